@@ -1,0 +1,215 @@
+"""The flow convention of aerobench: one home for layouts, input checks and colours.
+
+Conventions (see ``docs/architecture.md``):
+
+* A frame is ``(H, W)`` gray or ``(H, W, 3)`` RGB, of an integer or real dtype.
+  :func:`as_gray` converts it once to ``(H, W)`` float32 in the input's own
+  units (uint8 stays 0..255, float stays as it is): every method takes frames
+  through it.
+* A flow field is ``(H, W, 2)`` float32 in pixels, ``[..., 0] = u`` (+x, right),
+  ``[..., 1] = v`` (+y, down), forward from frame t to frame t+1::
+
+      I_{t+1}(x + u, y + v) ~ I_t(x, y)
+
+  Pixel centres sit at integer coordinates.
+* A global shift is the displacement ``(dx, dy)`` of the ground's image content
+  from t to t+1, not the correction that undoes it.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "FLOW_DTYPE",
+    "as_gray",
+    "check_frame_pair",
+    "check_flow",
+    "warp_backward",
+    "flow_to_color",
+    "color_wheel_image",
+]
+
+FLOW_DTYPE = np.float32
+
+# ITU-R BT.601 luma weights, the ones cv2.COLOR_RGB2GRAY uses.
+_LUMA_RGB = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+
+
+def _describe(a: np.ndarray) -> str:
+    return f"{tuple(a.shape)} {a.dtype}"
+
+
+def as_gray(frame: np.ndarray, *, name: str = "frame") -> np.ndarray:
+    """Return ``frame`` as ``(H, W)`` float32 gray, in the input's own units.
+
+    Parameters
+    ----------
+    frame : ndarray, (H, W) or (H, W, 3) or (H, W, 1)
+        Integer (uint8, uint16, ...) or real dtype. RGB is converted with the
+        BT.601 weights (0.299, 0.587, 0.114); values are not rescaled, so uint8
+        input gives 0..255.
+    name : str
+        Used in error messages.
+
+    Raises
+    ------
+    TypeError
+        For bool, complex, object or other non-numeric dtypes.
+    ValueError
+        For a wrong number of dimensions or channels, an empty image, or a
+        non-finite pixel.
+    """
+    a = np.asarray(frame)
+    if a.dtype == bool or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
+        raise TypeError(
+            f"{name}: expected an integer or real image (uint8, float32, ...), got dtype {a.dtype}"
+        )
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim == 3 and a.shape[2] == 3:
+        g = (a.astype(np.float32, copy=False) @ _LUMA_RGB).astype(np.float32, copy=False)
+    elif a.ndim == 2:
+        g = a.astype(np.float32, copy=True)
+    else:
+        raise ValueError(f"{name}: expected (H, W) gray or (H, W, 3) RGB, got {_describe(a)}")
+    if g.size == 0 or min(g.shape) < 2:
+        raise ValueError(f"{name}: expected an image of at least 2x2 pixels, got {_describe(a)}")
+    if not np.isfinite(g).all():
+        bad = int(np.count_nonzero(~np.isfinite(g)))
+        raise ValueError(f"{name}: {bad} pixel(s) are NaN or infinite")
+    return g
+
+
+def check_frame_pair(frame0: np.ndarray, frame1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Convert both frames with :func:`as_gray` and check that their sizes match."""
+    g0 = as_gray(frame0, name="frame0")
+    g1 = as_gray(frame1, name="frame1")
+    if g0.shape != g1.shape:
+        raise ValueError(f"frame0 and frame1 differ in size: {g0.shape} vs {g1.shape}")
+    return g0, g1
+
+
+def check_flow(flow: np.ndarray, *, name: str = "flow", shape: tuple[int, int] | None = None,
+               allow_nan: bool = False) -> np.ndarray:
+    """Check a flow field's layout and return it as float32 ``(H, W, 2)``.
+
+    ``shape`` pins ``(H, W)``. Non-finite values are an error unless
+    ``allow_nan`` (for fields whose unknown pixels are NaN, such as ground truth
+    read from a file).
+    """
+    a = np.asarray(flow)
+    if not np.issubdtype(a.dtype, np.floating):
+        raise TypeError(f"{name}: expected (H, W, 2) float32, got {_describe(a)}")
+    if a.ndim != 3 or a.shape[2] != 2:
+        hint = " (channels first? flow is (H, W, 2))" if a.ndim == 3 and a.shape[0] == 2 else ""
+        raise ValueError(f"{name}: expected (H, W, 2) float32, got {_describe(a)}{hint}")
+    if shape is not None and a.shape[:2] != tuple(shape):
+        raise ValueError(f"{name}: expected size {tuple(shape)}, got {a.shape[:2]}")
+    if not allow_nan and not np.isfinite(a).all():
+        raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(a)))} value(s) are NaN or infinite")
+    return a.astype(FLOW_DTYPE, copy=False)
+
+
+def warp_backward(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample ``image`` at ``(x + u, y + v)``: bring frame t+1 back onto frame t.
+
+    With the true forward flow, ``warp_backward(frame1, flow) ~ frame0``.
+
+    Returns
+    -------
+    warped : ndarray, same shape and float32
+        Bilinear samples; outside the image the border is replicated.
+    inside : ndarray, (H, W) bool
+        Where the sample point lies inside the image.
+    """
+    f = check_flow(flow, shape=np.asarray(image).shape[:2])
+    h, w = f.shape[:2]
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    map_x = xs + f[..., 0]
+    map_y = ys + f[..., 1]
+    src = np.asarray(image).astype(np.float32, copy=False)
+    warped = cv2.remap(src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    inside = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
+    return warped, inside
+
+
+def _middlebury_wheel() -> np.ndarray:
+    """The colour wheel of Baker et al. (IJCV 2011): 55 hues, (ncols, 3) float in 0..255.
+
+    Segments red-yellow 15, yellow-green 6, green-cyan 4, cyan-blue 11,
+    blue-magenta 13, magenta-red 6, as the Middlebury flow colour coding defines.
+    """
+    segments = [(15, (255, 0, 0), (255, 255, 0)), (6, (255, 255, 0), (0, 255, 0)),
+                (4, (0, 255, 0), (0, 255, 255)), (11, (0, 255, 255), (0, 0, 255)),
+                (13, (0, 0, 255), (255, 0, 255)), (6, (255, 0, 255), (255, 0, 0))]
+    rows = []
+    for n, start, end in segments:
+        t = np.arange(n, dtype=np.float64)[:, None] / n
+        rows.append(np.asarray(start, float) + t * (np.asarray(end, float) - np.asarray(start, float)))
+    return np.concatenate(rows, axis=0)
+
+
+_WHEEL = _middlebury_wheel()
+
+
+def flow_to_color(flow: np.ndarray, *, max_magnitude: float | None = None,
+                  valid: np.ndarray | None = None) -> np.ndarray:
+    """Colour-code a flow field in the Middlebury convention: hue = direction, saturation = magnitude.
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+        Our layout; NaN marks unknown pixels (drawn black).
+    max_magnitude : float, optional
+        Magnitude, in px, that maps to full saturation; default the largest
+        finite magnitude in ``flow`` (at least 1e-6). Pass the same value for
+        fields that should be compared side by side.
+    valid : ndarray, (H, W) bool, optional
+        Pixels outside it are drawn black.
+
+    Returns
+    -------
+    ndarray, (H, W, 3) uint8 RGB
+    """
+    f = check_flow(flow, allow_nan=True).astype(np.float64)
+    u, v = f[..., 0], f[..., 1]
+    unknown = ~(np.isfinite(u) & np.isfinite(v))
+    if valid is not None:
+        unknown |= ~np.asarray(valid, bool)
+    u = np.where(unknown, 0.0, u)
+    v = np.where(unknown, 0.0, v)
+    mag = np.hypot(u, v)
+    if max_magnitude is None:
+        max_magnitude = float(mag.max()) if mag.size else 0.0
+    scale = max(float(max_magnitude), 1e-6)
+    r = np.minimum(mag / scale, 1.0)
+    ncols = _WHEEL.shape[0]
+    angle = np.arctan2(-v, -u) / np.pi  # -1..1, as in the reference coding
+    fk = (angle + 1.0) / 2.0 * (ncols - 1)
+    k0 = np.floor(fk).astype(int) % ncols
+    k1 = (k0 + 1) % ncols
+    frac = (fk - np.floor(fk))[..., None]
+    col = ((1 - frac) * _WHEEL[k0] + frac * _WHEEL[k1]) / 255.0
+    col = 1.0 - r[..., None] * (1.0 - col)
+    rgb = np.round(255.0 * col).astype(np.uint8)
+    rgb[unknown] = 0
+    return rgb
+
+
+def color_wheel_image(size: int = 101) -> np.ndarray:
+    """A legend: the flow colour of every displacement in a disc, ``(size, size, 3)`` uint8.
+
+    The disc's edge is full saturation; directions are image directions
+    (+x right, +y down).
+    """
+    if size < 3:
+        raise ValueError(f"size: expected at least 3, got {size}")
+    c = (size - 1) / 2.0
+    ys, xs = np.mgrid[0:size, 0:size].astype(np.float32)
+    field = np.stack([(xs - c) / c, (ys - c) / c], axis=-1)
+    outside = np.hypot(field[..., 0], field[..., 1]) > 1.0
+    rgb = flow_to_color(field, max_magnitude=1.0)
+    rgb[outside] = 255
+    return rgb

@@ -1,0 +1,1 @@
+"""aerobench harness package."""

@@ -1,0 +1,1 @@
+"""aerobench reports package."""
