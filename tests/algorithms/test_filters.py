@@ -1,0 +1,77 @@
+"""Threshold, spatial filter eq. 4.11, temporal filter eq. 4.12."""
+
+import numpy as np
+import pytest
+
+from algorithms.filters import spatial_filter, temporal_filter, threshold_flow
+from algorithms.registry import get_stage
+
+
+def _field(u, v):
+    return np.stack([np.asarray(u, np.float32), np.asarray(v, np.float32)], axis=-1)
+
+
+def test_spatial_filter_eq_4_11_by_hand():
+    u = np.zeros((5, 5), np.float32)
+    u[2, 2] = 16.0
+    u[1, 1] = 8.0
+    f = spatial_filter(_field(u, -u))
+    # centre: 1/2 * 16 + 1/16 * 8 ; neighbour (1, 2): 1/2 * 0 + 1/16 * (16 + 8)
+    assert f[2, 2, 0] == pytest.approx(8.5)
+    assert f[1, 2, 0] == pytest.approx(1.5)
+    assert f[1, 1, 0] == pytest.approx(4.0 + 1.0)
+    assert f[3, 3, 0] == pytest.approx(1.0)
+    assert f[4, 4, 0] == 0.0
+    np.testing.assert_array_equal(f[..., 1], -f[..., 0])
+
+
+def test_spatial_filter_keeps_constant_field_and_border_modes():
+    f = _field(np.full((6, 7), 1.25), np.full((6, 7), -3.0))
+    np.testing.assert_allclose(spatial_filter(f), f, atol=1e-6)
+    zero = spatial_filter(f, border="zero")
+    np.testing.assert_allclose(zero[1:-1, 1:-1], f[1:-1, 1:-1], atol=1e-6)
+    # a corner sees 3 of its 8 neighbours inside: 1/2 + 3/16 of the value
+    assert zero[0, 0, 0] == pytest.approx(1.25 * (0.5 + 3 / 16))
+    with pytest.raises(ValueError, match="border: expected one of"):
+        spatial_filter(f, border="wrap")
+
+
+def test_temporal_filter_eq_4_12_and_ends():
+    a, b, c = (_field(np.full((2, 2), x), np.zeros((2, 2))) for x in (4.0, 8.0, 2.0))
+    np.testing.assert_allclose(temporal_filter(a, b, c)[..., 0], 0.5 * 8 + 0.25 * (4 + 2))
+    np.testing.assert_allclose(temporal_filter(None, b, c)[..., 0], (0.5 * 8 + 0.25 * 2) / 0.75)
+    np.testing.assert_allclose(temporal_filter(None, b, None), b)
+    with pytest.raises(ValueError, match=r"next: expected size \(2, 2\)"):
+        temporal_filter(a, b, _field(np.zeros((3, 3)), np.zeros((3, 3))))
+
+
+def test_threshold_keeps_only_allowed_direction_and_magnitude():
+    # up, down, right, up-left (45 deg off up), tiny up, huge up
+    u = np.array([[0.0, 0.0, 2.0, -1.0, 0.0, 0.0]])
+    v = np.array([[-2.0, 2.0, 0.0, -1.0, -0.1, -50.0]])
+    flow, mask = threshold_flow(_field(u, v), direction=-90.0, tolerance_deg=50.0,
+                                min_magnitude_px=0.5, max_magnitude_px=10.0)
+    np.testing.assert_array_equal(mask, [[True, False, False, True, False, False]])
+    np.testing.assert_array_equal(flow[~mask], 0.0)
+    np.testing.assert_array_equal(flow[mask], _field(u, v)[mask])
+    # a vector direction means the same as its angle; tolerance 90 is the thesis's half-plane
+    _, m_vec = threshold_flow(_field(u, v), direction=(0.0, -3.0), tolerance_deg=90.0)
+    np.testing.assert_array_equal(m_vec, [[True, False, False, True, True, True]])
+
+
+def test_threshold_rejects_bad_arguments_and_respects_valid():
+    f = _field(np.ones((2, 2)), np.ones((2, 2)))
+    _, m = threshold_flow(f, valid=np.array([[True, False], [True, True]]))
+    assert m.tolist() == [[True, False], [True, True]]
+    with pytest.raises(ValueError, match="direction: expected an angle"):
+        threshold_flow(f, direction=(0.0, 0.0))
+    with pytest.raises(ValueError, match="tolerance_deg"):
+        threshold_flow(f, direction=0.0, tolerance_deg=200)
+    with pytest.raises(ValueError, match="channels first"):
+        threshold_flow(np.zeros((2, 4, 4), np.float32))
+
+
+def test_stages_are_registered():
+    assert get_stage("threshold", "threshold_flow") is threshold_flow
+    assert get_stage("spatial", "spatial_filter") is spatial_filter
+    assert get_stage("temporal", "temporal_filter") is temporal_filter
