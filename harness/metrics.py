@@ -1,0 +1,657 @@
+"""Metric definitions and scoring against ground truth: pure numpy / pandas, no I/O.
+
+Every metric is a :class:`MetricDef` in the plain-dict registry :data:`METRICS`
+(name -> unit, direction, weighting, how totals reduce to a value, one-line
+description for ``aerobench list``). Scoring functions return *rows*: dicts with
+``frame, track_id, metric, region, motion, kind, value, sum, count, unit,
+higher_is_better, hist`` (the cell columns of the results table are added by the
+runner, see :func:`harness.results.rows_to_frame`).
+
+Every row carries totals from which any aggregate is recomputed: ``sum`` and
+``count`` are summed over rows, then reduced by the metric's ``reduce`` rule
+(never an average of averages):
+
+==========  ==========================================  ===========================
+reduce      value of a row / of an aggregate            sum, count
+==========  ==========================================  ===========================
+mean        sum / count                                 sum of x, number of items
+rms         sqrt(sum / count)                           sum of x**2, number of items
+rate        100 * sum / count  (percent)                items over the limit, items
+total       sum                                         sum of x, number of items
+quantile    from the summed EPE histogram (``hist``)    NaN, number of pixels
+==========  ==========================================  ===========================
+
+Quantiles (``epe_median``, ``epe_p95``) cannot be summed: their rows carry the
+exact per-frame value in ``value`` and the frame's EPE histogram in ``hist``
+(fixed bins of :data:`HIST_BIN_PX` = 0.01 px from 0 to :data:`HIST_MAX_PX` = 100 px,
+plus one overflow bin, encoded by :func:`encode_hist`). :func:`aggregate` sums the
+histograms and reads the quantile off at the bin centre, so an aggregate
+quantile is within half a bin (0.005 px) of the quantile of all pixels pooled,
+for quantiles below 100 px (above, it reads 100 px: a floor).
+
+Regions of a flow field (see :func:`region_masks`): ``all`` (every valid
+pixel), ``background`` (instance 0), ``vehicles`` (instance > 0), ``interior``
+(valid pixels farther than ``boundary_px`` = 3 px, Chebyshev distance, from an
+invalid pixel or an instance edge: occlusion boundaries excluded).
+
+Motions: ``total`` scores ``flow_total`` against the ground-truth ``flow``;
+``local`` scores ``flow_total - flow_global`` against ``flow - flow_camera``,
+so a stabilisation error and a flow error can be told apart.
+
+Public functions
+----------------
+register_metric, metric_def, describe_metrics         the registry
+endpoint_error, angular_error_deg                      per-pixel errors
+region_masks, boundary_mask                            pixel regions
+epe_histogram, encode_hist, decode_hist, hist_quantile quantile totals
+flow_rows                                              flow metrics of one field in one mask
+score_flow                                             all flow rows of one pair (no PairEstimate needed)
+timing_rows                                            rows from ``stage_ms``
+score_pair                                             PairEstimate + PairTruth -> rows
+shift_rows, jitter_rows, detrend                       global motion and stabilisation
+associate_tracks, track_rows                           trajectories, CLEAR-MOT ID switches
+score_sequence                                         SequenceEstimate + camera.csv + tracks.csv -> rows
+aggregate                                              rows DataFrame -> aggregates from totals
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import pandas as pd
+from scipy.optimize import linear_sum_assignment
+
+from algorithms.flow import check_flow
+
+__all__ = [
+    "METRICS", "MetricDef", "register_metric", "metric_def", "describe_metrics", "timing_metric_name",
+    "REGIONS", "MOTIONS", "HIST_BIN_PX", "HIST_MAX_PX", "HIST_NBINS",
+    "endpoint_error", "angular_error_deg", "boundary_mask", "region_masks",
+    "epe_histogram", "encode_hist", "decode_hist", "hist_quantile",
+    "flow_rows", "score_flow", "timing_rows", "score_pair",
+    "shift_rows", "detrend", "jitter_rows", "associate_tracks", "track_rows", "score_sequence",
+    "aggregate", "reduce_totals",
+]
+
+REGIONS = ("all", "background", "vehicles", "interior")
+MOTIONS = ("total", "local")
+HIST_BIN_PX = 0.01
+HIST_MAX_PX = 100.0
+HIST_NBINS = int(round(HIST_MAX_PX / HIST_BIN_PX)) + 1  # the last bin is the overflow
+REDUCES = ("mean", "rms", "rate", "total", "quantile")
+STAGES = ("global_motion", "jitter", "compensation", "flow", "threshold", "spatial", "temporal",
+          "tracking", "total")
+
+
+@dataclass(frozen=True)
+class MetricDef:
+    """What a metric means: ``unit``, direction, weighting and how totals reduce to a value."""
+
+    name: str
+    unit: str
+    higher_is_better: bool
+    weighting: str
+    description: str
+    reduce: str = "mean"
+    kind: str = "accuracy"  # "accuracy" | "timing"
+    q: float | None = None  # the quantile, for reduce == "quantile"
+
+
+METRICS: dict[str, MetricDef] = {}
+
+
+def register_metric(name: str, unit: str, *, higher_is_better: bool, weighting: str, description: str,
+                    reduce: str = "mean", kind: str = "accuracy", q: float | None = None) -> MetricDef:
+    """Add a metric to :data:`METRICS` (twice with different definitions is an error)."""
+    if reduce not in REDUCES:
+        raise ValueError(f"metric {name!r}: reduce must be one of {REDUCES}, got {reduce!r}")
+    if kind not in ("accuracy", "timing"):
+        raise ValueError(f"metric {name!r}: kind must be 'accuracy' or 'timing', got {kind!r}")
+    d = MetricDef(name, unit, higher_is_better, weighting, description, reduce, kind, q)
+    if name in METRICS and METRICS[name] != d:
+        raise ValueError(f"metric {name!r} is registered twice with different definitions")
+    METRICS[name] = d
+    return d
+
+
+def timing_metric_name(stage: str) -> str:
+    """``time_<stage>_ms``: the wall-time metric of a pipeline stage (registered on first use)."""
+    name = f"time_{stage}_ms"
+    if name not in METRICS:
+        register_metric(name, "ms", higher_is_better=False, kind="timing",
+                        weighting="per frame pair, mean over pairs",
+                        description=f"wall time of the {stage} stage per frame pair")
+    return name
+
+
+def metric_def(name: str) -> MetricDef:
+    """The definition of ``name``; an unknown name raises ``KeyError`` listing the valid ones."""
+    try:
+        return METRICS[name]
+    except KeyError:
+        raise KeyError(f"unknown metric {name!r}; valid: {', '.join(sorted(METRICS))}") from None
+
+
+def describe_metrics(pattern: str = "*") -> pd.DataFrame:
+    """A table of the registered metrics matching a glob ``pattern``, for ``aerobench list``."""
+    rows = [{"metric": d.name, "unit": d.unit, "better": "higher" if d.higher_is_better else "lower",
+             "kind": d.kind, "weighting": d.weighting, "description": d.description}
+            for n, d in sorted(METRICS.items()) if fnmatch.fnmatchcase(n, pattern)]
+    return pd.DataFrame(rows, columns=["metric", "unit", "better", "kind", "weighting", "description"])
+
+
+_PIX = "per valid pixel, pooled over frames"
+register_metric("epe_mean", "px", higher_is_better=False, weighting=_PIX,
+                description="mean endpoint error |w_est - w_true|")
+register_metric("epe_rms", "px", higher_is_better=False, weighting=_PIX, reduce="rms",
+                description="root mean square endpoint error")
+register_metric("epe_median", "px", higher_is_better=False, weighting=_PIX + " (summed 0.01 px histogram)",
+                reduce="quantile", q=0.5, description="median endpoint error")
+register_metric("epe_p95", "px", higher_is_better=False, weighting=_PIX + " (summed 0.01 px histogram)",
+                reduce="quantile", q=0.95, description="95th percentile of the endpoint error")
+register_metric("ae_mean", "deg", higher_is_better=False, weighting=_PIX,
+                description="mean angular error between (u, v, 1) vectors (Barron 1994, Baker 2011)")
+for _t in (1, 3, 5):
+    register_metric(f"outlier_{_t}px", "%", higher_is_better=False, weighting=_PIX, reduce="rate",
+                    description=f"share of pixels with endpoint error > {_t} px")
+register_metric("fl_all", "%", higher_is_better=False, weighting=_PIX, reduce="rate",
+                description="KITTI Fl: share of pixels with EPE > 3 px and > 5 % of the true magnitude")
+register_metric("coverage", "%", higher_is_better=True, weighting="per ground-truth-valid pixel, pooled",
+                reduce="rate", description="share of ground-truth-valid pixels the method marks valid "
+                "(the other flow metrics count only those)")
+register_metric("shift_error", "px", higher_is_better=False, weighting="per frame pair, mean over pairs",
+                description="|estimated global shift - true global shift| (camera.csv global_dx/dy_px)")
+register_metric("jitter_residual_rms", "px", higher_is_better=False, weighting="per frame, RMS over frames",
+                reduce="rms", description="RMS of estimated jitter minus detrended true jitter "
+                "(jitter left after remove_jitter)")
+_TRK = "per vehicle and frame where visible and tracked, pooled"
+register_metric("track_error", "px", higher_is_better=False, weighting=_TRK,
+                description="|filtered track position - true vehicle centre|")
+register_metric("track_raw_error", "px", higher_is_better=False, weighting=_TRK,
+                description="|measured (unfiltered) track position - true vehicle centre|")
+register_metric("track_pred_error", "px", higher_is_better=False, weighting=_TRK,
+                description="|one-step Kalman prediction for the frame - true vehicle centre|")
+register_metric("track_ate_rmse", "px", higher_is_better=False, weighting=_TRK + " (RMS)", reduce="rms",
+                description="absolute trajectory error: RMS of filtered position error")
+register_metric("track_fde", "px", higher_is_better=False, weighting="per vehicle, mean over vehicles",
+                description="final displacement error: filtered position error on the last tracked frame")
+register_metric("track_completeness", "%", higher_is_better=True,
+                weighting="per vehicle-frame where visible, pooled", reduce="rate",
+                description="share of frames where a vehicle is visible and a track is assigned to it")
+register_metric("id_switches", "count", higher_is_better=False, weighting="summed over vehicles",
+                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT)")
+for _s in STAGES:
+    timing_metric_name(_s)
+
+
+# --------------------------------------------------------------------------- per-pixel errors
+
+def endpoint_error(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
+    """Endpoint error ``sqrt((u_e - u_t)^2 + (v_e - v_t)^2)``, ``(H, W)`` float64 px."""
+    d = np.asarray(flow_est, np.float64) - np.asarray(flow_true, np.float64)
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def angular_error_deg(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
+    """Angular error between the 3-D vectors ``(u, v, 1)`` (Barron et al. 1994), ``(H, W)`` degrees.
+
+    ``AE = arccos((u_e u_t + v_e v_t + 1) / sqrt((u_e^2 + v_e^2 + 1)(u_t^2 + v_t^2 + 1)))``
+    """
+    e = np.asarray(flow_est, np.float64)
+    t = np.asarray(flow_true, np.float64)
+    num = e[..., 0] * t[..., 0] + e[..., 1] * t[..., 1] + 1.0
+    den = np.sqrt((e[..., 0] ** 2 + e[..., 1] ** 2 + 1.0) * (t[..., 0] ** 2 + t[..., 1] ** 2 + 1.0))
+    return np.degrees(np.arccos(np.clip(num / den, -1.0, 1.0)))
+
+
+def boundary_mask(valid: np.ndarray, instances: np.ndarray | None = None, *, boundary_px: int = 3) -> np.ndarray:
+    """Pixels within ``boundary_px`` (Chebyshev distance) of an invalid pixel or an instance edge.
+
+    An instance edge is a pixel whose instance id differs from one of its four
+    neighbours (both sides of the edge are edge pixels). Returns ``(H, W)`` bool.
+    """
+    valid = np.asarray(valid, bool)
+    bad = ~valid
+    if instances is not None:
+        ids = np.asarray(instances)
+        if ids.shape != valid.shape:
+            raise ValueError(f"instances: expected shape {valid.shape}, got {ids.shape}")
+        edge = np.zeros_like(valid)
+        dy = ids[1:, :] != ids[:-1, :]
+        dx = ids[:, 1:] != ids[:, :-1]
+        edge[1:, :] |= dy
+        edge[:-1, :] |= dy
+        edge[:, 1:] |= dx
+        edge[:, :-1] |= dx
+        bad = bad | edge
+    if boundary_px <= 0:
+        return bad
+    kernel = np.ones((2 * boundary_px + 1, 2 * boundary_px + 1), np.uint8)
+    return cv2.dilate(bad.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+
+
+def region_masks(valid: np.ndarray, instances: np.ndarray | None = None, *, boundary_px: int = 3,
+                 regions: Iterable[str] = REGIONS) -> dict[str, np.ndarray]:
+    """The scored pixels of each region (see the module docstring), ``name -> (H, W) bool``.
+
+    Without ``instances`` every pixel counts as background.
+    """
+    valid = np.asarray(valid, bool)
+    out: dict[str, np.ndarray] = {}
+    for r in regions:
+        if r == "all":
+            out[r] = valid
+        elif r == "background":
+            out[r] = valid if instances is None else valid & (np.asarray(instances) == 0)
+        elif r == "vehicles":
+            out[r] = np.zeros_like(valid) if instances is None else valid & (np.asarray(instances) > 0)
+        elif r == "interior":
+            out[r] = valid & ~boundary_mask(valid, instances, boundary_px=boundary_px)
+        else:
+            raise ValueError(f"unknown region {r!r}; valid: {', '.join(REGIONS)}")
+    return out
+
+
+# --------------------------------------------------------------------------- EPE histogram
+
+def epe_histogram(epe: np.ndarray) -> np.ndarray:
+    """Counts of ``epe`` in :data:`HIST_NBINS` bins of 0.01 px, the last one for >= 100 px. int64."""
+    idx = np.minimum(np.floor(np.asarray(epe, np.float64).ravel() / HIST_BIN_PX), HIST_NBINS - 1)
+    return np.bincount(idx.astype(np.int64), minlength=HIST_NBINS).astype(np.int64)
+
+
+def encode_hist(counts: np.ndarray) -> str:
+    """Sparse text form of a histogram: ``"bin:count bin:count ..."`` for the non-empty bins."""
+    nz = np.flatnonzero(counts)
+    return " ".join(f"{i}:{int(counts[i])}" for i in nz)
+
+
+def decode_hist(text: str) -> np.ndarray:
+    """Inverse of :func:`encode_hist`: dense ``(HIST_NBINS,)`` int64 counts."""
+    out = np.zeros(HIST_NBINS, np.int64)
+    if not isinstance(text, str) or not text:
+        return out
+    for item in text.split():
+        i, _, c = item.partition(":")
+        out[int(i)] += int(c)
+    return out
+
+
+def hist_quantile(counts: np.ndarray, q: float) -> float:
+    """The ``q`` quantile read at the centre of the bin holding it (within 0.005 px); NaN if empty.
+
+    In the overflow bin it reads :data:`HIST_MAX_PX` (a floor).
+    """
+    total = int(counts.sum())
+    if total == 0:
+        return float("nan")
+    # the sample of rank ceil(q * n) (1-based), the nearest-rank definition
+    rank = max(1, math.ceil(q * total))
+    b = int(np.searchsorted(np.cumsum(counts), rank))
+    if b >= HIST_NBINS - 1:
+        return HIST_MAX_PX
+    return (b + 0.5) * HIST_BIN_PX
+
+
+# --------------------------------------------------------------------------- rows
+
+def _row(metric: str, value: float, total: float, count: float, *, region: str = "all", motion: str = "total",
+         frame: int | None = None, track_id: int | None = None, hist: str = "") -> dict:
+    d = metric_def(metric)
+    return {"frame": frame, "track_id": track_id, "metric": metric, "region": region, "motion": motion,
+            "kind": d.kind, "value": float(value), "sum": float(total), "count": float(count),
+            "unit": d.unit, "higher_is_better": d.higher_is_better, "hist": hist}
+
+
+def flow_rows(flow_est: np.ndarray, flow_true: np.ndarray, mask: np.ndarray, *, region: str = "all",
+              motion: str = "total", frame: int | None = None) -> list[dict]:
+    """The flow metrics of one field over the pixels of ``mask``.
+
+    An empty mask gives rows with ``count`` 0 and NaN values (they add nothing
+    to an aggregate). Fl follows KITTI: EPE > 3 px and EPE > 0.05 |w_true|.
+    """
+    m = np.asarray(mask, bool)
+    e = np.asarray(flow_est, np.float64)[m]
+    t = np.asarray(flow_true, np.float64)[m]
+    n = int(m.sum())
+    epe = np.hypot(e[:, 0] - t[:, 0], e[:, 1] - t[:, 1])
+    ae = angular_error_deg(e, t)
+    mag = np.hypot(t[:, 0], t[:, 1])
+    nan = float("nan")
+    kw = {"region": region, "motion": motion, "frame": frame}
+
+    def mean(s: float) -> float:
+        return s / n if n else nan
+
+    hist = encode_hist(epe_histogram(epe))
+    s_epe, s_sq = float(epe.sum()), float((epe ** 2).sum())
+    rows = [
+        _row("epe_mean", mean(s_epe), s_epe, n, **kw),
+        _row("epe_rms", math.sqrt(s_sq / n) if n else nan, s_sq, n, **kw),
+        _row("epe_median", float(np.percentile(epe, 50, method="inverted_cdf")) if n else nan, nan, n, hist=hist, **kw),
+        _row("epe_p95", float(np.percentile(epe, 95, method="inverted_cdf")) if n else nan, nan, n,
+             hist=hist, **kw),
+        _row("ae_mean", mean(float(ae.sum())), float(ae.sum()), n, **kw),
+    ]
+    for thr in (1, 3, 5):
+        k = int(np.count_nonzero(epe > thr))
+        rows.append(_row(f"outlier_{thr}px", 100.0 * mean(k), k, n, **kw))
+    k = int(np.count_nonzero((epe > 3.0) & (epe > 0.05 * mag)))
+    rows.append(_row("fl_all", 100.0 * mean(k), k, n, **kw))
+    return rows
+
+
+def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarray, *,
+               valid_est: np.ndarray | None = None, instances: np.ndarray | None = None,
+               motion: str = "total", frame: int | None = None, regions: Iterable[str] = REGIONS,
+               boundary_px: int = 3) -> list[dict]:
+    """Flow rows of one field in every region, plus ``coverage``.
+
+    Scored pixels: valid in the truth (and finite there), valid in the estimate
+    (``valid_est``, default all) and finite in the estimate. Regions are built
+    from the truth's validity and instances (:func:`region_masks`).
+    """
+    t = check_flow(flow_true, name="flow_true", allow_nan=True)
+    e = check_flow(flow_est, name="flow_est", shape=t.shape[:2], allow_nan=True)
+    vt = np.asarray(valid_true, bool)
+    if vt.shape != t.shape[:2]:
+        raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt.shape}")
+    vt = vt & np.isfinite(t).all(-1)
+    ve = np.isfinite(e).all(-1)
+    if valid_est is not None:
+        ve &= np.asarray(valid_est, bool)
+    masks = region_masks(vt, instances, boundary_px=boundary_px, regions=regions)
+    rows = []
+    for r, m in masks.items():
+        rows += flow_rows(e, t, m & ve, region=r, motion=motion, frame=frame)
+        n, k = int(m.sum()), int((m & ve).sum())
+        rows.append(_row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
+                         frame=frame))
+    return rows
+
+
+def timing_rows(stage_ms: Mapping[str, float], *, frame: int | None = None) -> list[dict]:
+    """One ``time_<stage>_ms`` row per stage (``motion`` "cost"), and ``time_total_ms`` if absent."""
+    rows = []
+    total = 0.0
+    for stage, ms in stage_ms.items():
+        ms = float(ms)
+        total += ms
+        rows.append(_row(timing_metric_name(stage), ms, ms, 1, motion="cost", frame=frame))
+    if "total" not in stage_ms and stage_ms:
+        rows.append(_row("time_total_ms", total, total, 1, motion="cost", frame=frame))
+    return rows
+
+
+def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] = REGIONS, boundary_px: int = 3,
+               timings: bool = True) -> list[dict]:
+    """All rows of one frame pair: flow metrics (total and local motion) and stage timings.
+
+    Parameters
+    ----------
+    estimate : PairEstimate
+        Uses ``flow_total``, ``flow_global`` (H, W, 2), ``valid`` (H, W) and ``stage_ms``.
+    truth : PairTruth
+        ``flow``, ``flow_camera`` (H, W, 2), ``valid`` (H, W) bool, ``instances`` (H, W) uint16.
+    frame : int
+        Index of the first frame of the pair.
+    """
+    regions = tuple(regions)
+    kw = {"valid_est": estimate.valid, "instances": truth.instances, "frame": frame, "regions": regions,
+          "boundary_px": boundary_px}
+    rows = score_flow(estimate.flow_total, truth.flow, truth.valid, motion="total", **kw)
+    est_local = np.asarray(estimate.flow_total, np.float32) - np.asarray(estimate.flow_global, np.float32)
+    true_local = np.asarray(truth.flow, np.float32) - np.asarray(truth.flow_camera, np.float32)
+    rows += score_flow(est_local, true_local, truth.valid, motion="local", **kw)
+    if timings and getattr(estimate, "stage_ms", None):
+        rows += timing_rows(estimate.stage_ms, frame=frame)
+    return rows
+
+
+# --------------------------------------------------------------------------- global motion, jitter
+
+def shift_rows(shifts_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
+    """``shift_error`` per pair ``i -> i+1``: |shifts_px[i] - (global_dx_px, global_dy_px)[i]|.
+
+    Pairs whose truth is empty (the last frame) or whose estimate is NaN are skipped.
+    """
+    s = np.asarray(shifts_px, np.float64).reshape(-1, 2)
+    cam = camera.sort_values("frame").reset_index(drop=True)
+    rows = []
+    for i in range(min(len(s), len(cam))):
+        t = cam.loc[i, ["global_dx_px", "global_dy_px"]].to_numpy(np.float64)
+        if not (np.isfinite(t).all() and np.isfinite(s[i]).all()):
+            continue
+        err = float(np.hypot(*(s[i] - t)))
+        rows.append(_row("shift_error", err, err, 1, motion="global", frame=int(cam.loc[i, "frame"])))
+    return rows
+
+
+def detrend(y: np.ndarray) -> np.ndarray:
+    """``y`` minus its own least-squares line ``a + b i`` over the index i, column by column."""
+    y = np.asarray(y, np.float64)
+    i = np.arange(len(y), dtype=np.float64)
+    A = np.stack([np.ones_like(i), i], axis=1)
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    return y - A @ coef
+
+
+def jitter_rows(jitter_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
+    """``jitter_residual_rms`` per frame: the jitter left after ``remove_jitter``.
+
+    The true jitter J (camera.csv ``jitter_x_px, jitter_y_px``, shape (N, 2)) has
+    its own least-squares line removed (an offset or linear drift of the truth is
+    flight line, not jitter): J' = J - line(J). The residual of frame i is
+    r_i = jitter_px[i] - J'_i (the estimated jitter is what the correction
+    removes, so r_i is what stays in the stabilised video). Row: value |r_i|,
+    sum |r_i|^2, count 1; the aggregate is sqrt(sum |r_i|^2 / N).
+    """
+    est = np.asarray(jitter_px, np.float64).reshape(-1, 2)
+    cam = camera.sort_values("frame").reset_index(drop=True)
+    if len(cam) != len(est):
+        raise ValueError(f"jitter_px: expected {len(cam)} frames (camera.csv), got {len(est)}")
+    truth = detrend(cam[["jitter_x_px", "jitter_y_px"]].to_numpy(np.float64))
+    r = est - truth
+    rows = []
+    for i, f in enumerate(cam["frame"].to_numpy()):
+        if not np.isfinite(r[i]).all():
+            continue
+        sq = float(r[i] @ r[i])
+        rows.append(_row("jitter_residual_rms", math.sqrt(sq), sq, 1, motion="jitter", frame=int(f)))
+    return rows
+
+
+# --------------------------------------------------------------------------- trajectories
+
+def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> pd.DataFrame:
+    """Match estimated tracks to visible vehicles frame by frame (CLEAR-MOT, Bernardin 2008).
+
+    In each frame a correspondence of the previous frame is kept while its
+    distance stays within ``gate_px``; the remaining tracks and vehicles are
+    matched by the Hungarian method on Euclidean distance, pairs farther than
+    ``gate_px`` rejected. Positions: estimated ``x_filt_px, y_filt_px`` vs
+    truth ``x_px, y_px``.
+
+    Returns
+    -------
+    DataFrame with columns frame, vehicle_id, track_id, dist_px, switch (bool:
+    the vehicle's track differs from its last matched track).
+    """
+    vis = truth[truth["visible"].astype(bool)]
+    est_by_f = {f: g for f, g in est.groupby("frame")}
+    prev: dict[int, int] = {}   # vehicle -> track in the previous frame
+    last: dict[int, int] = {}   # vehicle -> last matched track ever
+    out = []
+    for f, g in vis.groupby("frame"):
+        e = est_by_f.get(f)
+        if e is None or e.empty:
+            prev = {}
+            continue
+        e = e[np.isfinite(e["x_filt_px"]) & np.isfinite(e["y_filt_px"])]
+        vids = g["vehicle_id"].to_numpy()
+        tids = e["track_id"].to_numpy()
+        P = g[["x_px", "y_px"]].to_numpy(np.float64)
+        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64)
+        D = np.hypot(P[:, None, 0] - Q[None, :, 0], P[:, None, 1] - Q[None, :, 1])
+        match: dict[int, int] = {}
+        for a, vid in enumerate(vids):
+            t = prev.get(int(vid))
+            if t is not None and t in tids:
+                b = int(np.flatnonzero(tids == t)[0])
+                if D[a, b] <= gate_px and b not in match.values():
+                    match[a] = b
+        ra = [a for a in range(len(vids)) if a not in match]
+        rb = [b for b in range(len(tids)) if b not in match.values()]
+        if ra and rb:
+            sub = D[np.ix_(ra, rb)]
+            cost = np.where(sub <= gate_px, sub, 1e12)
+            ia, ib = linear_sum_assignment(cost)
+            for x, y in zip(ia, ib):
+                if sub[x, y] <= gate_px:
+                    match[ra[x]] = rb[y]
+        prev = {}
+        for a, b in match.items():
+            vid, tid = int(vids[a]), int(tids[b])
+            out.append({"frame": int(f), "vehicle_id": vid, "track_id": tid, "dist_px": float(D[a, b]),
+                        "switch": vid in last and last[vid] != tid})
+            prev[vid] = tid
+            last[vid] = tid
+    return pd.DataFrame(out, columns=["frame", "vehicle_id", "track_id", "dist_px", "switch"])
+
+
+def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
+    """Trajectory rows per vehicle; ``region`` is the tracker (``source``: "point" or "multi").
+
+    Point-tracker rows map to vehicles by ``seed_vehicle_id``; multi-target rows
+    through :func:`associate_tracks`. Errors count the frames where the vehicle
+    is visible and a track is assigned; ``x_pred_px`` on frame t is the one-step
+    prediction for frame t made from frame t-1. ``track_id`` of a row is the
+    vehicle id; per-frame rows (track_error, track_raw_error, track_pred_error)
+    carry the frame, per-vehicle rows (ate, fde, completeness, id_switches) not.
+    """
+    truth = truth_tracks.copy()
+    truth["visible"] = truth["visible"].astype(bool)
+    vis_n = truth[truth["visible"]].groupby("vehicle_id").size()
+    rows: list[dict] = []
+    if est_tracks is None or est_tracks.empty:
+        return rows
+    for source, est in est_tracks.groupby("source"):
+        if source == "point":
+            m = est.dropna(subset=["seed_vehicle_id"]).copy()
+            m["vehicle_id"] = m["seed_vehicle_id"].astype(np.int64)
+            m = m[np.isfinite(m["x_filt_px"]) & np.isfinite(m["y_filt_px"])]
+            switches = None
+        else:
+            assoc = associate_tracks(est, truth, gate_px=gate_px)
+            m = assoc.merge(est, on=["frame", "track_id"], how="left")
+            switches = assoc.groupby("vehicle_id")["switch"].sum()
+        m = m.merge(truth[truth["visible"]][["frame", "vehicle_id", "x_px", "y_px"]],
+                    on=["frame", "vehicle_id"], suffixes=("_est", "_true"))
+        kw = {"region": str(source), "motion": "track"}
+        for vid, g in m.sort_values("frame").groupby("vehicle_id"):
+            vid = int(vid)
+            xt, yt = g["x_px_true"].to_numpy(float), g["y_px_true"].to_numpy(float)
+            err = np.hypot(g["x_filt_px"].to_numpy(float) - xt, g["y_filt_px"].to_numpy(float) - yt)
+            raw = np.hypot(g["x_px_est"].to_numpy(float) - xt, g["y_px_est"].to_numpy(float) - yt)
+            pred = np.hypot(g["x_pred_px"].to_numpy(float) - xt, g["y_pred_px"].to_numpy(float) - yt)
+            for f, e1, e2, e3 in zip(g["frame"].to_numpy(), err, raw, pred):
+                rows.append(_row("track_error", e1, e1, 1, frame=int(f), track_id=vid, **kw))
+                if np.isfinite(e2):
+                    rows.append(_row("track_raw_error", e2, e2, 1, frame=int(f), track_id=vid, **kw))
+                if np.isfinite(e3):
+                    rows.append(_row("track_pred_error", e3, e3, 1, frame=int(f), track_id=vid, **kw))
+            sq = float((err ** 2).sum())
+            rows.append(_row("track_ate_rmse", math.sqrt(sq / len(err)), sq, len(err), track_id=vid, **kw))
+            rows.append(_row("track_fde", err[-1], err[-1], 1, track_id=vid, **kw))
+        tracked = m.groupby("vehicle_id")["frame"].nunique()
+        for vid, n in vis_n.items():
+            k = int(tracked.get(vid, 0))
+            rows.append(_row("track_completeness", 100.0 * k / n, k, n, track_id=int(vid), **kw))
+            if switches is not None:
+                s = int(switches.get(vid, 0))
+                rows.append(_row("id_switches", s, s, 1, track_id=int(vid), **kw))
+    return rows
+
+
+def score_sequence(seq_estimate, camera_df: pd.DataFrame, tracks_df: pd.DataFrame | None, *,
+                   gate_px: float = 20.0) -> list[dict]:
+    """Rows of a whole sequence: global shift errors, residual jitter, trajectories.
+
+    Parameters
+    ----------
+    seq_estimate : SequenceEstimate
+        Uses ``shifts_px`` (N-1, 2), ``jitter_px`` (N, 2) and ``tracks`` (DataFrame or None).
+    camera_df, tracks_df : DataFrame
+        camera.csv and tracks.csv of the sequence.
+    """
+    rows = []
+    if getattr(seq_estimate, "shifts_px", None) is not None:
+        rows += shift_rows(seq_estimate.shifts_px, camera_df)
+    if getattr(seq_estimate, "jitter_px", None) is not None:
+        rows += jitter_rows(seq_estimate.jitter_px, camera_df)
+    tracks = getattr(seq_estimate, "tracks", None)
+    if tracks is not None and tracks_df is not None and len(tracks):
+        rows += track_rows(tracks, tracks_df, gate_px=gate_px)
+    return rows
+
+
+# --------------------------------------------------------------------------- aggregation
+
+def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None) -> float:
+    """The value of ``metric`` from summed totals (and a summed histogram for quantiles)."""
+    d = metric_def(metric) if metric in METRICS else None
+    rule = d.reduce if d else "mean"
+    if rule == "total":
+        return float(total)
+    if count == 0 or not np.isfinite(count):
+        return float("nan")
+    if rule == "mean":
+        return float(total / count)
+    if rule == "rms":
+        return float(math.sqrt(total / count))
+    if rule == "rate":
+        return float(100.0 * total / count)
+    if hist is None:
+        return float("nan")
+    return hist_quantile(hist, d.q)
+
+
+def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
+    """Aggregate rows over everything not in ``by`` (+ metric, region, motion), from totals.
+
+    ``sum`` and ``count`` are summed and reduced by each metric's rule; quantile
+    metrics sum their ``hist``. Rows whose ``status`` (if present) is not "ok" are
+    left out. Returns one row per group with ``by, metric, region, motion, kind,
+    value, sum, count, unit, higher_is_better, n_rows`` (and ``hist`` for quantiles).
+    """
+    keys = list(dict.fromkeys([*by, "metric", "region", "motion"]))
+    df = rows
+    if "status" in df.columns:
+        df = df[df["status"] == "ok"]
+    cols = [*keys, "kind", "value", "sum", "count", "unit", "higher_is_better", "n_rows", "hist"]
+    if df.empty:
+        return pd.DataFrame(columns=cols)
+    out = []
+    for key, g in df.groupby(keys, sort=True, dropna=False):
+        key = key if isinstance(key, tuple) else (key,)
+        rec = dict(zip(keys, key))
+        metric = rec["metric"]
+        total = float(np.nansum(g["sum"].to_numpy(np.float64)))
+        count = float(g["count"].to_numpy(np.float64).sum())
+        hist = None
+        d = METRICS.get(metric)
+        if d is not None and d.reduce == "quantile":
+            hist = np.zeros(HIST_NBINS, np.int64)
+            for h in g["hist"]:
+                hist += decode_hist(h)
+            total = float("nan")
+        rec.update(kind=g["kind"].iloc[0], value=reduce_totals(metric, total, count, hist), sum=total,
+                   count=count, unit=g["unit"].iloc[0], higher_is_better=bool(g["higher_is_better"].iloc[0]),
+                   n_rows=len(g), hist=encode_hist(hist) if hist is not None else "")
+        out.append(rec)
+    return pd.DataFrame(out, columns=cols)

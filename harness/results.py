@@ -1,0 +1,262 @@
+"""The results table: schema, atomic writes, reading, collecting cells, summaries; run.json.
+
+One row per run x frame (or track) x metric x region x motion, long form
+(:data:`COLUMNS`, dtypes in :data:`SCHEMA`). Schema version :data:`SCHEMA_VERSION`
+is stored twice: in the ``schema_version`` column and in the parquet file's
+key-value metadata (``aerobench.schema_version``); :func:`read_results` refuses
+any other version with a message that says which one it found.
+
+Columns beyond docs/architecture.md:
+
+* ``kind``: "accuracy" or "timing" (the gate treats timings differently).
+* ``hist``: for quantile metrics (``epe_median``, ``epe_p95``) the row's EPE
+  histogram in the sparse text form of :func:`harness.metrics.encode_hist`
+  ("bin:count ..." over 0.01 px bins up to 100 px plus an overflow bin); empty
+  for every other metric. Aggregates of quantiles sum these histograms and read
+  the quantile off (within 0.005 px of the pooled value); ``value`` holds the
+  exact per-frame quantile, ``sum`` is NaN.
+* ``schema_version``.
+
+Weighting: ``sum`` and ``count`` are totals (see :mod:`harness.metrics` for each
+metric's reduce rule); aggregates always come from summed totals, never from
+averaging ``value``. ``frame`` and ``track_id`` are nullable integers (NA for
+per-track and per-sequence rows respectively); ``sweep_param`` is "" and
+``sweep_value`` "" when a cell has no sweep; ``sweep_value`` is the text of the
+value (``str(value)``; use ``pandas.to_numeric`` to plot it).
+
+Public functions
+----------------
+rows_to_frame(rows, **cell_columns)   metric rows (dicts) + cell columns -> typed DataFrame
+check_schema(df, *, source)           validate / coerce a DataFrame to the schema
+write_table(df, path)                 atomic parquet write (temp + fsync + rename)
+read_table(path)                      read one parquet file, schema version checked
+read_results(run_dir)                 RUN/results.parquet, schema version checked
+summarize(df)                         per pipeline x scene x sweep x metric x region x motion
+collect_cells(run_dir)                cells/*/rows.parquet -> results.parquet + summary.csv
+write_run_json(run_dir, data), read_run_json(run_dir)   RUN/run.json, atomic
+aggregate (re-exported from harness.metrics)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from harness.metrics import aggregate
+from scenes.formats import atomic_write_bytes
+
+__all__ = [
+    "SCHEMA_VERSION", "SCHEMA", "COLUMNS", "CELL_COLUMNS", "SUMMARY_KEYS", "SchemaError",
+    "rows_to_frame", "check_schema", "write_table", "read_table", "read_results", "summarize",
+    "collect_cells", "write_run_json", "read_run_json", "aggregate",
+    "RESULTS_FILE", "SUMMARY_FILE", "RUN_FILE", "ROWS_FILE",
+]
+
+SCHEMA_VERSION = 1
+RESULTS_FILE = "results.parquet"
+SUMMARY_FILE = "summary.csv"
+RUN_FILE = "run.json"
+ROWS_FILE = "rows.parquet"
+_META_KEY = b"aerobench.schema_version"
+
+# column -> pandas dtype, in table order
+SCHEMA: dict[str, str] = {
+    "cell_id": "str", "scene": "str", "scene_hash": "str", "seed": "int64",
+    "pipeline": "str", "pipeline_hash": "str", "sweep_param": "str", "sweep_value": "str",
+    "frame": "Int64", "track_id": "Int64",
+    "metric": "str", "region": "str", "motion": "str", "kind": "str",
+    "value": "float64", "sum": "float64", "count": "float64",
+    "unit": "str", "higher_is_better": "bool", "hist": "str",
+    "status": "str", "error": "str",
+    "config_hash": "str", "git_commit": "str", "git_dirty": "bool", "renderer": "str", "machine": "str",
+    "schema_version": "int64",
+}
+COLUMNS = tuple(SCHEMA)
+# what the runner supplies for every row of a cell (rows_to_frame keyword arguments)
+CELL_COLUMNS = ("cell_id", "scene", "scene_hash", "seed", "pipeline", "pipeline_hash", "sweep_param",
+                "sweep_value", "status", "error", "config_hash", "git_commit", "git_dirty", "renderer",
+                "machine")
+SUMMARY_KEYS = ("pipeline", "scene", "sweep_param", "sweep_value")
+_DEFAULTS = {"str": "", "int64": 0, "float64": np.nan, "bool": False, "Int64": pd.NA}
+
+
+class SchemaError(ValueError):
+    """A results table does not have the schema this version of aerobench reads."""
+
+
+def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
+    """Return ``df`` with exactly :data:`COLUMNS` in order and their dtypes; missing columns are an error.
+
+    ``schema_version`` may be missing (it is then set); present, it must equal
+    :data:`SCHEMA_VERSION`.
+    """
+    df = df.copy()
+    if "schema_version" not in df.columns:
+        df["schema_version"] = SCHEMA_VERSION
+    missing = [c for c in COLUMNS if c not in df.columns]
+    if missing:
+        raise SchemaError(f"{source}: missing column(s) {missing}; expected the aerobench results "
+                          f"schema v{SCHEMA_VERSION}: {list(COLUMNS)}")
+    versions = set(pd.unique(df["schema_version"]).tolist()) if len(df) else set()
+    if versions - {SCHEMA_VERSION}:
+        raise SchemaError(f"{source}: schema version {sorted(versions)}, this aerobench reads "
+                          f"v{SCHEMA_VERSION}; re-run the suite (or `aerobench collect`) to rebuild it")
+    out = {}
+    for c, dt in SCHEMA.items():
+        col = df[c]
+        try:
+            if dt == "str":
+                col = col.astype(object).where(col.notna(), "").astype(str)
+            elif dt == "bool":
+                col = col.fillna(False).astype(bool)
+            elif dt == "Int64":
+                col = pd.to_numeric(col, errors="raise").astype("Int64")
+            else:
+                col = col.astype(dt)
+        except (TypeError, ValueError) as exc:
+            raise SchemaError(f"{source}: column {c!r} cannot be {dt}: {exc}") from None
+        out[c] = col.reset_index(drop=True)
+    return pd.DataFrame(out, columns=list(COLUMNS))
+
+
+def rows_to_frame(rows: Iterable[Mapping], **cell_columns) -> pd.DataFrame:
+    """Build a typed results table from metric rows (dicts from :mod:`harness.metrics`).
+
+    ``cell_columns`` (any of :data:`CELL_COLUMNS`) are set on every row; other
+    missing columns get defaults ("" / 0 / NaN / NA / False, ``status`` "ok").
+    """
+    unknown = set(cell_columns) - set(COLUMNS)
+    if unknown:
+        raise ValueError(f"unknown column(s) {sorted(unknown)}; valid: {list(COLUMNS)}")
+    df = pd.DataFrame(list(rows))
+    for c, v in cell_columns.items():
+        df[c] = "" if v is None and SCHEMA[c] == "str" else (str(v) if SCHEMA[c] == "str" else v)
+    for c, dt in SCHEMA.items():
+        if c not in df.columns:
+            df[c] = "ok" if c == "status" else (SCHEMA_VERSION if c == "schema_version" else _DEFAULTS[dt])
+    return check_schema(df, source="rows")
+
+
+def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
+    """Write a results table as parquet atomically: temp file in the folder, fsync, rename."""
+    path = Path(path)
+    df = check_schema(df, source=str(path))
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[_META_KEY] = str(SCHEMA_VERSION).encode()
+    table = table.replace_schema_metadata(meta)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        pq.write_table(table, tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_table(path: str | os.PathLike) -> pd.DataFrame:
+    """Read a parquet results table (results.parquet or a cell's rows.parquet), schema checked."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such results table")
+    meta = pq.read_schema(path).metadata or {}
+    found = meta.get(_META_KEY)
+    if found is None:
+        raise SchemaError(f"{path}: no aerobench schema version in the file (written by an older aerobench "
+                          f"or another tool); this aerobench reads v{SCHEMA_VERSION}")
+    if found.decode() != str(SCHEMA_VERSION):
+        raise SchemaError(f"{path}: results schema v{found.decode()}, this aerobench reads v{SCHEMA_VERSION}; "
+                          "re-run the suite (or `aerobench collect`) to rebuild it")
+    return check_schema(pq.read_table(path).to_pandas(), source=str(path))
+
+
+def read_results(run_dir: str | os.PathLike) -> pd.DataFrame:
+    """The results table of a run folder (or a path to a .parquet file), schema version checked."""
+    p = Path(run_dir)
+    return read_table(p if p.suffix == ".parquet" else p / RESULTS_FILE)
+
+
+def summarize(df: pd.DataFrame) -> pd.DataFrame:
+    """Aggregates per pipeline x scene x sweep_param x sweep_value x metric x region x motion.
+
+    Recomputed from summed totals (see :func:`harness.metrics.aggregate`); rows of
+    failed cells are left out; ``n_cells`` counts the cells behind each row.
+    """
+    ok = df[df["status"] == "ok"] if "status" in df.columns else df
+    out = aggregate(ok, by=list(SUMMARY_KEYS))
+    if "cell_id" in ok.columns and len(out):
+        keys = [*SUMMARY_KEYS, "metric", "region", "motion"]
+        n = ok.groupby(keys, dropna=False)["cell_id"].nunique().rename("n_cells").reset_index()
+        out = out.merge(n, on=keys, how="left")
+    else:
+        out["n_cells"] = pd.Series(dtype="int64")
+    return out
+
+
+def collect_cells(run_dir: str | os.PathLike) -> pd.DataFrame:
+    """Concatenate ``cells/*/rows.parquet`` into ``results.parquet`` and write ``summary.csv``.
+
+    Folders whose name starts with "." (cells still being written) are skipped.
+    Rows are sorted (cell, metric, region, motion, frame, track) so the file does
+    not depend on the order in which cells finished. Returns the table.
+    """
+    run_dir = Path(run_dir)
+    parts = [read_table(p) for p in sorted((run_dir / "cells").glob(f"*/{ROWS_FILE}"))
+             if not p.parent.name.startswith(".")]
+    df = pd.concat(parts, ignore_index=True) if parts else rows_to_frame([])
+    df = df.sort_values(["cell_id", "metric", "region", "motion", "frame", "track_id"],
+                        na_position="first", kind="stable").reset_index(drop=True)
+    write_table(df, run_dir / RESULTS_FILE)
+    summary = summarize(df)
+    atomic_write_bytes(run_dir / SUMMARY_FILE, summary.drop(columns=["hist"]).to_csv(index=False).encode())
+    return df
+
+
+def write_run_json(run_dir: str | os.PathLike, data: Mapping) -> Path:
+    """Write ``RUN/run.json`` atomically (sorted keys, indented; NaN refused).
+
+    Keys the gate and reports read: ``suite`` (name), ``config_hash``,
+    ``provenance`` (from :func:`harness.provenance.collect`, holding ``machine``),
+    plus ``resolved_suite``, ``cache_dir``, ``cells``, ``status``, ``started``, ``finished``.
+    """
+    path = Path(run_dir) / RUN_FILE
+    text = json.dumps(data, indent=2, sort_keys=True, allow_nan=False, default=_json_default)
+    atomic_write_bytes(path, (text + "\n").encode())
+    return path
+
+
+def read_run_json(run_dir: str | os.PathLike) -> dict:
+    """Read ``RUN/run.json``; a missing or unreadable file raises with the path in the message."""
+    path = Path(run_dir)
+    path = path if path.suffix == ".json" else path / RUN_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no run.json (not a run folder, or the run never started)")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON: {exc}") from None
+
+
+def _json_default(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"run.json: cannot write a {type(o).__name__}")
