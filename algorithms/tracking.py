@@ -1,0 +1,255 @@
+"""Detection of moving regions and tracking: the thesis point tracker (4.1) and a multi-target tracker.
+
+Point tracker (thesis 4.1, Appendix B): a pixel of a target is followed frame
+by frame by the global shift plus the local flow at its (rounded) position,
+
+    p(t+1) = p(t) + s(t) + w(t)(round(p(t)))
+
+and the scalar Kalman filter (eqs. 4.6-4.10) is run on the series of local flow
+measurements w per axis. Appendix B moves the column by the correlation alone
+(its targets moved vertically); here both axes use global + local flow.
+
+Multi-target tracker (beyond the thesis): connected moving regions of the
+motion mask are detections; each track is a constant-velocity Kalman filter
+(:class:`~algorithms.kalman.ConstantVelocityKalman`); detections are assigned
+to tracks by the Hungarian method on the distance to each track's prediction,
+gated; a track is confirmed after ``birth_hits`` consecutive hits and dropped
+after ``death_misses`` consecutive misses. It can work in a ground-fixed
+frame: given the camera path (the cumulative global shift of frame t), it
+subtracts it from detections before filtering and adds it back to its output,
+so a car driving straight is a constant-velocity target even when the
+camera sways.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, scalar_kalman
+from algorithms.registry import register_stage
+
+__all__ = ["detect_moving_objects", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
+
+# Column order of the rows trackers produce (the tracks table of docs/architecture.md).
+TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
+                 "source", "seed_vehicle_id")
+
+
+@register_stage("detection")
+def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
+                          connectivity: int = 8) -> list[tuple[float, float, int]]:
+    """Connected regions of a motion mask as detections.
+
+    Parameters
+    ----------
+    mask : ndarray, (H, W) bool
+        Moving pixels of frame t.
+    min_area_px : int
+        Regions with fewer pixels are dropped.
+    connectivity : {4, 8}
+
+    Returns
+    -------
+    list of (x_px, y_px, area_px)
+        Centroid (frame t pixel coordinates, x right, y down) and area of each
+        region, largest first.
+    """
+    m = np.asarray(mask)
+    if m.ndim != 2 or m.dtype != bool:
+        raise ValueError(f"mask: expected (H, W) bool, got {tuple(m.shape)} {m.dtype}")
+    if connectivity not in (4, 8):
+        raise ValueError(f"connectivity: expected 4 or 8, got {connectivity}")
+    n, _, stats, centroids = cv2.connectedComponentsWithStats(m.astype(np.uint8), connectivity=connectivity)
+    out = [(float(centroids[i, 0]), float(centroids[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
+           for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area_px]
+    return sorted(out, key=lambda d: -d[2])
+
+
+class PointTracker:
+    """The thesis point tracker: one pixel followed by global shift + local flow, Kalman-filtered flow.
+
+    Parameters
+    ----------
+    x_px, y_px : float
+        The seed pixel in frame 0.
+    track_id : int
+    seed_vehicle_id : optional
+        Carried into the rows (the runner seeds with ground-truth vehicles).
+    kalman : mapping, optional
+        ``x0, p0, q, r`` of :func:`~algorithms.kalman.scalar_kalman` per axis.
+        Default: the thesis's P(1|1), Q, R with ``x0=None`` (X(1|1) = the first
+        flow measurement), since the thesis's X(1|1) = -1 encodes its video's
+        upward motion. Pass ``THESIS_KALMAN`` for the thesis exactly.
+
+    Use :meth:`step` once per pair in order, then :meth:`rows`.
+    """
+
+    def __init__(self, x_px: float, y_px: float, *, track_id: int = 0, seed_vehicle_id=None,
+                 kalman: Mapping | None = None):
+        self.track_id, self.seed_vehicle_id = int(track_id), seed_vehicle_id
+        self.kalman = dict(THESIS_KALMAN, x0=None) if kalman is None else dict(kalman)
+        self._pos = [(float(x_px), float(y_px))]
+        self._shift: list[tuple[float, float]] = []
+        self._w: list[tuple[float, float]] = []
+
+    def step(self, global_shift_px, flow_local: np.ndarray, valid: np.ndarray | None = None) -> None:
+        """Advance by pair t -> t+1: sample the local flow at the current position.
+
+        Outside the image, or where ``valid`` is False, the measurement is NaN
+        (the Kalman filter only predicts) and the point moves by the global shift.
+        """
+        x, y = self._pos[-1]
+        h, w = flow_local.shape[:2]
+        c, r = (round(x), round(y)) if math.isfinite(x) and math.isfinite(y) else (-1, -1)
+        inside = 0 <= c < w and 0 <= r < h and (valid is None or bool(valid[r, c]))
+        wu, wv = (float(flow_local[r, c, 0]), float(flow_local[r, c, 1])) if inside else (math.nan, math.nan)
+        sx, sy = float(global_shift_px[0]), float(global_shift_px[1])
+        self._shift.append((sx, sy))
+        self._w.append((wu, wv))
+        # p(t+1) = p(t) + s(t) + w(t)(p(t))  (Appendix B: row = row + ofy + icy)
+        self._pos.append((x + sx + (wu if inside else 0.0), y + sy + (wv if inside else 0.0)))
+
+    def rows(self) -> list[dict]:
+        """One row per frame 0..len(steps): raw, filtered and one-step-predicted positions."""
+        n = len(self._w)
+        rows = []
+        raw = np.array(self._pos)
+        if n == 0:
+            x, y = raw[0]
+            return [self._row(0, x, y, x, y, x, y)]
+        s, w = np.array(self._shift), np.array(self._w)
+        w_f = np.column_stack([self._filter(w[:, a]) for a in (0, 1)])  # X(k|k) per axis
+        # filtered path: the same integration with the filtered local flow
+        filt = np.vstack([raw[:1], raw[:1] + np.cumsum(s + np.nan_to_num(w_f), axis=0)])
+        rows.append(self._row(0, *raw[0], *filt[0], *raw[0]))
+        for k in range(1, n + 1):
+            # eq. 4.6: the prediction of the flow of pair k-1 is X(k-1|k-1) of the pair before
+            w_pred = w_f[k - 2] if k >= 2 else np.zeros(2)
+            pred = filt[k - 1] + s[k - 1] + np.nan_to_num(w_pred)
+            rows.append(self._row(k, *raw[k], *filt[k], *pred))
+        return rows
+
+    def _filter(self, z: np.ndarray) -> np.ndarray:
+        finite = np.isfinite(z)
+        if not finite.any():
+            return np.full_like(z, np.nan)
+        kw = dict(self.kalman)
+        if kw.get("x0") is None and not finite[0]:
+            kw["x0"] = float(z[finite][0])
+        return scalar_kalman(z, **kw)
+
+    def _row(self, frame, x, y, xf, yf, xp, yp) -> dict:
+        return {"frame": int(frame), "track_id": self.track_id, "x_px": float(x), "y_px": float(y),
+                "x_filt_px": float(xf), "y_filt_px": float(yf), "x_pred_px": float(xp), "y_pred_px": float(yp),
+                "source": "point", "seed_vehicle_id": self.seed_vehicle_id}
+
+
+@dataclass
+class _Track:
+    id: int
+    kf: ConstantVelocityKalman
+    hits: int = 1
+    misses: int = 0
+    confirmed: bool = False
+    pending: list = field(default_factory=list)  # rows held until confirmation
+
+
+class MultiTargetTracker:
+    """Constant-velocity Kalman tracks, Hungarian assignment with a distance gate, birth / death rules.
+
+    Parameters
+    ----------
+    gate_px : float
+        Largest distance between a track's predicted position and a detection
+        it may take.
+    birth_hits : int
+        M: a new track is confirmed (and its rows, from its first frame, are
+        output) after M consecutive frames with a detection; a miss before that
+        deletes it.
+    death_misses : int
+        K: a confirmed track is deleted after K consecutive misses (it coasts on
+        its prediction meanwhile; its rows have NaN raw positions then).
+    sigma_accel_px, sigma_meas_px, sigma_vel0_px : float
+        :class:`~algorithms.kalman.ConstantVelocityKalman` noise (px/frame^2, px, px/frame).
+
+    Use :meth:`step` once per frame, then :meth:`rows`.
+    """
+
+    def __init__(self, *, gate_px: float = 8.0, birth_hits: int = 3, death_misses: int = 3,
+                 sigma_accel_px: float = 0.5, sigma_meas_px: float = 1.0, sigma_vel0_px: float = 5.0):
+        if not gate_px > 0:
+            raise ValueError(f"gate_px: expected > 0, got {gate_px}")
+        for name, v in (("birth_hits", birth_hits), ("death_misses", death_misses)):
+            if not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        self.gate_px, self.birth_hits, self.death_misses = float(gate_px), int(birth_hits), int(death_misses)
+        self._kf_kw = dict(sigma_accel_px=sigma_accel_px, sigma_meas_px=sigma_meas_px,
+                           sigma_pos0_px=sigma_meas_px, sigma_vel0_px=sigma_vel0_px)
+        self._tracks: list[_Track] = []
+        self._rows: list[dict] = []
+        self._next_id = 0
+
+    def step(self, frame: int, detections, *, offset_px=(0.0, 0.0)) -> None:
+        """Take the detections ``[(x_px, y_px, ...), ...]`` of ``frame``.
+
+        ``offset_px`` is the camera path at this frame (ground content displacement
+        since frame 0); tracks live in ``image - offset`` coordinates.
+        """
+        off = np.asarray(offset_px, dtype=np.float64)
+        det = np.array([[d[0], d[1]] for d in detections], dtype=np.float64).reshape(-1, 2) - off
+        preds = np.array([t.kf.predict() for t in self._tracks]).reshape(-1, 2)
+        cost = np.linalg.norm(preds[:, None, :] - det[None, :, :], axis=2)
+        pairs = []
+        if cost.size:
+            # infeasible pairs cost more than any feasible assignment could
+            big = self.gate_px * (1 + len(self._tracks) + len(det)) * 10
+            rows, cols = linear_sum_assignment(np.where(cost <= self.gate_px, cost, big))
+            pairs = [(r, c) for r, c in zip(rows, cols) if cost[r, c] <= self.gate_px]
+        taken_t, taken_d = {r for r, _ in pairs}, {c for _, c in pairs}
+        survivors = []
+        for i, trk in enumerate(self._tracks):
+            pred = preds[i]
+            if i in taken_t:
+                z = det[[c for r, c in pairs if r == i][0]]
+                trk.kf.update(z)
+                trk.hits, trk.misses = trk.hits + 1, 0
+            else:
+                z = np.full(2, np.nan)
+                trk.misses += 1
+                if not trk.confirmed or trk.misses >= self.death_misses:
+                    continue
+            self._emit(trk, frame, z, trk.kf.x[:2], pred, off)
+            if not trk.confirmed and trk.hits >= self.birth_hits:
+                trk.confirmed = True
+                self._rows.extend(trk.pending)
+                trk.pending = []
+            survivors.append(trk)
+        for c in range(len(det)):
+            if c not in taken_d:
+                trk = _Track(self._next_id, ConstantVelocityKalman(det[c], **self._kf_kw))
+                self._next_id += 1
+                self._emit(trk, frame, det[c], det[c], det[c], off)
+                if self.birth_hits == 1:
+                    trk.confirmed = True
+                    self._rows.extend(trk.pending)
+                    trk.pending = []
+                survivors.append(trk)
+        self._tracks = survivors
+
+    def _emit(self, trk: _Track, frame, z, filt, pred, off) -> None:
+        z, filt, pred = z + off, filt + off, pred + off
+        row = {"frame": int(frame), "track_id": trk.id, "x_px": float(z[0]), "y_px": float(z[1]),
+               "x_filt_px": float(filt[0]), "y_filt_px": float(filt[1]),
+               "x_pred_px": float(pred[0]), "y_pred_px": float(pred[1]), "source": "multi",
+               "seed_vehicle_id": None}
+        (self._rows if trk.confirmed else trk.pending).append(row)
+
+    def rows(self) -> list[dict]:
+        """Rows of confirmed tracks, in the order produced (frame-major)."""
+        return sorted(self._rows, key=lambda r: (r["frame"], r["track_id"]))
