@@ -1,0 +1,312 @@
+"""The ``aerobench`` command: parse, call the library, print, pick the exit code.
+
+Exit codes: 0 ok / gate passed, 1 a regression or failed cells, 2 bad usage or bad
+input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the traceback).
+
+::
+
+    aerobench list
+    aerobench render SCENE --out DIR [--set key=value ...]
+    aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
+                        [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
+    aerobench report RUN_DIR [--baseline FILE]
+    aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME
+    aerobench baseline RUN_DIR --out FILE
+    aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import textwrap
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports OpenGL
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+__all__ = ["main", "build_parser", "UsageError"]
+
+
+class UsageError(Exception):
+    """A user error the CLI reports in one line with exit code 2."""
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from harness.executors import ExecutorError
+    from harness.runner import RunFolderError
+    from harness.suites import SuiteError
+
+    errors: list[type[BaseException]] = [UsageError, SuiteError, RunFolderError, ExecutorError,
+                                         FileNotFoundError, NotADirectoryError, IsADirectoryError]
+    for module, name in (("scenes.formats", "FormatError"), ("harness.gate", "GateError"),
+                         ("harness.results", "ResultsError"), ("scenes", "SceneSpecError")):
+        try:
+            errors.append(getattr(__import__(module, fromlist=[name]), name))
+        except (ImportError, AttributeError):
+            pass
+    return tuple(errors)
+
+
+def _one_line(text: str, width: int = 100) -> str:
+    """``text`` on one line (lines joined by "; "), shortened to ``width`` characters."""
+    lines = [line.strip() for line in (text or "").strip().splitlines() if line.strip()]
+    return textwrap.shorten("; ".join(lines), width, placeholder=" ...") if lines else ""
+
+
+# --------------------------------------------------------------------------- list
+
+
+def _list_presets() -> dict[str, str]:
+    from scenes import list_presets
+
+    presets = list_presets()
+    if isinstance(presets, dict):
+        return {k: _one_line(str(v)) for k, v in presets.items()}
+    out = {}
+    for name in presets:
+        desc = ""
+        try:
+            from scenes import load_scene_spec
+
+            spec = load_scene_spec(name)
+            desc = getattr(spec, "description", "") or ""
+        except Exception:  # a broken preset still lists, without its description
+            desc = "(cannot be loaded)"
+        out[name] = _one_line(desc)
+    return out
+
+
+def _list_pipelines() -> dict[str, str]:
+    from harness.suites import pipeline_names
+
+    out = {}
+    for name, p in pipeline_names().items():
+        desc = p.get("description", "") if isinstance(p, dict) else getattr(p, "description", "")
+        out[name] = _one_line(desc or "")
+    return out
+
+
+def _list_metrics() -> dict[str, str]:
+    from harness.metrics import METRICS
+
+    return {n: f"[{d.unit}, {'higher' if d.higher_is_better else 'lower'} is better] {_one_line(d.description)}"
+            for n, d in sorted(METRICS.items())}
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from harness.suites import describe_suites
+
+    sections = [("scene presets", _list_presets), ("suites", describe_suites),
+                ("pipelines", _list_pipelines), ("metrics", _list_metrics)]
+    for title, fn in sections:
+        items = fn()
+        print(f"{title}:")
+        width = max((len(k) for k in items), default=0)
+        for name, desc in sorted(items.items()):
+            print(f"  {name:<{width}}  {desc}".rstrip())
+        print()
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- render
+
+
+def _parse_set(items: Sequence[str]) -> dict[str, Any]:
+    import yaml
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--set: expected key=value (e.g. camera.jitter_std_px=2.0), got {item!r}")
+        try:
+            out[key.strip()] = yaml.safe_load(value) if value.strip() else ""
+        except yaml.YAMLError:
+            out[key.strip()] = value
+    return out
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from scenes import load_scene_spec, render_sequence
+
+    spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
+    out = Path(args.out)
+    if out.exists() and any(out.iterdir()):
+        raise UsageError(f"{out}: the output folder is not empty")
+    render_sequence(spec, out)
+    print(f"wrote {out} (preview: {out / 'preview.png'})")
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- run / report
+
+
+def _write_report(run_dir: Path, baseline: str | None = None) -> Path | None:
+    """``reports.write_report`` if the reports package provides it (it is optional for a run)."""
+    try:
+        from reports import write_report
+    except ImportError:
+        return None
+    return write_report(run_dir, baseline=baseline)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from harness.runner import run_suite
+
+    result = run_suite(args.suite, args.out, workers=args.workers, resume=args.resume,
+                       executor=args.executor, scheduler=args.scheduler, cache_dir=args.cache,
+                       progress=not args.quiet)
+    print(f"{result.cells} cells ({result.reused_cells} reused), scenes {result.scenes_rendered} rendered / "
+          f"{result.scenes_reused} reused, {len(result.table)} rows, {result.elapsed_s:.1f} s -> {result.run_dir}")
+    if not args.no_report:
+        try:
+            report = _write_report(result.run_dir)
+        except Exception as exc:  # the results are written; a report failure must not hide them
+            print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        else:
+            if report is not None:
+                print(f"report: {report}")
+    if not result.ok:
+        for line in result.failed_cells:
+            print(f"FAILED {line}", file=sys.stderr)
+        print(f"aerobench: {len(result.failed_cells)} of {result.cells} cells failed (see cells/*/error.txt)",
+              file=sys.stderr)
+        return EXIT_FAIL
+    return EXIT_OK
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    run_dir = Path(args.run_dir)
+    if not (run_dir / "results.parquet").is_file():
+        raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    if args.baseline is not None and not Path(args.baseline).is_file():
+        raise UsageError(f"--baseline: {args.baseline}: no such file")
+    report = _write_report(run_dir, args.baseline)
+    if report is None:
+        raise UsageError("the reports package provides no write_report")
+    print(f"report: {report}")
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- datasets, gate
+
+
+def cmd_eval_flow(args: argparse.Namespace) -> int:
+    from harness.datasets import evaluate_flow_dataset
+
+    table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method)
+    print(table.to_string(index=False) if hasattr(table, "to_string") else table)
+    return EXIT_OK
+
+
+def cmd_baseline(args: argparse.Namespace) -> int:
+    from harness import gate
+
+    run_dir = Path(args.run_dir)
+    if not (run_dir / "results.parquet").is_file():
+        raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    path = gate.make_baseline(run_dir, args.out)
+    print(f"baseline: {path or args.out}")
+    return EXIT_OK
+
+
+def cmd_gate(args: argparse.Namespace) -> int:
+    from harness import gate
+    from scenes.formats import atomic_write_bytes
+
+    run_dir = Path(args.run_dir)
+    if not (run_dir / "results.parquet").is_file():
+        raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    if not Path(args.baseline).is_file():
+        raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
+    rules = gate.load_rules(args.rules) if args.rules else gate.load_rules()
+    outcome = gate.compare(run_dir, args.baseline, rules)
+    markdown = gate.to_markdown(outcome)
+    print(markdown)
+    if args.junit:
+        atomic_write_bytes(args.junit, gate.to_junit_xml(outcome).encode())
+    if args.summary:
+        atomic_write_bytes(args.summary, markdown.encode())
+    return EXIT_OK if outcome.passed else EXIT_FAIL
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from harness.executors import EXECUTORS
+
+    p = argparse.ArgumentParser(prog="aerobench", description="Synthetic benchmark of motion estimation in aerial video.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics")
+    s.set_defaults(fn=cmd_list)
+
+    s = sub.add_parser("render", help="render one scene into a sequence folder")
+    s.add_argument("scene", help="preset name or scene YAML")
+    s.add_argument("--out", required=True, help="the sequence folder to write")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene parameter by dotted key (repeatable)")
+    s.set_defaults(fn=cmd_render)
+
+    s = sub.add_parser("run", help="run a suite into a run folder")
+    s.add_argument("suite", help="built-in suite name or suite YAML")
+    s.add_argument("--out", required=True, help="the run folder (must be empty unless --resume)")
+    s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
+    s.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    s.add_argument("--executor", choices=EXECUTORS, default="process")
+    s.add_argument("--scheduler", default=None, help="dask scheduler address (with --executor dask)")
+    s.add_argument("--cache", default=None, help="render cache (default: $AEROBENCH_CACHE or ~/.cache/aerobench)")
+    s.add_argument("--no-report", action="store_true", help="do not write report.html / report.md")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(fn=cmd_run)
+
+    s = sub.add_parser("report", help="(re)write report.html and report.md of a run")
+    s.add_argument("run_dir")
+    s.add_argument("--baseline", default=None, help="a baseline JSON to compare against")
+    s.set_defaults(fn=cmd_report)
+
+    s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder")
+    s.add_argument("dir")
+    s.add_argument("--format", required=True, choices=("middlebury", "sintel", "kitti"))
+    s.add_argument("--method", required=True, help="flow method name (see aerobench list)")
+    s.set_defaults(fn=cmd_eval_flow)
+
+    s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")
+    s.add_argument("run_dir")
+    s.add_argument("--out", required=True, help="the baseline JSON to write")
+    s.set_defaults(fn=cmd_baseline)
+
+    s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")
+    s.add_argument("run_dir")
+    s.add_argument("--baseline", required=True)
+    s.add_argument("--rules", default=None, help="gate rules YAML (default: the built-in rules)")
+    s.add_argument("--junit", default=None, help="write a JUnit XML report here")
+    s.add_argument("--summary", default=None, help="write the Markdown summary here (e.g. $GITHUB_STEP_SUMMARY)")
+    s.set_defaults(fn=cmd_gate)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``aerobench`` console command; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)  # argparse exits 2 on bad usage by itself
+    try:
+        return args.fn(args)
+    except KeyboardInterrupt:
+        print("aerobench: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if not isinstance(exc, _user_errors()) or os.environ.get("AEROBENCH_DEBUG"):
+            raise
+        print(f"aerobench: error: {_one_line(str(exc), 2000)}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""Where the runner's tasks run: a local process pool or a Dask cluster, one interface.
+
+Both give a standard :class:`concurrent.futures.Executor`, so the runner has one code
+path: ``submit`` returns futures that ``concurrent.futures.as_completed`` can wait on.
+
+- ``"process"``: a :class:`~concurrent.futures.ProcessPoolExecutor` with the *spawn*
+  start method (a forked child must never inherit an OpenGL context), one worker per
+  core by default.
+- ``"dask"``: an existing ``dask.distributed`` scheduler at ``scheduler`` (an address
+  such as ``tcp://10.0.0.5:8786``), through ``Client.get_executor()``.
+- ``"dask-local"``: a :class:`distributed.LocalCluster` of ``workers`` single-threaded
+  worker processes on this machine (a rehearsal of the cluster path).
+
+Dask is optional: without it the two dask kinds raise :class:`ExecutorError` saying
+``pip install aerobench[dask]``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
+from contextlib import contextmanager
+
+__all__ = ["EXECUTORS", "ExecutorError", "default_workers", "open_executor"]
+
+EXECUTORS = ("process", "dask", "dask-local")
+
+
+class ExecutorError(ValueError):
+    """The executor asked for cannot be made (unknown kind, dask missing, bad address)."""
+
+
+def default_workers() -> int:
+    """Worker processes to use by default: the cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ExecutorError(
+            "the dask executors need dask.distributed, which is not installed: pip install aerobench[dask]"
+        ) from None
+    return distributed
+
+
+@contextmanager
+def open_executor(
+    kind: str = "process", *, workers: int | None = None, scheduler: str | None = None
+) -> Iterator[Executor]:
+    """An executor of ``kind``, shut down (and its cluster closed) on exit.
+
+    Parameters
+    ----------
+    kind : {"process", "dask", "dask-local"}
+    workers : int, optional
+        Worker processes for ``process`` and ``dask-local``; default: one per core.
+        Ignored for ``dask`` (the cluster has its own workers).
+    scheduler : str, optional
+        Scheduler address; required for ``dask``, refused for the others.
+    """
+    if kind not in EXECUTORS:
+        raise ExecutorError(f"unknown executor {kind!r}; valid: {', '.join(EXECUTORS)}")
+    if workers is not None and workers < 1:
+        raise ExecutorError(f"workers: expected a positive number, got {workers}")
+    if scheduler is not None and kind != "dask":
+        raise ExecutorError(f"--scheduler is for the dask executor, not {kind!r}")
+    n = workers or default_workers()
+
+    if kind == "process":
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"))
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+
+    distributed = _import_distributed()
+    if kind == "dask":
+        if not scheduler:
+            raise ExecutorError("the dask executor needs a scheduler address (--scheduler tcp://HOST:8786)")
+        try:
+            client = distributed.Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ExecutorError(f"cannot reach the dask scheduler at {scheduler}: {exc}") from None
+        try:
+            yield client.get_executor()
+        finally:
+            client.close()
+        return
+
+    # dask-local: worker processes (GL needs a process each), one thread each, no dashboard
+    cluster = distributed.LocalCluster(
+        n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+    )
+    client = distributed.Client(cluster)
+    try:
+        yield client.get_executor()
+    finally:
+        client.close()
+        cluster.close()

@@ -1,0 +1,596 @@
+"""Run a suite: render its scenes (cached), run its cells on an executor, collect the results.
+
+:func:`run_suite` is the library entry point; ``aerobench run`` only parses, calls it,
+prints and picks the exit code. The run folder is laid out as docs/architecture.md says.
+
+Work comes in two kinds of task, both plain functions of plain data so that any
+:class:`concurrent.futures.Executor` (local processes or Dask) can run them:
+
+1. :func:`render_task`, one per distinct scene variant: ``scenes.cached_sequence``
+   renders into the shared cache, or finds the sequence already there.
+2. :func:`cell_task`, one per (scene variant, seed, pipeline): opens the sequence
+   lazily, runs the pipeline pair by pair, scores each pair at once and drops its
+   arrays, scores the sequence, writes the cell's rows and artifacts into a temporary
+   folder and renames it to ``cells/<cell_id>/``. A cell that raises is recorded
+   (``status = "failed"`` with its error) and the run goes on.
+
+A cell's results depend only on its inputs (no shared RNG), and rows are sorted on
+collection, so the accuracy numbers do not depend on the executor or the number of
+workers. ``resume=True`` keeps every complete cell folder whose config hash matches,
+so a run killed at any moment (SIGKILL included) finishes with the same results.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import math
+import os
+import shutil
+import sys
+import time
+import traceback
+import uuid
+from collections.abc import Iterable, Mapping
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness.results import ROWS_FILE, collect_cells, rows_to_frame, write_run_json, write_table
+from harness.suites import Cell, SceneVariant, Suite, expand, load_suite
+
+__all__ = ["RunFolderError", "RunResult", "default_cache_dir", "run_suite", "render_task", "cell_task"]
+
+CELL_FILE = "cell.json"  # written last inside a cell folder, before the rename
+LOCK_FILE = ".lock"
+CACHE_ENV = "AEROBENCH_CACHE"
+
+
+class RunFolderError(ValueError):
+    """The run folder cannot be used: not empty without ``resume``, or locked by another run."""
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_suite` returns: the results table and how the run went."""
+
+    run_dir: Path
+    table: pd.DataFrame
+    status: str  # "ok" | "failed"
+    cells: int
+    failed_cells: list[str] = field(default_factory=list)  # "cell_id scene seed pipeline: error"
+    reused_cells: int = 0
+    scenes_rendered: int = 0
+    scenes_reused: int = 0
+    elapsed_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+def default_cache_dir() -> Path:
+    """The render cache: ``$AEROBENCH_CACHE``, else ``$XDG_CACHE_HOME/aerobench`` (``~/.cache/aerobench``)."""
+    env = os.environ.get(CACHE_ENV)
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "aerobench"
+
+
+# --------------------------------------------------------------------------- worker side
+
+
+def _prepare_worker() -> None:
+    # Before anything imports OpenGL: headless EGL (see README).
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+
+def _import_plugins(modules: Iterable[str]) -> None:
+    import importlib
+
+    for name in modules:
+        importlib.import_module(name)
+
+
+def render_task(variant_key: str, spec: Any, cache_dir: str) -> dict:
+    """Render one scene variant into the cache (or find it there); returns where and whether reused."""
+    _prepare_worker()
+    from scenes import cached_sequence
+
+    t0 = time.perf_counter()
+    try:
+        result = cached_sequence(spec, cache_dir)
+    except Exception as exc:  # the cells of this scene are recorded as failed, the run goes on
+        return {"key": variant_key, "path": None, "reused": False,
+                "error": f"rendering failed: {type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc()}
+    path, reused = _unpack_cached(result)
+    return {"key": variant_key, "path": str(path), "reused": reused, "error": None,
+            "render_s": time.perf_counter() - t0}
+
+
+def _unpack_cached(result: Any) -> tuple[Path, bool]:
+    """``cached_sequence`` returns the path, or (path, was_cached)."""
+    if isinstance(result, tuple):
+        return Path(result[0]), bool(result[1])
+    path = Path(result)
+    meta = _read_json(path / "meta.json") or {}
+    return path, bool(meta.get("_reused", False))
+
+
+class _Frames:
+    """The frames of a sequence as an indexable (``len``, ``[i]``) read lazily from disk."""
+
+    def __init__(self, seq: Any):
+        self._seq = seq
+
+    def __len__(self) -> int:
+        return len(self._seq)
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        if not 0 <= i < len(self._seq):
+            raise IndexError(i)
+        return self._seq.frame(i)
+
+
+def point_seeds(tracks: pd.DataFrame) -> list[tuple[int, float, float]]:
+    """Seeds for the point tracker: ground-truth centres of the vehicles visible in frame 0."""
+    if tracks is None or len(tracks) == 0:
+        return []
+    first = tracks[(tracks["frame"] == 0) & (tracks["visible"].astype(int) == 1)]
+    first = first.sort_values("vehicle_id")
+    return [(int(r.vehicle_id), float(r.x_px), float(r.y_px)) for r in first.itertuples()]
+
+
+def _stabilisation_table(est: Any, camera: pd.DataFrame) -> pd.DataFrame:
+    """Per frame: the estimated cumulative shift, flight line, correction and jitter beside the truth."""
+    n = len(camera)
+    out = pd.DataFrame({"frame": np.arange(n)})
+    for name in ("cumulative_px", "flight_line_px", "correction_px", "jitter_px"):
+        a = getattr(est, name, None)
+        if a is None:
+            continue
+        a = np.asarray(a, dtype=float)
+        if a.shape != (n, 2):
+            continue
+        stem = name.removesuffix("_px")
+        out[f"{stem}_x_px"], out[f"{stem}_y_px"] = a[:, 0], a[:, 1]
+    gx = pd.to_numeric(camera.get("global_dx_px"), errors="coerce").to_numpy(float)
+    gy = pd.to_numeric(camera.get("global_dy_px"), errors="coerce").to_numpy(float)
+    # cumulative truth: sum of the pair shifts before frame i (frame 0 at the origin)
+    out["true_cumulative_x_px"] = np.concatenate([[0.0], np.cumsum(np.nan_to_num(gx[:-1]))])
+    out["true_cumulative_y_px"] = np.concatenate([[0.0], np.cumsum(np.nan_to_num(gy[:-1]))])
+    out["true_jitter_x_px"] = camera["jitter_x_px"].to_numpy(float)
+    out["true_jitter_y_px"] = camera["jitter_y_px"].to_numpy(float)
+    return out
+
+
+def _tracks_table(est: Any, truth: pd.DataFrame) -> pd.DataFrame:
+    """The estimated tracks, with the ground-truth centre of the seeded vehicle beside each row."""
+    tracks = getattr(est, "tracks", None)
+    if tracks is None or len(tracks) == 0:
+        return pd.DataFrame(columns=["frame", "track_id", "x_px", "y_px", "source", "true_x_px", "true_y_px"])
+    tracks = tracks.copy()
+    if "seed_vehicle_id" in tracks and truth is not None and len(truth):
+        t = truth[["frame", "vehicle_id", "x_px", "y_px", "visible"]].rename(
+            columns={"vehicle_id": "seed_vehicle_id", "x_px": "true_x_px", "y_px": "true_y_px",
+                     "visible": "true_visible"})
+        ids = pd.to_numeric(tracks["seed_vehicle_id"], errors="coerce")
+        tracks["seed_vehicle_id"] = ids.astype("Int64")
+        t["seed_vehicle_id"] = t["seed_vehicle_id"].astype("Int64")
+        tracks = tracks.merge(t, on=["frame", "seed_vehicle_id"], how="left")
+    return tracks.sort_values([c for c in ("track_id", "frame") if c in tracks]).reset_index(drop=True)
+
+
+def _as_rows(rows: Any) -> list[dict]:
+    if rows is None:
+        return []
+    if isinstance(rows, pd.DataFrame):
+        return rows.to_dict("records")
+    return [dict(r) for r in rows]
+
+
+def _renderer_of(meta: Mapping) -> str:
+    """One line naming what rendered a sequence (renderer and GL strings of meta.json)."""
+    parts = [str(meta.get(k)) for k in ("renderer", "gl_renderer", "gl_version") if meta.get(k)]
+    return " | ".join(parts)
+
+
+def _score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
+    """Run one cell's pipeline on its sequence and score it; artifacts go into ``tmp``."""
+    from algorithms.pipeline import Pipeline
+    from harness.metrics import score_pair, score_sequence
+    from scenes import open_sequence
+    from scenes.formats import write_flo
+
+    seq = open_sequence(payload["sequence"])
+    pipeline = Pipeline.from_dict(payload["pipeline_spec"])
+    pictures = set(payload["picture_pairs"])
+    rows: list[dict] = []
+    seq_est = None
+    for est in pipeline.run(_Frames(seq), seeds=point_seeds(seq.tracks)):
+        if not hasattr(est, "flow_total"):  # the SequenceEstimate comes last
+            seq_est = est
+            continue
+        truth = seq.pair_truth(est.index)
+        rows += _as_rows(score_pair(est, truth, frame=est.index))
+        if est.index in pictures:
+            write_flo(tmp / f"flow_{est.index:06d}.flo", est.flow_total)
+        del est, truth  # the arrays of a pair live no longer than its scoring
+    if seq_est is None:
+        raise RuntimeError("the pipeline yielded no SequenceEstimate")
+    rows += _as_rows(score_sequence(seq_est, seq.camera, seq.tracks))
+    if payload["metrics"] is not None:
+        keep = set(payload["metrics"])
+        rows = [r for r in rows if r["metric"] in keep]
+    return rows, _renderer_of(seq.meta or {})
+    _write_csv(tmp / "stabilisation.csv", _stabilisation_table(seq_est, seq.camera))
+    _write_csv(tmp / "tracks.csv", _tracks_table(seq_est, seq.tracks))
+
+
+def _cell_columns(payload: Mapping) -> dict:
+    return {
+        "cell_id": payload["cell_id"],
+        "scene": payload["scene"],
+        "scene_hash": payload["scene_hash"],
+        "seed": payload["seed"],
+        "pipeline": payload["pipeline"],
+        "pipeline_hash": payload["pipeline_hash"],
+        "sweep_param": payload["sweep_param"],
+        "sweep_value": payload["sweep_value"],
+        "config_hash": payload["config_hash"],
+        **payload["provenance"],
+    }
+
+
+def cell_task(payload: Mapping) -> dict:
+    """Run, score and write one cell; never raises for a failure of the cell itself.
+
+    Returns a small summary dict (``cell_id``, ``status``, ``error``, ``rows``).
+    """
+    _prepare_worker()
+    cells_dir = Path(payload["cells_dir"])
+    final = cells_dir / payload["cell_id"]
+    tmp = cells_dir / f".tmp-{payload['cell_id']}-{uuid.uuid4().hex[:8]}"
+    tmp.mkdir(parents=True)
+    t0 = time.perf_counter()
+    status, error, tb, renderer = "ok", "", "", ""
+    try:
+        _import_plugins(payload.get("imports", ()))
+        if payload.get("render_error"):
+            raise RuntimeError(payload["render_error"])
+        rows, renderer = _score_cell(payload, tmp)
+        if not rows:
+            raise RuntimeError("the cell produced no result rows (no metric applies?)")
+    except Exception as exc:
+        status, error, tb = "failed", f"{type(exc).__name__}: {exc}", traceback.format_exc()
+        rows = [{"metric": "cell_failed", "value": math.nan, "sum": math.nan, "count": 0.0}]
+        (tmp / "error.txt").write_text(tb + payload.get("render_traceback", ""))
+    table = rows_to_frame(rows, **_cell_columns(payload), renderer=renderer, status=status, error=error)
+    write_table(table, tmp / ROWS_FILE)
+    _write_json(tmp / CELL_FILE, {
+        "cell_id": payload["cell_id"], "config_hash": payload["config_hash"], "status": status,
+        "error": error, "rows": len(table), "elapsed_s": round(time.perf_counter() - t0, 3),
+        "scene": payload["scene"], "seed": payload["seed"], "pipeline": payload["pipeline"],
+    })
+    _rename_into_place(tmp, final)
+    return {"cell_id": payload["cell_id"], "status": status, "error": error, "rows": len(table)}
+
+
+def _rename_into_place(tmp: Path, final: Path) -> None:
+    """Make ``tmp`` the folder ``final``; an older folder there (a failed try) is moved aside first."""
+    if final.exists():
+        old = final.with_name(f".old-{final.name}-{uuid.uuid4().hex[:8]}")
+        os.rename(final, old)
+        os.rename(tmp, final)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.rename(tmp, final)
+
+
+# --------------------------------------------------------------------------- files
+
+
+def _write_csv(path: Path, table: pd.DataFrame) -> None:
+    from scenes.formats import atomic_write_bytes
+
+    atomic_write_bytes(path, table.to_csv(index=False).encode())
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    from scenes.formats import atomic_write_bytes
+
+    atomic_write_bytes(path, (json.dumps(obj, indent=2, sort_keys=True, default=str) + "\n").encode())
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+# --------------------------------------------------------------------------- driver side
+
+
+def _say(progress: bool, msg: str) -> None:
+    if progress:
+        print(msg, file=sys.stderr, flush=True)
+
+
+class _Lock:
+    """An exclusive ``flock`` on ``RUN/.lock``: released by the kernel even if the run is killed."""
+
+    def __init__(self, run_dir: Path):
+        self.path = run_dir / LOCK_FILE
+        self.fd: int | None = None
+
+    def __enter__(self) -> _Lock:
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(self.fd)
+            self.fd = None
+            raise RuntimeError from None
+        os.ftruncate(self.fd, 0)
+        os.write(self.fd, f"{os.getpid()}\n".encode())
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.fd is not None:
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+            os.close(self.fd)
+
+
+def _open_run_dir(run_dir: Path, resume: bool) -> _Lock:
+    if run_dir.exists() and not run_dir.is_dir():
+        raise RunFolderError(f"{run_dir}: exists and is not a folder")
+    if run_dir.is_dir() and not resume:
+        others = [p.name for p in run_dir.iterdir() if p.name != LOCK_FILE]
+        if others:
+            raise RunFolderError(
+                f"{run_dir}: the run folder is not empty; pass --resume to finish that run, or choose another --out"
+            )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    lock = _Lock(run_dir)
+    try:
+        lock.__enter__()
+    except RuntimeError:
+        raise RunFolderError(f"{run_dir}: another aerobench run is writing into this folder ({run_dir / LOCK_FILE})") from None
+    return lock
+
+
+def _cell_complete(cells_dir: Path, cell: Cell) -> bool:
+    """A cell folder is kept on resume when it is complete, succeeded, and has the same config hash."""
+    folder = cells_dir / cell.cell_id
+    info = _read_json(folder / CELL_FILE)
+    return (
+        info is not None
+        and info.get("config_hash") == cell.config_hash
+        and info.get("status") == "ok"
+        and (folder / ROWS_FILE).is_file()
+    )
+
+
+def _clean_partial(cells_dir: Path) -> None:
+    """Temporary folders of cells that were running when a run was killed."""
+    for p in cells_dir.glob(".tmp-*"):
+        shutil.rmtree(p, ignore_errors=True)
+    for p in cells_dir.glob(".old-*"):
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def _variant_key(v: SceneVariant) -> str:
+    return v.scene_hash
+
+
+def _payload(cell: Cell, cells_dir: Path, provenance: dict, imports: list[str]) -> dict:
+    v = cell.variant
+    return {
+        "cell_id": cell.cell_id,
+        "config_hash": cell.config_hash,
+        "scene": v.label,
+        "scene_hash": v.scene_hash,
+        "seed": v.seed,
+        "sweep_param": v.sweep_param,
+        "sweep_value": None if v.sweep_value is None else str(v.sweep_value),
+        "pipeline": cell.pipeline,
+        "pipeline_spec": cell.pipeline_spec,
+        "pipeline_hash": cell.pipeline_hash,
+        "metrics": list(cell.metrics) if cell.metrics is not None else None,
+        "picture_pairs": list(cell.picture_pairs),
+        "cells_dir": str(cells_dir),
+        "provenance": provenance,
+        "imports": imports,
+    }
+
+
+def run_suite(
+    suite: Suite | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    resume: bool = False,
+    executor: str = "process",
+    scheduler: str | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> RunResult:
+    """Run every cell of ``suite`` into the run folder ``out_dir`` and collect the results.
+
+    Parameters
+    ----------
+    suite : Suite, built-in suite name or path to a suite YAML
+    out_dir : path
+        The run folder; must be empty or absent unless ``resume``.
+    workers : int, optional
+        Worker processes (``process``, ``dask-local``); default one per core.
+    resume : bool
+        Keep the complete cells already in ``out_dir`` and run the rest.
+    executor : {"process", "dask", "dask-local"}
+    scheduler : str, optional
+        Dask scheduler address for ``executor="dask"``.
+    cache_dir : path, optional
+        The render cache shared between runs; default :func:`default_cache_dir`.
+    progress : bool
+        Progress bar and status lines on stderr.
+
+    Returns
+    -------
+    RunResult
+        ``status`` is ``"failed"`` when any cell failed; the table holds every row.
+
+    Raises
+    ------
+    harness.suites.SuiteError
+        the suite is invalid (nothing is written).
+    RunFolderError
+        ``out_dir`` is not empty without ``resume``, or another run holds it.
+    harness.executors.ExecutorError
+        the executor cannot be made (dask missing, scheduler unreachable).
+    """
+    from harness.executors import EXECUTORS, ExecutorError, open_executor
+    from harness.provenance import collect as collect_provenance
+    from harness.provenance import config_hash
+
+    t_start = time.perf_counter()
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    source = str(suite) if not isinstance(suite, Suite) else suite.name
+    if not isinstance(suite, Suite):
+        suite = load_suite(suite)
+    if executor not in EXECUTORS:
+        raise ExecutorError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
+    cells = expand(suite, source=source)  # validates everything before a file is written
+    suite_dict = suite.model_dump(mode="json")
+    suite_hash = config_hash(suite_dict)
+    cache = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
+    run_dir = Path(out_dir)
+
+    lock = _open_run_dir(run_dir, resume)
+    try:
+        cells_dir = run_dir / "cells"
+        cells_dir.mkdir(exist_ok=True)
+        _clean_partial(cells_dir)
+        old = _read_json(run_dir / "run.json")
+        if resume and old is not None and old.get("config_hash") not in (None, suite_hash):
+            raise RunFolderError(
+                f"{run_dir}: holds a run of another suite configuration (config hash "
+                f"{old.get('config_hash')}, this suite {suite_hash}); choose another --out"
+            )
+        todo = [c for c in cells if not (resume and _cell_complete(cells_dir, c))]
+        reused_cells = len(cells) - len(todo)
+        if reused_cells:
+            _say(progress, f"resume: {reused_cells} of {len(cells)} cells already complete")
+
+        prov = collect_provenance()
+        provenance = {k: prov[k] for k in ("git_commit", "git_dirty", "machine")}
+        run_info = {
+            "suite": suite.name, "suite_source": source, "resolved_suite": suite_dict,
+            "config_hash": suite_hash, "provenance": prov, "cache_dir": str(cache),
+            "cells": [_cell_entry(c) for c in cells], "status": "running",
+            "started": started, "finished": None, "executor": executor,
+            "workers": workers,
+        }
+        write_run_json(run_dir, run_info)
+
+        rendered, reused, failed = _execute(
+            todo, cells_dir, cache, provenance, suite, executor, workers, scheduler, progress
+        )
+        _say(progress, f"scenes: {rendered} rendered, {reused} reused from the cache ({cache})")
+
+        _remove_strays(cells_dir, cells)
+        table = collect_cells(run_dir)  # sorted rows: independent of the order cells finished
+        failed_cells = _failures(cells_dir, cells)
+        status = "failed" if failed_cells else "ok"
+        renderers = sorted(set(table["renderer"]) - {""}) if len(table) else []
+        prov["renderer"] = "; ".join(renderers)
+        run_info.update(status=status, failed_cells=failed_cells, provenance=prov,
+                        finished=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                        scenes_rendered=rendered, scenes_reused=reused, cells_reused=reused_cells)
+        write_run_json(run_dir, run_info)
+    finally:
+        lock.__exit__(None, None, None)
+    return RunResult(run_dir=run_dir, table=table, status=status, cells=len(cells),
+                     failed_cells=failed_cells, reused_cells=reused_cells, scenes_rendered=rendered,
+                     scenes_reused=reused, elapsed_s=time.perf_counter() - t_start)
+
+
+def _cell_entry(c: Cell) -> dict:
+    return {"cell_id": c.cell_id, "scene": c.variant.label, "seed": c.variant.seed,
+            "pipeline": c.pipeline, "config_hash": c.config_hash}
+
+
+def _failures(cells_dir: Path, cells: list[Cell]) -> list[str]:
+    out = []
+    for c in cells:
+        info = _read_json(cells_dir / c.cell_id / CELL_FILE) or {}
+        if info.get("status") != "ok":
+            out.append(f"{c.cell_id} {c.variant.label} seed {c.variant.seed} x {c.pipeline}: "
+                       f"{info.get('error') or 'no result'}")
+    return out
+
+
+def _remove_strays(cells_dir: Path, cells: list[Cell]) -> None:
+    """Cell folders that are not cells of this suite (cannot happen unless edited by hand)."""
+    wanted = {c.cell_id for c in cells}
+    for p in cells_dir.iterdir():
+        if p.is_dir() and p.name not in wanted:
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def _execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, suite: Suite,
+             executor: str, workers: int | None, scheduler: str | None,
+             progress: bool) -> tuple[int, int, int]:
+    """Render the scenes ``todo`` needs, then run its cells as their scene becomes ready."""
+    from tqdm import tqdm
+
+    from harness.executors import open_executor
+
+    if not todo:
+        return 0, 0, 0
+    imports = list(getattr(suite, "imports", None) or [])
+    by_scene: dict[str, list[Cell]] = {}
+    variants: dict[str, SceneVariant] = {}
+    for c in todo:
+        key = _variant_key(c.variant)
+        by_scene.setdefault(key, []).append(c)
+        variants[key] = c.variant
+    cache.mkdir(parents=True, exist_ok=True)
+    rendered = reused = failed = 0
+    bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
+               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
+        pending: dict[Future, tuple[str, str]] = {}
+        for key, v in variants.items():
+            pending[pool.submit(render_task, key, v.spec, str(cache))] = ("render", key)
+        while pending:
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for fut in done:
+                kind, key = pending.pop(fut)
+                bar.update(1)
+                result = fut.result()  # our tasks catch their own failures; this is a lost worker
+                if kind == "render":
+                    if result["error"]:
+                        failed += 1
+                    elif result["reused"]:
+                        reused += 1
+                    else:
+                        rendered += 1
+                    for c in by_scene[key]:
+                        payload = _payload(c, cells_dir, provenance, imports)
+                        payload["sequence"] = result["path"]
+                        if result["error"]:
+                            payload["render_error"] = result["error"]
+                            payload["render_traceback"] = result.get("traceback", "")
+                        pending[pool.submit(cell_task, payload)] = ("cell", c.cell_id)
+                elif result["status"] != "ok":
+                    bar.write(f"cell {key} failed: {result['error']}")
+    bar.close()
+    return rendered, reused, failed
