@@ -1,0 +1,387 @@
+"""The regression gate: baselines, tolerance rules, comparison, JUnit XML and Markdown.
+
+A baseline is a JSON file of aggregated values per (scene, pipeline,
+sweep_param, sweep_value, metric, region, motion) with units and directions,
+stamped with the suite name, config hash and machine of the run that made it.
+
+Rules (YAML) map metric names or glob patterns to a parsed statement::
+
+    rules:
+      epe_mean: abs 0.02        # allowed worsening, in the metric's unit
+      "outlier_*": abs 0.5
+      "time_*": rel 10%         # allowed worsening, relative to the baseline
+      track_fde: off            # not checked
+
+An exact name wins over patterns; among patterns the first listed wins. A
+rule whose name or pattern matches no registered metric is an error.
+Without a rule, accuracy metrics get ``abs`` :data:`DEFAULT_ABS` and timings
+``rel`` :data:`DEFAULT_REL`.
+
+:func:`compare` is direction-aware (an improvement never fails). Timings are
+checked only when the current machine equals the baseline's; otherwise they
+are skipped and the result says so. A baseline from another suite, or a key
+present on one side only, raises :class:`GateError` (exit code 2), never a pass.
+
+Public functions
+----------------
+make_baseline(results_df, run_meta) -> dict
+write_baseline(baseline, path), read_baseline(path)
+parse_rule(text) -> Rule, load_rules(path) -> dict[str, Rule], rules_from_mapping(mapping)
+compare(current, baseline, rules=None, *, suite=None, machine=None) -> GateResult
+to_junit_xml(result) -> str, to_markdown(result) -> str
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import math
+import os
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from harness.metrics import METRICS
+from harness.results import SUMMARY_KEYS, summarize
+from scenes.formats import atomic_write_bytes
+
+__all__ = ["GateError", "Rule", "Check", "GateResult", "BASELINE_FORMAT", "DEFAULT_ABS", "DEFAULT_REL",
+           "make_baseline", "write_baseline", "read_baseline", "parse_rule", "load_rules",
+           "rules_from_mapping", "compare", "to_junit_xml", "to_markdown"]
+
+BASELINE_FORMAT = "aerobench-baseline/1"
+DEFAULT_ABS = 1e-4   # accuracy: worsening allowed in the metric's unit (px, %, deg, ...)
+DEFAULT_REL = 0.20   # timings: worsening allowed relative to the baseline
+KEY = (*SUMMARY_KEYS, "metric", "region", "motion")
+
+
+class GateError(ValueError):
+    """The gate cannot decide (missing or foreign baseline, a metric on one side only, bad rules): exit 2."""
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A tolerance: ``mode`` "abs" (in the metric's unit), "rel" (fraction of the baseline) or "off"."""
+
+    mode: str
+    tolerance: float = 0.0
+    text: str = ""
+
+    def allowed(self, baseline: float) -> float:
+        return self.tolerance if self.mode == "abs" else self.tolerance * abs(baseline)
+
+
+@dataclass
+class Check:
+    """One compared value."""
+
+    key: dict
+    unit: str
+    higher_is_better: bool
+    kind: str
+    baseline: float
+    current: float
+    rule: Rule
+    status: str  # "pass" | "fail" | "skipped"
+    reason: str = ""
+
+    @property
+    def name(self) -> str:
+        k = self.key
+        sweep = f" {k['sweep_param']}={k['sweep_value']}" if k.get("sweep_param") else ""
+        return f"{k['metric']}[{k['region']},{k['motion']}]{sweep}"
+
+    @property
+    def group(self) -> str:
+        return f"{self.key['scene']}.{self.key['pipeline']}"
+
+    @property
+    def delta(self) -> float:
+        return self.current - self.baseline
+
+
+@dataclass
+class GateResult:
+    """All checks of one comparison; ``passed`` when none failed."""
+
+    suite: str
+    checks: list[Check] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if c.status == "fail"]
+
+    @property
+    def skipped(self) -> list[Check]:
+        return [c for c in self.checks if c.status == "skipped"]
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.passed else 1
+
+
+# --------------------------------------------------------------------------- baselines
+
+def _summary(df: pd.DataFrame) -> pd.DataFrame:
+    """A summary table from either a results table (has ``frame``) or a summary already."""
+    return summarize(df) if "frame" in df.columns else df
+
+
+def _meta_machine(run_meta: Mapping) -> str:
+    prov = run_meta.get("provenance") or {}
+    return str(prov.get("machine") or run_meta.get("machine") or "")
+
+
+def _meta_suite(run_meta: Mapping) -> str:
+    s = run_meta.get("suite", "")
+    return str(s.get("name", "")) if isinstance(s, Mapping) else str(s)
+
+
+def make_baseline(results_df: pd.DataFrame, run_meta: Mapping) -> dict:
+    """A baseline from a run's results (or summary) and its run.json contents.
+
+    ``run_meta`` keys used: ``suite`` (name), ``config_hash``, ``provenance.machine``
+    (or ``machine``), ``provenance.git_commit``.
+    """
+    suite = _meta_suite(run_meta)
+    if not suite:
+        raise GateError("run metadata has no suite name: cannot make a baseline")
+    s = _summary(results_df)
+    entries = []
+    for r in s.sort_values(list(KEY)).itertuples(index=False):
+        d = r._asdict()
+        entries.append({**{k: str(d[k]) for k in KEY}, "value": _num(d["value"]), "unit": d["unit"],
+                        "higher_is_better": bool(d["higher_is_better"]), "kind": d["kind"],
+                        "count": _num(d["count"])})
+    return {"format": BASELINE_FORMAT, "suite": suite, "config_hash": str(run_meta.get("config_hash", "")),
+            "machine": _meta_machine(run_meta),
+            "git_commit": str((run_meta.get("provenance") or {}).get("git_commit", "")),
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), "metrics": entries}
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def write_baseline(baseline: Mapping, path: str | os.PathLike) -> Path:
+    """Write a baseline as indented JSON, atomically (NaN is written as null)."""
+    path = Path(path)
+    atomic_write_bytes(path, (json.dumps(baseline, indent=1, sort_keys=True, allow_nan=False) + "\n").encode())
+    return path
+
+
+def read_baseline(path: str | os.PathLike) -> dict:
+    """Read a baseline; a missing, unreadable or foreign file raises :class:`GateError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise GateError(f"{path}: no baseline file; make one with `aerobench baseline` (a missing baseline "
+                        "is an error, not a pass)")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise GateError(f"{path}: baseline is not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != BASELINE_FORMAT:
+        got = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise GateError(f"{path}: not an aerobench baseline: format {got!r}, expected {BASELINE_FORMAT!r}")
+    return data
+
+
+# --------------------------------------------------------------------------- rules
+
+_RULE = re.compile(r"^\s*(abs|rel)\s+([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(%?)\s*$")
+
+
+def parse_rule(text: str) -> Rule:
+    """Parse ``"abs 0.02"``, ``"rel 10%"`` (or ``"rel 0.1"``) or ``"off"``."""
+    t = str(text).strip()
+    if t.lower() == "off":
+        return Rule("off", 0.0, t)
+    m = _RULE.match(t)
+    if not m:
+        raise GateError(f"rule {text!r}: expected 'abs <number>', 'rel <number>%' or 'off'")
+    mode, num, pct = m.group(1), float(m.group(2)), m.group(3)
+    if pct and mode == "abs":
+        raise GateError(f"rule {text!r}: a percentage is relative; write 'rel {m.group(2)}%'")
+    return Rule(mode, num / 100.0 if pct else num, t)
+
+
+def rules_from_mapping(mapping: Mapping, *, source: str = "rules") -> dict[str, Rule]:
+    """Parse ``{name or pattern: statement}``; a name matching no registered metric is an error."""
+    out = {}
+    for name, text in mapping.items():
+        name = str(name)
+        if not any(fnmatch.fnmatchcase(m, name) for m in METRICS):
+            raise GateError(f"{source}: rule {name!r} names no metric; valid: {', '.join(sorted(METRICS))}")
+        try:
+            out[name] = parse_rule(text)
+        except GateError as exc:
+            raise GateError(f"{source}: {name}: {exc}") from None
+    return out
+
+
+def load_rules(path: str | os.PathLike) -> dict[str, Rule]:
+    """Read gate rules from YAML: a mapping under ``rules:`` (or at the top level)."""
+    path = Path(path)
+    if not path.is_file():
+        raise GateError(f"{path}: no such rules file")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise GateError(f"{path}: not valid YAML: {exc}") from None
+    if isinstance(data, Mapping) and "rules" in data:
+        extra = set(data) - {"rules"}
+        if extra:
+            raise GateError(f"{path}: unknown key(s) {sorted(extra)}; expected only 'rules'")
+        data = data["rules"] or {}
+    if not isinstance(data, Mapping):
+        raise GateError(f"{path}: expected a mapping of metric -> rule, got {type(data).__name__}")
+    return rules_from_mapping(data, source=str(path))
+
+
+def _rule_for(metric: str, kind: str, rules: Mapping[str, Rule]) -> Rule:
+    if metric in rules:
+        return rules[metric]
+    for pattern, rule in rules.items():
+        if fnmatch.fnmatchcase(metric, pattern):
+            return rule
+    return Rule("rel", DEFAULT_REL, "default") if kind == "timing" else Rule("abs", DEFAULT_ABS, "default")
+
+
+# --------------------------------------------------------------------------- compare
+
+def compare(current: pd.DataFrame, baseline: Mapping, rules: Mapping[str, Rule] | None = None, *,
+            suite: str | None = None, machine: str | None = None) -> GateResult:
+    """Check current results against a baseline.
+
+    Parameters
+    ----------
+    current : DataFrame
+        A results table (summarised here) or a summary from :func:`harness.results.summarize`.
+    baseline : dict
+        From :func:`read_baseline` / :func:`make_baseline`.
+    rules : dict, optional
+        From :func:`load_rules`.
+    suite : str, optional
+        The current suite's name; must equal the baseline's.
+    machine : str, optional
+        The current machine id; default the ``machine`` column of a results table.
+
+    Raises
+    ------
+    GateError
+        Baseline from another suite, or a (scene, pipeline, sweep, metric, region,
+        motion) present on one side only.
+    """
+    rules = dict(rules or {})
+    if baseline.get("format") != BASELINE_FORMAT:
+        raise GateError(f"not an aerobench baseline (format {baseline.get('format')!r})")
+    base_suite = str(baseline.get("suite", ""))
+    if suite is not None and suite != base_suite:
+        raise GateError(f"baseline is for suite {base_suite!r}, the results are of suite {suite!r}")
+    if machine is None and "machine" in current.columns:
+        ms = sorted(set(current["machine"].astype(str)))
+        machine = ms[0] if len(ms) == 1 else None
+    result = GateResult(suite=base_suite)
+    s = _summary(current)
+    cur = {tuple(str(r[k]) for k in KEY): r for r in s.to_dict("records")}
+    base = {tuple(str(e[k]) for k in KEY): e for e in baseline.get("metrics", [])}
+    only_cur, only_base = sorted(set(cur) - set(base)), sorted(set(base) - set(cur))
+    if only_cur or only_base:
+        def fmt(keys):
+            return "; ".join("/".join(k) for k in keys[:10]) + (" ..." if len(keys) > 10 else "")
+        msg = []
+        if only_base:
+            msg.append(f"{len(only_base)} in the baseline but not in the results: {fmt(only_base)}")
+        if only_cur:
+            msg.append(f"{len(only_cur)} in the results but not in the baseline: {fmt(only_cur)}")
+        raise GateError("metrics on one side only (re-make the baseline if the suite changed): " + " | ".join(msg))
+    same_machine = bool(machine) and machine == baseline.get("machine")
+    if not same_machine:
+        result.notes.append(f"timings skipped: baseline machine {baseline.get('machine')!r}, "
+                            f"current machine {machine!r}")
+    if suite is None:
+        result.notes.append("suite name not given: not checked against the baseline's")
+    for k in sorted(base):
+        b, c = base[k], cur[k]
+        key = dict(zip(KEY, k))
+        kind = str(b.get("kind", "accuracy"))
+        hib = bool(b["higher_is_better"])
+        bv = float("nan") if b["value"] is None else float(b["value"])
+        cv = float(c["value"])
+        rule = _rule_for(key["metric"], kind, rules)
+        status, reason = "pass", ""
+        if rule.mode == "off":
+            status, reason = "skipped", "rule off"
+        elif kind == "timing" and not same_machine:
+            status, reason = "skipped", "timing on another machine"
+        elif math.isnan(bv) and math.isnan(cv):
+            reason = "no value on either side"
+        elif math.isnan(bv) or math.isnan(cv):
+            status, reason = "fail", "value missing (NaN) on one side"
+        else:
+            worse = (bv - cv) if hib else (cv - bv)
+            allowed = rule.allowed(bv)
+            if worse > allowed:
+                status = "fail"
+                reason = (f"{'fell' if hib else 'rose'} by {abs(cv - bv):.6g} {b['unit']}, allowed "
+                          f"{allowed:.6g} {b['unit']} ({rule.mode} {rule.text or rule.tolerance})")
+        result.checks.append(Check(key, str(b["unit"]), hib, kind, bv, cv, rule, status, reason))
+    return result
+
+
+# --------------------------------------------------------------------------- reports
+
+def _describe(c: Check) -> str:
+    return (f"{c.group} {c.name}: baseline {c.baseline:.6g} {c.unit}, current {c.current:.6g} {c.unit} "
+            f"({'higher' if c.higher_is_better else 'lower'} is better): {c.reason}")
+
+
+def to_junit_xml(result: GateResult) -> str:
+    """JUnit XML: one testsuite, one testcase per checked metric (failure / skipped elements)."""
+    suite = ET.Element("testsuite", name=f"aerobench-gate.{result.suite}", tests=str(len(result.checks)),
+                       failures=str(len(result.failures)), errors="0", skipped=str(len(result.skipped)))
+    if result.notes:
+        props = ET.SubElement(suite, "properties")
+        for i, n in enumerate(result.notes):
+            ET.SubElement(props, "property", name=f"note{i}", value=n)
+    for c in result.checks:
+        tc = ET.SubElement(suite, "testcase", classname=c.group, name=c.name)
+        if c.status == "fail":
+            f = ET.SubElement(tc, "failure", message=c.reason, type="regression")
+            f.text = _describe(c)
+        elif c.status == "skipped":
+            ET.SubElement(tc, "skipped", message=c.reason)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(suite, encoding="unicode") + "\n"
+
+
+def to_markdown(result: GateResult) -> str:
+    """A Markdown page for a CI job: verdict, notes, the violations table, counts."""
+    n, nf, ns = len(result.checks), len(result.failures), len(result.skipped)
+    head = "PASS" if result.passed else "FAIL"
+    lines = [f"## aerobench gate: {head} ({result.suite})", "",
+             f"{n} checked, {n - nf - ns} passed, {nf} failed, {ns} skipped.", ""]
+    lines += [f"- {note}" for note in result.notes]
+    if result.notes:
+        lines.append("")
+    if result.failures:
+        lines += ["| scene | pipeline | metric | baseline | current | change | allowed | unit |",
+                  "|---|---|---|---:|---:|---:|---|---|"]
+        for c in result.failures:
+            lines.append(f"| {c.key['scene']} | {c.key['pipeline']} | {c.name} | {c.baseline:.6g} | "
+                         f"{c.current:.6g} | {c.delta:+.6g} | {c.rule.mode} {c.rule.text or c.rule.tolerance} "
+                         f"| {c.unit} |")
+        lines.append("")
+    return "\n".join(lines)
+
