@@ -1,0 +1,111 @@
+"""Reference flow methods from OpenCV and scikit-image, adapted to our layout and sign.
+
+One adapter each: the foreign call, its input range and dtype, and its output
+layout are handled here and nowhere else. All return ``(H, W, 2)`` float32
+(u, v), forward t -> t+1, and a ``(H, W)`` bool mask: ``x + flow`` inside frame
+t+1, all False when either frame is constant (no gradient: flow undetermined).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from skimage.registration import optical_flow_ilk, optical_flow_tvl1
+
+from algorithms.flow import FLOW_DTYPE, check_frame_pair
+from algorithms.pyramid import target_inside
+from algorithms.registry import register_flow
+
+__all__ = ["farneback", "dis", "tvl1", "ilk"]
+
+
+def _joint_unit_range(g0: np.ndarray, g1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both frames mapped by the same affine map onto [0, 1] (a constant pair gives zeros)."""
+    lo = min(float(g0.min()), float(g1.min()))
+    span = max(float(g0.max()), float(g1.max())) - lo
+    if span == 0:
+        return np.zeros_like(g0), np.zeros_like(g1)
+    return (g0 - lo) / span, (g1 - lo) / span
+
+
+def _finish(flow: np.ndarray, g0: np.ndarray, g1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    flow = np.ascontiguousarray(flow, dtype=FLOW_DTYPE)
+    if not np.isfinite(flow).all():
+        raise FloatingPointError("reference method returned non-finite flow")
+    valid = target_inside(flow)
+    if np.ptp(g0) == 0 or np.ptp(g1) == 0:
+        valid[:] = False
+    return flow, valid
+
+
+def _from_vu(vu: np.ndarray) -> np.ndarray:
+    """scikit-image's ``(2, H, W)`` stack with ``[0] = v`` (rows) and ``[1] = u`` (cols) -> ours."""
+    return np.stack([vu[1], vu[0]], axis=-1)
+
+
+@register_flow
+def farneback(frame0: np.ndarray, frame1: np.ndarray, *, pyr_scale: float = 0.5, levels: int = 4,
+              winsize: int = 15, iterations: int = 3, poly_n: int = 5, poly_sigma: float = 1.2,
+              gaussian_window: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Farneback polynomial-expansion flow (``cv2.calcOpticalFlowFarneback``).
+
+    Frames go in as float32 in their own units; OpenCV's output is already
+    ``(H, W, 2)`` (u, v) forward, so the adapter only checks it.
+    """
+    g0, g1 = check_frame_pair(frame0, frame1)
+    flags = cv2.OPTFLOW_FARNEBACK_GAUSSIAN if gaussian_window else 0
+    flow = cv2.calcOpticalFlowFarneback(g0, g1, None, pyr_scale, levels, winsize, iterations, poly_n,
+                                        poly_sigma, flags)
+    return _finish(flow, g0, g1)
+
+
+_DIS_PRESETS = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+                "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
+
+
+@register_flow
+def dis(frame0: np.ndarray, frame1: np.ndarray, *, preset: str = "medium") -> tuple[np.ndarray, np.ndarray]:
+    """Dense Inverse Search flow (``cv2.DISOpticalFlow``, Kroeger et al. 2016).
+
+    DIS takes uint8 only: uint8 frames pass unchanged, others are mapped onto
+    0..255 by one affine map shared by both frames (so brightness constancy
+    between them survives) and rounded.
+    """
+    if preset not in _DIS_PRESETS:
+        raise ValueError(f"preset: expected one of {sorted(_DIS_PRESETS)}, got {preset!r}")
+    g0, g1 = check_frame_pair(frame0, frame1)
+    if np.asarray(frame0).dtype == np.uint8 and np.asarray(frame1).dtype == np.uint8:
+        b0, b1 = np.round(g0).astype(np.uint8), np.round(g1).astype(np.uint8)
+    else:
+        n0, n1 = _joint_unit_range(g0, g1)
+        b0 = np.round(255.0 * n0).astype(np.uint8)
+        b1 = np.round(255.0 * n1).astype(np.uint8)
+    flow = cv2.DISOpticalFlow.create(_DIS_PRESETS[preset]).calc(b0, b1, None)
+    return _finish(flow, g0, g1)
+
+
+@register_flow
+def tvl1(frame0: np.ndarray, frame1: np.ndarray, *, attachment: float = 15.0, tightness: float = 0.3,
+         num_warp: int = 5, num_iter: int = 10, tol: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """TV-L1 flow (``skimage.registration.optical_flow_tvl1``, Zach et al. 2007).
+
+    scikit-image wants intensities in [0, 1] (its ``attachment`` assumes it) and
+    returns ``(v, u)``: both frames share one map onto [0, 1], and the output is
+    reordered to (u, v).
+    """
+    g0, g1 = check_frame_pair(frame0, frame1)
+    n0, n1 = _joint_unit_range(g0, g1)
+    vu = optical_flow_tvl1(n0, n1, attachment=attachment, tightness=tightness, num_warp=num_warp,
+                           num_iter=num_iter, tol=tol, dtype=np.float32)
+    return _finish(_from_vu(vu), g0, g1)
+
+
+@register_flow
+def ilk(frame0: np.ndarray, frame1: np.ndarray, *, radius: int = 7, num_warp: int = 10,
+        gaussian: bool = False, prefilter: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Iterative dense Lucas-Kanade (``skimage.registration.optical_flow_ilk``), output reordered from (v, u)."""
+    g0, g1 = check_frame_pair(frame0, frame1)
+    n0, n1 = _joint_unit_range(g0, g1)
+    vu = optical_flow_ilk(n0, n1, radius=radius, num_warp=num_warp, gaussian=gaussian, prefilter=prefilter,
+                          dtype=np.float32)
+    return _finish(_from_vu(vu), g0, g1)
