@@ -24,10 +24,11 @@ present on one side only, raises :class:`GateError` (exit code 2), never a pass.
 
 Public functions
 ----------------
-make_baseline(results_df, run_meta) -> dict
+make_baseline(results_df, run_meta) -> dict, baseline_from_run(run_dir, out_path) -> Path
 write_baseline(baseline, path), read_baseline(path)
-parse_rule(text) -> Rule, load_rules(path) -> dict[str, Rule], rules_from_mapping(mapping)
+parse_rule(text) -> Rule, load_rules(path=None) -> dict[str, Rule], rules_from_mapping(mapping)
 compare(current, baseline, rules=None, *, suite=None, machine=None) -> GateResult
+    (current: DataFrame or run folder; baseline: dict or file)
 to_junit_xml(result) -> str, to_markdown(result) -> str
 """
 
@@ -48,11 +49,11 @@ import pandas as pd
 import yaml
 
 from harness.metrics import METRICS
-from harness.results import SUMMARY_KEYS, summarize
+from harness.results import SUMMARY_KEYS, read_results, read_run_json, summarize
 from scenes.formats import atomic_write_bytes
 
 __all__ = ["GateError", "Rule", "Check", "GateResult", "BASELINE_FORMAT", "DEFAULT_ABS", "DEFAULT_REL",
-           "make_baseline", "write_baseline", "read_baseline", "parse_rule", "load_rules",
+           "make_baseline", "baseline_from_run", "write_baseline", "read_baseline", "parse_rule", "load_rules",
            "rules_from_mapping", "compare", "to_junit_xml", "to_markdown"]
 
 BASELINE_FORMAT = "aerobench-baseline/1"
@@ -152,8 +153,15 @@ def make_baseline(results_df: pd.DataFrame, run_meta: Mapping) -> dict:
     """A baseline from a run's results (or summary) and its run.json contents.
 
     ``run_meta`` keys used: ``suite`` (name), ``config_hash``, ``provenance.machine``
-    (or ``machine``), ``provenance.git_commit``.
+    (or ``machine``), ``provenance.git_commit``. For a run folder, see
+    :func:`baseline_from_run`.
     """
+    if not isinstance(run_meta, Mapping):
+        raise TypeError(f"make_baseline(results_df, run_meta): run_meta must be the run.json dict, got "
+                        f"{type(run_meta).__name__}; to write the baseline of a run folder use "
+                        "gate.baseline_from_run(run_dir, out_path)")
+    if not isinstance(results_df, pd.DataFrame):
+        raise TypeError(f"make_baseline: results_df must be a DataFrame, got {type(results_df).__name__}")
     suite = _meta_suite(run_meta)
     if not suite:
         raise GateError("run metadata has no suite name: cannot make a baseline")
@@ -168,6 +176,12 @@ def make_baseline(results_df: pd.DataFrame, run_meta: Mapping) -> dict:
             "machine": _meta_machine(run_meta),
             "git_commit": str((run_meta.get("provenance") or {}).get("git_commit", "")),
             "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), "metrics": entries}
+
+
+def baseline_from_run(run_dir: str | os.PathLike, out_path: str | os.PathLike) -> Path:
+    """Read a run folder (results.parquet + run.json), make its baseline and write it to ``out_path``."""
+    baseline = make_baseline(read_results(run_dir), read_run_json(run_dir))
+    return write_baseline(baseline, out_path)
 
 
 def _num(x) -> float | None:
@@ -231,8 +245,13 @@ def rules_from_mapping(mapping: Mapping, *, source: str = "rules") -> dict[str, 
     return out
 
 
-def load_rules(path: str | os.PathLike) -> dict[str, Rule]:
-    """Read gate rules from YAML: a mapping under ``rules:`` (or at the top level)."""
+def load_rules(path: str | os.PathLike | None = None) -> dict[str, Rule]:
+    """Read gate rules from YAML: a mapping under ``rules:`` (or at the top level).
+
+    Without a path: no rules, so every metric gets the defaults.
+    """
+    if path is None:
+        return {}
     path = Path(path)
     if not path.is_file():
         raise GateError(f"{path}: no such rules file")
@@ -261,16 +280,17 @@ def _rule_for(metric: str, kind: str, rules: Mapping[str, Rule]) -> Rule:
 
 # --------------------------------------------------------------------------- compare
 
-def compare(current: pd.DataFrame, baseline: Mapping, rules: Mapping[str, Rule] | None = None, *,
+def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str | os.PathLike, rules: Mapping[str, Rule] | None = None, *,
             suite: str | None = None, machine: str | None = None) -> GateResult:
     """Check current results against a baseline.
 
     Parameters
     ----------
-    current : DataFrame
-        A results table (summarised here) or a summary from :func:`harness.results.summarize`.
-    baseline : dict
-        From :func:`read_baseline` / :func:`make_baseline`.
+    current : DataFrame or path
+        A results table (summarised here), a summary from :func:`harness.results.summarize`,
+        or a run folder (its results and, unless ``suite`` is given, its run.json suite name).
+    baseline : dict or path
+        From :func:`read_baseline` / :func:`make_baseline`, or the baseline file.
     rules : dict, optional
         From :func:`load_rules`.
     suite : str, optional
@@ -285,6 +305,13 @@ def compare(current: pd.DataFrame, baseline: Mapping, rules: Mapping[str, Rule] 
         motion) present on one side only.
     """
     rules = dict(rules or {})
+    if not isinstance(current, pd.DataFrame):
+        run_dir = Path(current)
+        current = read_results(run_dir)
+        if suite is None:
+            suite = _meta_suite(read_run_json(run_dir))
+    if not isinstance(baseline, Mapping):
+        baseline = read_baseline(baseline)
     if baseline.get("format") != BASELINE_FORMAT:
         raise GateError(f"not an aerobench baseline (format {baseline.get('format')!r})")
     base_suite = str(baseline.get("suite", ""))
