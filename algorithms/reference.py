@@ -49,12 +49,18 @@ def farneback(frame0: np.ndarray, frame1: np.ndarray, *, pyr_scale: float = 0.5,
               gaussian_window: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Farneback polynomial-expansion flow (``cv2.calcOpticalFlowFarneback``).
 
-    Frames go in as float32 in their own units; OpenCV's output is already
-    ``(H, W, 2)`` (u, v) forward, so the adapter only checks it.
+    Its polynomial fit assumes a 0..255 range (on [0, 1] floats it returns
+    zeros): uint8 frames pass as they are, others are mapped onto 0..255 by one
+    affine map shared by both frames. OpenCV's output is already ``(H, W, 2)``
+    (u, v) forward, so the adapter only checks it.
     """
     g0, g1 = check_frame_pair(frame0, frame1)
+    a0, a1 = g0, g1
+    if not (np.asarray(frame0).dtype == np.uint8 and np.asarray(frame1).dtype == np.uint8):
+        n0, n1 = _joint_unit_range(g0, g1)
+        a0, a1 = 255.0 * n0, 255.0 * n1
     flags = cv2.OPTFLOW_FARNEBACK_GAUSSIAN if gaussian_window else 0
-    flow = cv2.calcOpticalFlowFarneback(g0, g1, None, pyr_scale, levels, winsize, iterations, poly_n,
+    flow = cv2.calcOpticalFlowFarneback(a0, a1, None, pyr_scale, levels, winsize, iterations, poly_n,
                                         poly_sigma, flags)
     return _finish(flow, g0, g1)
 
