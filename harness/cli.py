@@ -28,6 +28,8 @@ from typing import Any
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports OpenGL
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+# the gate's tolerances unless --rules names another file
+DEFAULT_RULES = Path(__file__).resolve().parent / "gate_rules.yaml"
 
 __all__ = ["main", "build_parser", "UsageError"]
 
@@ -199,8 +201,16 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_eval_flow(args: argparse.Namespace) -> int:
     from harness.datasets import evaluate_flow_dataset
 
+    from harness.metrics import aggregate
+
+    if not Path(args.dir).is_dir():
+        raise UsageError(f"{args.dir}: no such folder")
     table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method)
-    print(table.to_string(index=False) if hasattr(table, "to_string") else table)
+    pairs = table["scene"].nunique()
+    summary = aggregate(table, by=["pipeline"])
+    cols = ["pipeline", "metric", "value", "unit", "count"]
+    print(f"{args.method} on {pairs} {args.format} pair(s) in {args.dir}:")
+    print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     return EXIT_OK
 
 
@@ -210,8 +220,8 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    path = gate.make_baseline(run_dir, args.out)
-    print(f"baseline: {path or args.out}")
+    path = gate.baseline_from_run(run_dir, args.out)
+    print(f"baseline: {path}")
     return EXIT_OK
 
 
@@ -224,15 +234,15 @@ def cmd_gate(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
     if not Path(args.baseline).is_file():
         raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
-    rules = gate.load_rules(args.rules) if args.rules else gate.load_rules()
-    outcome = gate.compare(run_dir, args.baseline, rules)
+    rules = gate.load_rules(args.rules or DEFAULT_RULES)
+    outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)
     print(markdown)
     if args.junit:
         atomic_write_bytes(args.junit, gate.to_junit_xml(outcome).encode())
     if args.summary:
         atomic_write_bytes(args.summary, markdown.encode())
-    return EXIT_OK if outcome.passed else EXIT_FAIL
+    return outcome.exit_code
 
 
 # --------------------------------------------------------------------------- parser
@@ -285,7 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")
     s.add_argument("run_dir")
     s.add_argument("--baseline", required=True)
-    s.add_argument("--rules", default=None, help="gate rules YAML (default: the built-in rules)")
+    s.add_argument("--rules", default=None, help=f"gate rules YAML (default: {DEFAULT_RULES.name} of aerobench)")
     s.add_argument("--junit", default=None, help="write a JUnit XML report here")
     s.add_argument("--summary", default=None, help="write the Markdown summary here (e.g. $GITHUB_STEP_SUMMARY)")
     s.set_defaults(fn=cmd_gate)
