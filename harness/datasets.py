@@ -7,9 +7,10 @@ flow in our layout with NaN where unknown, and a ``valid`` mask):
   PNG frames whose names end in consecutive numbers with the same prefix
   (``frame10.png, frame11.png, flow10.flo``; ``yos9.png, yos10.png,
   correct_yos.flo``; ...). The pair is found by the files present. Yosemite
-  (a folder or frame prefix starting with ``yos``) has its sky masked: pixels
-  black in the first frame, or whose ground truth is the placeholder (1, 0)
-  exactly (the horizon's anti-aliased pixels carry it too).
+  (a folder or frame prefix starting with ``yos``) has its sky masked: the
+  black pixels of the first frame connected to the top edge in their column,
+  and pixels whose ground truth is the placeholder (1, 0) exactly (the
+  horizon's anti-aliased pixels carry it too); black pixels on the ground stay.
 * ``sintel``: ``root/<pass>/<scene>/frame_NNNN.png`` with
   ``root/flow/<scene>/frame_NNNN.flo`` (``pass`` "clean" or "final");
   ``root/invalid/<scene>/frame_NNNN.png`` (non-zero = invalid) is used when present.
@@ -97,8 +98,9 @@ def _middlebury_folder(folder: Path) -> FlowPair | None:
     valid = np.isfinite(flow).all(-1)
     if folder.name.lower().startswith("yos") or prefix.lower().startswith("yos"):
         black = (frame0 == 0) if frame0.ndim == 2 else (frame0 == 0).all(-1)
+        sky = np.cumprod(black, axis=0).astype(bool)  # black pixels connected to the top edge in their column
         placeholder = (flow[..., 0] == 1.0) & (flow[..., 1] == 0.0)
-        valid &= ~(black | placeholder)
+        valid &= ~(sky | placeholder)
     return _check_pair(FlowPair(folder.name, frame0, frame1, flow, valid), str(folder))
 
 
@@ -143,7 +145,8 @@ def read_sintel(root: str | os.PathLike, *, pass_: str = "clean") -> list[FlowPa
         valid = np.isfinite(flow).all(-1)
         inv = root / "invalid" / scene / f"{stem}.png"
         if inv.is_file():
-            valid &= read_png(inv) == 0 if read_png(inv).ndim == 2 else (read_png(inv) == 0).all(-1)
+            mask = read_png(inv)
+            valid &= (mask == 0) if mask.ndim == 2 else (mask == 0).all(-1)
         out.append(_check_pair(FlowPair(f"{scene}/{stem}", read_png(f0), read_png(f1), flow, valid), str(flo)))
     if not out:
         raise FormatError(f"{root}: no flow/<scene>/frame_NNNN.flo files")
