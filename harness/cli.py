@@ -157,6 +157,13 @@ def _write_report(run_dir: Path, baseline: str | None = None) -> Path | None:
     return write_report(run_dir, baseline=baseline)
 
 
+def _paths(report: Any) -> str:
+    """What write_report returned (a path, or a dict of paths by format), for one line of output."""
+    if isinstance(report, dict):
+        return ", ".join(str(p) for p in report.values())
+    return str(report)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from harness.runner import run_suite
 
@@ -172,7 +179,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         else:
             if report is not None:
-                print(f"report: {report}")
+                print(f"report: {_paths(report)}")
     if not result.ok:
         for line in result.failed_cells:
             print(f"FAILED {line}", file=sys.stderr)
@@ -191,7 +198,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     report = _write_report(run_dir, args.baseline)
     if report is None:
         raise UsageError("the reports package provides no write_report")
-    print(f"report: {report}")
+    print(f"report: {_paths(report)}")
     return EXIT_OK
 
 

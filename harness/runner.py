@@ -98,30 +98,36 @@ def _import_plugins(modules: Iterable[str]) -> None:
         importlib.import_module(name)
 
 
-def render_task(variant_key: str, spec: Any, cache_dir: str) -> dict:
+def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = ()) -> dict:
     """Render one scene variant into the cache (or find it there); returns where and whether reused."""
     _prepare_worker()
-    from scenes import cached_sequence
-
-    t0 = time.perf_counter()
+    t0, started_s = time.perf_counter(), time.time()
     try:
+        _import_plugins(imports)
+        from scenes import cached_sequence
+
         result = cached_sequence(spec, cache_dir)
     except Exception as exc:  # the cells of this scene are recorded as failed, the run goes on
         return {"key": variant_key, "path": None, "reused": False,
                 "error": f"rendering failed: {type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
-    path, reused = _unpack_cached(result)
+    path, reused = _unpack_cached(result, started_s)
     return {"key": variant_key, "path": str(path), "reused": reused, "error": None,
             "render_s": time.perf_counter() - t0}
 
 
-def _unpack_cached(result: Any) -> tuple[Path, bool]:
-    """``cached_sequence`` returns the path, or (path, was_cached)."""
-    if isinstance(result, tuple):
-        return Path(result[0]), bool(result[1])
-    path = Path(result)
-    meta = _read_json(path / "meta.json") or {}
-    return path, bool(meta.get("_reused", False))
+def _unpack_cached(result: Any, started_s: float) -> tuple[Path, bool]:
+    """The sequence folder ``cached_sequence`` returned, and whether it was there before ``started_s``.
+
+    A sequence folder is complete when its MANIFEST.json is written (last); one
+    written before this task started was reused from the cache.
+    """
+    path = Path(result[0] if isinstance(result, tuple) else result)
+    try:
+        reused = (path / "MANIFEST.json").stat().st_mtime < started_s
+    except OSError:
+        reused = False
+    return path, reused
 
 
 class _Frames:
@@ -226,12 +232,12 @@ def _score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
     if seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
     rows += _as_rows(score_sequence(seq_est, seq.camera, seq.tracks))
+    _write_csv(tmp / "stabilisation.csv", _stabilisation_table(seq_est, seq.camera))
+    _write_csv(tmp / "tracks.csv", _tracks_table(seq_est, seq.tracks))
     if payload["metrics"] is not None:
         keep = set(payload["metrics"])
         rows = [r for r in rows if r["metric"] in keep]
     return rows, _renderer_of(seq.meta or {})
-    _write_csv(tmp / "stabilisation.csv", _stabilisation_table(seq_est, seq.camera))
-    _write_csv(tmp / "tracks.csv", _tracks_table(seq_est, seq.tracks))
 
 
 def _cell_columns(payload: Mapping) -> dict:
@@ -569,7 +575,7 @@ def _execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, s
     with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
         pending: dict[Future, tuple[str, str]] = {}
         for key, v in variants.items():
-            pending[pool.submit(render_task, key, v.spec, str(cache))] = ("render", key)
+            pending[pool.submit(render_task, key, v.spec, str(cache), imports)] = ("render", key)
         while pending:
             done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
             for fut in done:
