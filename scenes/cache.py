@@ -1,0 +1,86 @@
+"""The render cache: one folder per (resolved spec, generator version), reused when intact.
+
+An entry is named by a content hash. It is reused only if its manifest
+verifies (sizes of all files, whole hashes of small files, sampled hashes of
+big ones); a partial or corrupt entry is removed and rebuilt, never used.
+Concurrent renders of the same entry are safe: each renders into its own
+temporary folder and renames it into place; if another process got there
+first, its entry is kept and ours is discarded.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from scenes.sequence import ManifestError, Progress, _write_into, verify_manifest
+from scenes.spec import GENERATOR_VERSION, SceneSpec, load_scene_spec, spec_hash
+
+__all__ = ["CacheResult", "cache_key", "cached_sequence", "cached_sequence_result"]
+
+
+@dataclass(frozen=True)
+class CacheResult:
+    """Where the sequence is, and whether this call rendered it (False: reused)."""
+
+    path: Path
+    rendered: bool
+    key: str
+
+
+def cache_key(spec: SceneSpec) -> str:
+    """Content hash of the resolved spec and the generator version, 20 hex digits."""
+    text = f"{spec_hash(spec)}|{GENERATOR_VERSION}"
+    return f"{spec.name}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
+
+
+def _discard(path: Path) -> None:
+    """Remove a folder by renaming it aside first, so no reader sees it half-deleted."""
+    trash = path.with_name(f".{path.name}.trash-{os.getpid()}-{time.monotonic_ns()}")
+    try:
+        os.rename(path, trash)
+    except FileNotFoundError:
+        return
+    shutil.rmtree(trash, ignore_errors=True)
+
+
+def cached_sequence_result(spec: SceneSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
+                           progress: Progress | None = None) -> CacheResult:
+    """Return the cached sequence of ``spec``, rendering it if absent, partial or corrupt."""
+    if not isinstance(spec, SceneSpec):
+        spec = load_scene_spec(spec)
+    cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    key = cache_key(spec)
+    target = cache_dir / key
+    if target.exists():
+        try:
+            verify_manifest(target)
+            return CacheResult(path=target, rendered=False, key=key)
+        except ManifestError:
+            _discard(target)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{key}.partial-", dir=cache_dir))
+    try:
+        _write_into(spec, tmp, progress, None)
+        try:
+            os.rename(tmp, target)
+        except OSError:
+            # another process renamed its complete entry into place first: keep theirs
+            shutil.rmtree(tmp, ignore_errors=True)
+            verify_manifest(target)
+            return CacheResult(path=target, rendered=False, key=key)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return CacheResult(path=target, rendered=True, key=key)
+
+
+def cached_sequence(spec: SceneSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
+                    progress: Progress | None = None) -> Path:
+    """Path of the cached sequence of ``spec`` (see :func:`cached_sequence_result`)."""
+    return cached_sequence_result(spec, cache_dir, progress=progress).path

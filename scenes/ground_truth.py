@@ -1,0 +1,244 @@
+"""Exact ground truth from geometry: flow, the camera-induced flow, occlusion, instances.
+
+Nothing here matches images. Each pixel ``(x, y)`` of frame t is a ray
+``d = K^-1 (x, y, 1)`` (its z component is 1, so the ray parameter *is* the
+depth ``Z``). The rendered depth only says *which* surface a pixel sees; the
+point itself comes from the analytic surface where there is one (the ground
+plane z = 0, the vehicle boxes), so the flow of the ground is exact to float64
+rounding. Buildings take the rendered depth.
+
+For a point ``X0 = Z d`` in camera t coordinates, with camera-to-world poses
+``(R0, C0)``, ``(R1, C1)`` and a rigid world motion ``(M_R, M_t)`` of the point
+(identity for the static world, ``M_v(t+1) M_v(t)^-1`` for vehicle v)::
+
+    X1 = R1^T (M_R (R0 X0 + C0) + M_t - C1) = A X0 + b
+    x1 = fx X1_x / X1_z + cx,   y1 = fy X1_y / X1_z + cy
+    flow = (x1 - x, y1 - y)
+
+A pixel is valid when ``(x1, y1)`` lies in frame t+1 and the point is not
+behind what frame t+1 rendered there (z-buffer test with a relative tolerance).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from scenes.motion import project
+from scenes.world import Box
+
+__all__ = ["PairTruth", "FrameSurface", "GroundTruth"]
+
+# depth agreement between the render and an analytic surface, relative + absolute (metres)
+SURFACE_TOL_REL = 2e-3
+SURFACE_TOL_ABS_M = 0.02
+# occlusion test at t+1: a point may lie this far behind the rendered surface
+OCCLUSION_TOL_REL = 5e-3
+OCCLUSION_TOL_ABS_M = 0.05
+
+
+@dataclass(frozen=True)
+class PairTruth:
+    """Ground truth of the frame pair i -> i+1.
+
+    Attributes
+    ----------
+    flow : (H, W, 2) float32, px, forward i -> i+1, ``[..., 0] = u`` (+x right), ``[..., 1] = v`` (+y down)
+    flow_camera : (H, W, 2) float32, px, the flow if every point were static
+    valid : (H, W) bool, in view in i+1 and not occluded there
+    instances : (H, W) uint16, vehicle id per pixel of frame i, 0 = static world
+    """
+
+    flow: np.ndarray
+    flow_camera: np.ndarray
+    valid: np.ndarray
+    instances: np.ndarray
+
+
+@dataclass
+class FrameSurface:
+    """What each pixel of one frame sees.
+
+    Attributes
+    ----------
+    depth : (H, W) float32, rendered depth along z (0 = nothing)
+    Z : (H, W) float64, depth of the visible point (analytic where possible), inf = nothing
+    instances : (H, W) uint16, vehicle id (0 = static world)
+    R, C : camera-to-world rotation (3, 3) and centre (3,)
+    vehicle_M : list of (4, 4) vehicle-to-world matrices at this frame
+    """
+
+    depth: np.ndarray
+    Z: np.ndarray
+    instances: np.ndarray
+    R: np.ndarray
+    C: np.ndarray
+    vehicle_M: list
+
+
+class GroundTruth:
+    """Ground-truth computations for one image size, intrinsics and set of vehicle shapes.
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics, pixel centres at integer coordinates
+    width_px, height_px : image size
+    vehicle_boxes : list (one per vehicle, in id order 1..) of lists of :class:`Box` in the vehicle frame
+    """
+
+    def __init__(self, K: np.ndarray, width_px: int, height_px: int, vehicle_boxes: list[list[Box]]):
+        self.K = np.asarray(K, np.float64)
+        self.w, self.h = int(width_px), int(height_px)
+        self.fx, self.fy, self.cx, self.cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        xs = np.arange(self.w, dtype=np.float64)
+        ys = np.arange(self.h, dtype=np.float64)
+        self.xn = (xs - self.cx) / self.fx  # (W,) ray x per column
+        self.yn = (ys - self.cy) / self.fy  # (H,) ray y per row
+        self.px_x = np.broadcast_to(xs[None, :], (self.h, self.w))
+        self.px_y = np.broadcast_to(ys[:, None], (self.h, self.w))
+        self.vehicle_boxes = vehicle_boxes
+        corners = []
+        for boxes in vehicle_boxes:
+            pts = []
+            for b in boxes:
+                c, hs = np.asarray(b.centre), np.asarray(b.size) / 2
+                for sx in (-1, 1):
+                    for sy in (-1, 1):
+                        for sz in (-1, 1):
+                            pts.append(c + hs * (sx, sy, sz))
+            corners.append(np.asarray(pts))
+        self.vehicle_corners = corners  # per vehicle (16, 3) in its own frame
+
+    # -- per frame ----------------------------------------------------------------------
+    def _affine_field(self, a: float, b: float, c: float) -> np.ndarray:
+        """``a xn + b yn + c`` over the image, (H, W) float64 (a ray component is affine in pixels)."""
+        return (a * self.xn)[None, :] + (b * self.yn)[:, None] + c
+
+    def vehicle_bboxes(self, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> list:
+        """Projected bbox (x0, y0, x1, y1) and centre (x, y) per vehicle, NaN when behind the camera."""
+        out = []
+        for corners, M in zip(self.vehicle_corners, vehicle_M):
+            Xw = corners @ M[:3, :3].T + M[:3, 3]
+            p, z = project(self.K, R, C, Xw)
+            centre_w = M[:3, :3] @ corners.mean(axis=0) + M[:3, 3]
+            pc, zc = project(self.K, R, C, centre_w)
+            if (z <= 0).any() or zc <= 0:
+                out.append(((np.nan,) * 4, (np.nan, np.nan)))
+            else:
+                out.append(((p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()), (pc[0], pc[1])))
+        return out
+
+    def surface(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> FrameSurface:
+        """Classify the pixels of a rendered frame and give each its exact depth."""
+        D = depth.astype(np.float64)
+        # ground z = 0: Z = C_z / (g . d) with g = R^T (0, 0, -1) the world's down in camera axes
+        g = -R[2, :]
+        gd = self._affine_field(g[0], g[1], g[2])
+        with np.errstate(divide="ignore"):
+            Zg = np.where(gd > 0, C[2] / gd, np.inf)
+        tol = SURFACE_TOL_REL * D + SURFACE_TOL_ABS_M
+        Z = np.where(np.abs(D - Zg) <= tol, Zg, D)
+        Z[D <= 0] = np.inf
+        instances = np.zeros((self.h, self.w), np.uint16)
+        best_err = np.full((self.h, self.w), np.inf)
+        for vid, ((bbox, _), boxes, M) in enumerate(
+                zip(self.vehicle_bboxes(R, C, vehicle_M), self.vehicle_boxes, vehicle_M), start=1):
+            x0, y0, x1, y1 = bbox
+            if not np.isfinite(x0):
+                continue
+            c0, c1 = max(0, int(np.floor(x0))), min(self.w, int(np.ceil(x1)) + 1)
+            r0, r1 = max(0, int(np.floor(y0))), min(self.h, int(np.ceil(y1)) + 1)
+            if c0 >= c1 or r0 >= r1:
+                continue
+            Zv = self._ray_boxes(R, C, M, boxes, r0, r1, c0, c1)
+            Dw = D[r0:r1, c0:c1]
+            err = np.abs(Dw - Zv)
+            hit = (err <= SURFACE_TOL_REL * Dw + SURFACE_TOL_ABS_M) & (Dw > 0) & (err < best_err[r0:r1, c0:c1])
+            instances[r0:r1, c0:c1][hit] = vid
+            Z[r0:r1, c0:c1][hit] = Zv[hit]
+            best_err[r0:r1, c0:c1][hit] = err[hit]
+        return FrameSurface(depth=depth, Z=Z, instances=instances, R=R, C=C, vehicle_M=vehicle_M)
+
+    def _ray_boxes(self, R, C, M, boxes, r0, r1, c0, c1) -> np.ndarray:
+        """Depth of the nearest hit of each pixel ray in the window with the vehicle's boxes (slab method)."""
+        Minv_R = M[:3, :3].T
+        o = Minv_R @ (C - M[:3, 3])  # camera centre in the vehicle frame
+        A = Minv_R @ R  # camera axes -> vehicle axes
+        xn = self.xn[c0:c1][None, :]
+        yn = self.yn[r0:r1][:, None]
+        r = [A[k, 0] * xn + A[k, 1] * yn + A[k, 2] for k in range(3)]  # ray directions, local
+        best = np.full((r1 - r0, c1 - c0), np.inf)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for b in boxes:
+                c, hs = np.asarray(b.centre), np.asarray(b.size) / 2
+                t_near = np.full_like(best, -np.inf)
+                t_far = np.full_like(best, np.inf)
+                for k in range(3):
+                    ta = (c[k] - hs[k] - o[k]) / r[k]
+                    tb = (c[k] + hs[k] - o[k]) / r[k]
+                    t_near = np.maximum(t_near, np.minimum(ta, tb))
+                    t_far = np.minimum(t_far, np.maximum(ta, tb))
+                hit = (t_near <= t_far) & (t_near > 0)
+                best = np.where(hit & (t_near < best), t_near, best)
+        return best
+
+    # -- per pair -----------------------------------------------------------------------
+    def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows=None, cols=None):
+        """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` (d the pixel rays)."""
+        xn = self.xn if cols is None else self.xn[cols]
+        yn = self.yn if rows is None else self.yn[rows]
+        if rows is None:
+            Ad = [self._affine_field(A[k, 0], A[k, 1], A[k, 2]) for k in range(3)]
+        else:  # scattered pixels: xn, yn are per-pixel vectors
+            Ad = [A[k, 0] * xn + A[k, 1] * yn + A[k, 2] for k in range(3)]
+        X = Z * Ad[0] + b[0]
+        Y = Z * Ad[1] + b[1]
+        W = Z * Ad[2] + b[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x1 = self.fx * X / W + self.cx
+            y1 = self.fy * Y / W + self.cy
+        return x1, y1, W
+
+    def pair(self, s0: FrameSurface, s1: FrameSurface) -> tuple[PairTruth, tuple[float, float]]:
+        """Ground truth of the pair (s0 -> s1) and the global shift (dx, dy) in px (NaN if no static pixel)."""
+        R0, C0, R1, C1 = s0.R, s0.C, s1.R, s1.C
+        A = R1.T @ R0
+        b = R1.T @ (C0 - C1)
+        Z = s0.Z
+        sky = ~np.isfinite(Z)
+        Zs = np.where(sky, 1.0, Z)
+        x1, y1, W1 = self._project_affine(Zs, A, b)
+        flow_cam = np.stack([x1 - self.px_x, y1 - self.px_y], axis=-1)
+        flow = flow_cam.copy()
+        X1, Y1, Z1 = x1, y1, W1
+        for vid, (M0, M1) in enumerate(zip(s0.vehicle_M, s1.vehicle_M), start=1):
+            rows, cols = np.nonzero(s0.instances == vid)
+            if rows.size == 0:
+                continue
+            Mrel = M1 @ np.linalg.inv(M0)
+            Av = R1.T @ Mrel[:3, :3] @ R0
+            bv = R1.T @ (Mrel[:3, :3] @ C0 + Mrel[:3, 3] - C1)
+            xv, yv, zv = self._project_affine(Z[rows, cols], Av, bv, rows=rows, cols=cols)
+            flow[rows, cols, 0] = xv - cols
+            flow[rows, cols, 1] = yv - rows
+            X1 = X1.copy() if X1 is x1 else X1
+            Y1 = Y1.copy() if Y1 is y1 else Y1
+            Z1 = Z1.copy() if Z1 is W1 else Z1
+            X1[rows, cols], Y1[rows, cols], Z1[rows, cols] = xv, yv, zv
+        inside = (X1 >= 0) & (X1 <= self.w - 1) & (Y1 >= 0) & (Y1 <= self.h - 1) & (Z1 > 0) & ~sky
+        D1 = cv2.remap(s1.depth.astype(np.float32), X1.astype(np.float32), Y1.astype(np.float32),
+                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        visible = (D1 > 0) & (Z1 <= D1 * (1 + OCCLUSION_TOL_REL) + OCCLUSION_TOL_ABS_M)
+        valid = inside & visible
+        flow[sky] = 0.0
+        flow_cam[sky] = 0.0
+        static = valid & (s0.instances == 0)
+        if static.any():
+            shift = (float(flow_cam[..., 0][static].mean()), float(flow_cam[..., 1][static].mean()))
+        else:
+            shift = (float("nan"), float("nan"))
+        truth = PairTruth(flow=flow.astype(np.float32), flow_camera=flow_cam.astype(np.float32),
+                          valid=valid, instances=s0.instances)
+        return truth, shift

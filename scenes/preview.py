@@ -1,0 +1,82 @@
+"""The contact sheet of a sequence (``preview.png``): for people, not for scoring.
+
+Top row: frames with every vehicle's ground-truth track drawn (past in its
+colour, the current bbox as a box). Bottom row: the ground-truth flow of the
+pair starting at that frame in Middlebury colours, one shared scale, with the
+colour-wheel legend at the end.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from algorithms.flow import color_wheel_image, flow_to_color
+from scenes.formats import write_png
+
+__all__ = ["PreviewCollector"]
+
+N_COLUMNS = 4
+THUMB_WIDTH_PX = 320
+
+
+def _track_colour(vehicle_id: int) -> tuple[int, int, int]:
+    hue = (vehicle_id * 47) % 180
+    hsv = np.uint8([[[hue, 220, 255]]])
+    return tuple(int(c) for c in cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0, 0])
+
+
+class PreviewCollector:
+    """Keeps the few frames and flows the sheet shows while a sequence streams past."""
+
+    def __init__(self, n_frames: int):
+        k = min(N_COLUMNS, n_frames - 1)
+        self.pick = sorted({int(round(j)) for j in np.linspace(0, n_frames - 2, k)})
+        self.frames: dict[int, np.ndarray] = {}
+        self.flows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def add(self, fo) -> None:
+        if fo.index in self.pick:
+            self.frames[fo.index] = fo.rgb
+        if fo.pair is not None and fo.pair_index in self.pick:
+            self.flows[fo.pair_index] = (fo.pair.flow, fo.pair.valid)
+
+    def write(self, path: Path, tracks: list[dict]) -> None:
+        if not self.frames:
+            return
+        h, w = next(iter(self.frames.values())).shape[:2]
+        scale = min(1.0, THUMB_WIDTH_PX / w)
+        tw, th = int(round(w * scale)), int(round(h * scale))
+        max_mag = max([float(np.nanmax(np.hypot(f[..., 0], f[..., 1])[v])) if v.any() else 0.0
+                       for f, v in self.flows.values()] + [1e-6])
+        top, bottom = [], []
+        for i in self.pick:
+            img = self.frames[i].copy()
+            by_vehicle: dict[int, list] = {}
+            for r in tracks:
+                if r["frame"] <= i and r["visible"]:
+                    by_vehicle.setdefault(r["vehicle_id"], []).append(r)
+            for vid, rows in by_vehicle.items():
+                col = _track_colour(vid)
+                pts = np.array([[r["x_px"], r["y_px"]] for r in rows], np.float64)
+                pts = np.round(pts).astype(np.int32).reshape(-1, 1, 2)
+                cv2.polylines(img, [pts], False, col, 1, cv2.LINE_AA)
+                last = rows[-1]
+                if last["frame"] == i and np.isfinite(last["bbox_x0_px"]):
+                    cv2.rectangle(img, (int(last["bbox_x0_px"]), int(last["bbox_y0_px"])),
+                                  (int(np.ceil(last["bbox_x1_px"])), int(np.ceil(last["bbox_y1_px"]))), col, 1)
+            cv2.putText(img, f"frame {i}", (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1)
+            top.append(cv2.resize(img, (tw, th), interpolation=cv2.INTER_AREA))
+            f, v = self.flows[i]
+            fc = flow_to_color(f, max_magnitude=max_mag, valid=v)
+            cv2.putText(fc, f"flow {i}->{i + 1}", (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
+            bottom.append(cv2.resize(fc, (tw, th), interpolation=cv2.INTER_NEAREST))
+        legend = np.full((th, th, 3), 255, np.uint8)
+        size = max(3, th - 24)
+        legend[4:4 + size, (th - size) // 2:(th - size) // 2 + size] = color_wheel_image(size)
+        cv2.putText(legend, f"{max_mag:.1f} px", (4, th - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
+        blank = np.full((th, th, 3), 255, np.uint8)
+        sheet = np.vstack([np.hstack(top + [blank]), np.hstack(bottom + [legend])])
+        write_png(path, sheet)

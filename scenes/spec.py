@@ -1,0 +1,357 @@
+"""Scene specs: validated descriptions of an aerial sequence, from YAML files or presets.
+
+A :class:`SceneSpec` says everything the generator needs (image, camera and its
+drift and jitter, world, vehicles, photometry, seed); nothing else influences
+the frames. Models forbid unknown keys and refuse NaN and infinity; errors are
+:class:`SceneSpecError` (a ``ValueError``) naming the source (file or preset)
+and the dotted field.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = [
+    "GENERATOR_VERSION",
+    "SceneSpecError",
+    "ImageSpec",
+    "IntrinsicsSpec",
+    "DriftSpec",
+    "JitterSpec",
+    "CameraSpec",
+    "BuildingsSpec",
+    "WorldSpec",
+    "VehiclesSpec",
+    "PhotometrySpec",
+    "SceneSpec",
+    "PRESET_DIR",
+    "list_presets",
+    "load_scene_spec",
+    "spec_hash",
+    "spec_to_yaml",
+]
+
+# Bump when the same spec would render different frames or truth.
+GENERATOR_VERSION = "1.0.0"
+
+PRESET_DIR = Path(__file__).resolve().parent / "presets"
+
+# A vehicle may move at most this fraction of the image's smaller side per frame
+# relative to the ground; beyond it no flow method (and no viewer) can follow it.
+MAX_VEHICLE_STEP_FRACTION = 0.1
+# The camera may move the ground at most this fraction of the image per frame.
+MAX_CAMERA_STEP_FRACTION = 0.25
+# The top image edge of an oblique camera must stay this far below the horizon.
+MAX_RAY_OFF_NADIR_DEG = 75.0
+
+
+class SceneSpecError(ValueError):
+    """A scene spec is invalid; the message names the source and the field."""
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=False)
+
+
+class ImageSpec(_Model):
+    width_px: int = Field(640, ge=16, le=4096, description="image width")
+    height_px: int = Field(480, ge=16, le=4096, description="image height")
+    n_frames: int = Field(60, ge=2, le=100_000, description="number of frames (>= 2: a pair)")
+    fps: float = Field(10.0, gt=0, le=1000, description="frame rate, frames per second")
+
+
+class IntrinsicsSpec(_Model):
+    """Pinhole intrinsics; give ``focal_length_px`` or ``hfov_deg`` (horizontal field of view)."""
+
+    focal_length_px: float | None = Field(None, gt=0)
+    hfov_deg: float | None = Field(None, gt=1, lt=150)
+
+    @model_validator(mode="after")
+    def _one_of(self) -> "IntrinsicsSpec":
+        if self.focal_length_px is not None and self.hfov_deg is not None:
+            raise ValueError("give focal_length_px or hfov_deg, not both")
+        return self
+
+    def focal_px(self, width_px: int) -> float:
+        if self.focal_length_px is not None:
+            return float(self.focal_length_px)
+        hfov = 60.0 if self.hfov_deg is None else self.hfov_deg
+        return (width_px / 2.0) / math.tan(math.radians(hfov) / 2.0)
+
+
+class DriftSpec(_Model):
+    """Slow, smooth departures from a straight level flight line."""
+
+    heading_rate_deg_s: float = Field(0.0, ge=-30, le=30, description="slow turn of the flight line")
+    crab_deg: float = Field(0.0, ge=-45, le=45, description="camera yaw relative to the track (crosswind)")
+    climb_rate_mps: float = Field(0.0, ge=-50, le=50, description="altitude change per second")
+
+
+class JitterSpec(_Model):
+    """Wind and turbulence (thesis 3.2): Ornstein-Uhlenbeck perturbations of the camera pose."""
+
+    roll_std_deg: float = Field(0.0, ge=0, le=10)
+    pitch_std_deg: float = Field(0.0, ge=0, le=10)
+    yaw_std_deg: float = Field(0.0, ge=0, le=10)
+    x_std_m: float = Field(0.0, ge=0, le=100)
+    y_std_m: float = Field(0.0, ge=0, le=100)
+    z_std_m: float = Field(0.0, ge=0, le=100)
+    correlation_time_s: float = Field(0.5, gt=0, le=1000, description="OU correlation time tau")
+
+
+class CameraSpec(_Model):
+    intrinsics: IntrinsicsSpec = Field(default_factory=IntrinsicsSpec)
+    altitude_m: float = Field(120.0, gt=5, le=10_000)
+    ground_speed_mps: float = Field(12.0, ge=0, le=500)
+    heading_deg: float = Field(0.0, ge=-360, le=360, description="direction of flight, clockwise from north (+y)")
+    tilt_deg: float = Field(0.0, ge=0, le=60, description="0 = nadir; > 0 looks forward (oblique)")
+    drift: DriftSpec = Field(default_factory=DriftSpec)
+    jitter: JitterSpec = Field(default_factory=JitterSpec)
+
+
+class BuildingsSpec(_Model):
+    count: int = Field(0, ge=0, le=2000)
+    height_range_m: tuple[float, float] = (6.0, 30.0)
+    footprint_range_m: tuple[float, float] = (8.0, 25.0)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "BuildingsSpec":
+        for name in ("height_range_m", "footprint_range_m"):
+            lo, hi = getattr(self, name)
+            if not 0 < lo <= hi:
+                raise ValueError(f"{name}: expected 0 < low <= high, got ({lo}, {hi})")
+        return self
+
+
+class WorldSpec(_Model):
+    road_spacing_m: float = Field(60.0, ge=20, le=2000, description="distance between parallel roads")
+    road_width_m: float = Field(8.0, ge=3, le=40)
+    parking_fraction: float = Field(0.15, ge=0, le=1, description="share of blocks that are parking lots")
+    roof_fraction: float = Field(0.2, ge=0, le=1, description="share of blocks painted as flat roofs")
+    buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
+
+
+class VehiclesSpec(_Model):
+    count: int = Field(6, ge=0, le=500)
+    parked_fraction: float = Field(0.2, ge=0, le=1)
+    length_m: float = Field(4.5, gt=0, le=30)
+    width_m: float = Field(1.9, gt=0, le=5)
+    height_m: float = Field(1.5, gt=0, le=5)
+    speed_range_mps: tuple[float, float] = (5.0, 15.0)
+    turning_fraction: float = Field(0.2, ge=0, le=1)
+    accelerating_fraction: float = Field(0.2, ge=0, le=1)
+    stopping_fraction: float = Field(0.1, ge=0, le=1)
+    acceleration_mps2: float = Field(2.0, gt=0, le=20)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "VehiclesSpec":
+        lo, hi = self.speed_range_mps
+        if not 0 <= lo <= hi:
+            raise ValueError(f"speed_range_mps: expected 0 <= low <= high, got ({lo}, {hi})")
+        total = self.turning_fraction + self.accelerating_fraction + self.stopping_fraction
+        if total > 1.0 + 1e-9:
+            raise ValueError(
+                "turning_fraction + accelerating_fraction + stopping_fraction: expected <= 1, "
+                f"got {total:g}")
+        return self
+
+
+class PhotometrySpec(_Model):
+    lighting: Literal["flat", "sun"] = "flat"
+    sun_elevation_deg: float = Field(50.0, gt=0, le=90)
+    sun_azimuth_deg: float = Field(135.0, ge=-360, le=360)
+    shadows: bool = False
+    noise_std: float = Field(0.0, ge=0, le=50, description="Gaussian sensor noise, gray levels")
+    blur_sigma_px: float = Field(0.0, ge=0, le=10)
+    brightness_drift_per_s: float = Field(0.0, ge=-0.5, le=0.5, description="relative gain change per second")
+
+    @model_validator(mode="after")
+    def _shadows_need_sun(self) -> "PhotometrySpec":
+        if self.shadows and self.lighting != "sun":
+            raise ValueError("shadows: need lighting 'sun', got lighting 'flat'")
+        return self
+
+
+class SceneSpec(_Model):
+    name: str = "custom"
+    description: str = ""
+    seed: int = Field(0, ge=0, le=2**63 - 1)
+    image: ImageSpec = Field(default_factory=ImageSpec)
+    camera: CameraSpec = Field(default_factory=CameraSpec)
+    world: WorldSpec = Field(default_factory=WorldSpec)
+    vehicles: VehiclesSpec = Field(default_factory=VehiclesSpec)
+    photometry: PhotometrySpec = Field(default_factory=PhotometrySpec)
+
+    # -- derived quantities used by the generator and the checks ------------------------
+    def focal_px(self) -> float:
+        return self.camera.intrinsics.focal_px(self.image.width_px)
+
+    def gsd_m(self) -> float:
+        """Ground sampling distance at nadir, metres per pixel, at the lowest altitude flown."""
+        duration_s = (self.image.n_frames - 1) / self.image.fps
+        lowest_m = self.camera.altitude_m + min(0.0, self.camera.drift.climb_rate_mps * duration_s)
+        return lowest_m / self.focal_px()
+
+    @model_validator(mode="after")
+    def _physically_possible(self) -> "SceneSpec":
+        img, cam = self.image, self.camera
+        f_px = self.focal_px()
+        duration_s = (img.n_frames - 1) / img.fps
+        lowest_m = cam.altitude_m + cam.drift.climb_rate_mps * duration_s
+        if lowest_m < 5.0:
+            raise ValueError(
+                f"camera.drift.climb_rate_mps: the camera would descend to {lowest_m:.1f} m "
+                f"(altitude_m {cam.altitude_m} + {cam.drift.climb_rate_mps} m/s x {duration_s:.1f} s); "
+                "expected it to stay above 5 m")
+        half_vfov_deg = math.degrees(math.atan((img.height_px / 2.0) / f_px))
+        if cam.tilt_deg + half_vfov_deg > MAX_RAY_OFF_NADIR_DEG:
+            raise ValueError(
+                f"camera.tilt_deg: tilt {cam.tilt_deg} + half vertical field of view {half_vfov_deg:.1f} "
+                f"= {cam.tilt_deg + half_vfov_deg:.1f} deg off nadir; expected <= {MAX_RAY_OFF_NADIR_DEG} "
+                "(the horizon would enter the image)")
+        gsd = self.gsd_m()
+        side_px = min(img.width_px, img.height_px)
+        cam_step_px = cam.ground_speed_mps / img.fps / gsd
+        if cam_step_px > MAX_CAMERA_STEP_FRACTION * side_px:
+            raise ValueError(
+                f"camera.ground_speed_mps: {cam.ground_speed_mps} m/s moves the ground {cam_step_px:.1f} px "
+                f"per frame; expected <= {MAX_CAMERA_STEP_FRACTION * side_px:.1f} px "
+                f"({MAX_CAMERA_STEP_FRACTION:g} of the image's smaller side)")
+        v = self.vehicles
+        if v.count:
+            top_mps = v.speed_range_mps[1]  # accelerating vehicles stop accelerating there
+            step_px = top_mps / img.fps / gsd
+            limit_px = MAX_VEHICLE_STEP_FRACTION * side_px
+            if step_px > limit_px:
+                raise ValueError(
+                    f"vehicles.speed_range_mps: a vehicle at {top_mps:g} m/s moves {step_px:.1f} px per "
+                    f"frame at {img.fps:g} fps and {gsd:.3f} m/px; expected <= {limit_px:.1f} px "
+                    f"({MAX_VEHICLE_STEP_FRACTION:g} of the image's smaller side): too fast for the scene")
+        return self
+
+
+# -- loading ----------------------------------------------------------------------------
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"])
+        msg = e["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        got = e.get("input")
+        shown = "" if isinstance(got, (dict, list)) or e["type"] == "extra_forbidden" else f" (got {got!r})"
+        lines.append(f"  {loc or '(scene)'}: {msg}{shown}")
+    return f"scene spec {source}: invalid\n" + "\n".join(lines)
+
+
+def _preset_paths() -> dict[str, Path]:
+    return {p.stem: p for p in sorted(PRESET_DIR.glob("*.yaml"))}
+
+
+def list_presets() -> dict[str, str]:
+    """Built-in presets: name -> one-line description."""
+    out = {}
+    for name, path in _preset_paths().items():
+        data = yaml.safe_load(path.read_text()) or {}
+        out[name] = str(data.get("description", "")).strip().splitlines()[0] if data.get("description") else ""
+    return out
+
+
+def _set_dotted(data: dict, key: str, value: Any, source: str) -> None:
+    parts = key.split(".")
+    if not all(parts):
+        raise SceneSpecError(f"scene spec {source}: override {key!r}: expected a dotted field name")
+    node = data
+    for i, p in enumerate(parts[:-1]):
+        child = node.get(p)
+        if child is None:
+            child = node[p] = {}
+        if not isinstance(child, dict):
+            raise SceneSpecError(
+                f"scene spec {source}: override {key!r}: {'.'.join(parts[:i + 1])} is not a section")
+        node = child
+    node[parts[-1]] = value
+
+
+def _validate(data: Any, source: str) -> SceneSpec:
+    if not isinstance(data, dict):
+        raise SceneSpecError(f"scene spec {source}: expected a mapping at the top, got {type(data).__name__}")
+    try:
+        return SceneSpec.model_validate(data)
+    except ValidationError as err:
+        raise SceneSpecError(_format_errors(err, source)) from None
+
+
+def load_scene_spec(name_or_path: str | os.PathLike | SceneSpec | dict,
+                    overrides: dict[str, Any] | None = None) -> SceneSpec:
+    """Load a spec from a preset name, a YAML file, a dict or a spec, then apply overrides.
+
+    Parameters
+    ----------
+    name_or_path : str, path, dict or SceneSpec
+        A preset name (see :func:`list_presets`), a path to a YAML file, or data.
+    overrides : dict, optional
+        Dotted field -> value, e.g. ``{"camera.jitter.roll_std_deg": 0.5, "seed": 3}``.
+
+    Raises
+    ------
+    SceneSpecError
+        Unknown preset (the message lists the valid ones), unreadable YAML, or an
+        invalid field; the message names the source and the dotted field.
+    """
+    if isinstance(name_or_path, SceneSpec):
+        source, data = f"<{name_or_path.name}>", name_or_path.model_dump(mode="json")
+    elif isinstance(name_or_path, dict):
+        source, data = "<dict>", json.loads(json.dumps(name_or_path))
+    else:
+        text = os.fspath(name_or_path)
+        presets = _preset_paths()
+        if text in presets:
+            path = presets[text]
+            source = f"preset {text!r} ({path})"
+        else:
+            path = Path(text)
+            source = str(path)
+            if not path.is_file():
+                looks_like_file = path.suffix in (".yaml", ".yml") or os.sep in text
+                what = "no such file" if looks_like_file else "unknown preset"
+                raise SceneSpecError(
+                    f"scene spec {text!r}: {what}; valid presets: {', '.join(presets)} "
+                    "(or give a path to a .yaml file)")
+        try:
+            data = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as err:
+            raise SceneSpecError(f"scene spec {source}: not valid YAML: {err}") from None
+        if data is None:
+            data = {}
+        if text in presets and isinstance(data, dict):
+            data.setdefault("name", text)
+    if overrides:
+        if not isinstance(data, dict):
+            raise SceneSpecError(f"scene spec {source}: expected a mapping at the top")
+        for key, value in overrides.items():
+            _set_dotted(data, key, value, source)
+        source = f"{source} with overrides {sorted(overrides)}"
+    return _validate(data, source)
+
+
+def spec_to_yaml(spec: SceneSpec) -> str:
+    """The resolved spec (every field, with its seed) as YAML."""
+    return yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False)
+
+
+def spec_hash(spec: SceneSpec) -> str:
+    """Content hash of the resolved spec: sha256 of its canonical JSON, 16 hex digits."""
+    canonical = json.dumps(spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode()).hexdigest()[:16]
