@@ -1,0 +1,280 @@
+"""Pipeline: validation of descriptions, a run on a synthetic sequence with known motion, bounded memory."""
+
+import gc
+import tracemalloc
+
+import cv2
+import numpy as np
+import pytest
+
+from algorithms.jitter import fit_flight_path
+from algorithms.pipeline import _compensate, _compose
+from algorithms.pipeline import PIPELINES, PairEstimate, Pipeline, PipelineError, SequenceEstimate, get_pipeline
+from algorithms.registry import FLOW_METHODS, register_flow
+
+SQUARE = 255.0  # the moving square's gray value; the texture stays below it
+SIZE = 80
+SQ = 6
+
+
+@register_flow
+def _square_oracle_flow(frame0, frame1, *, unused: float = 0.0):
+    """Exact flow of the synthetic scene on a compensated pair: the square's displacement, zero elsewhere."""
+    m0, m1 = frame0 >= SQUARE - 0.5, frame1 >= SQUARE - 0.5
+    flow = np.zeros(frame0.shape + (2,), np.float32)
+    if m0.any() and m1.any():
+        y0, x0 = np.argwhere(m0).mean(axis=0)
+        y1, x1 = np.argwhere(m1).mean(axis=0)
+        flow[m0] = (x1 - x0, y1 - y0)
+    return flow, np.ones(frame0.shape, bool)
+
+
+def _texture(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    noise = rng.uniform(0, 1, size=(h, w)).astype(np.float32)
+    smooth = cv2.GaussianBlur(noise, (0, 0), 1.0)
+    smooth = (smooth - smooth.min()) / np.ptp(smooth)
+    return (254 * smooth).astype(np.float32)
+
+
+class Frames:
+    """A synthetic sequence built on demand: a camera crop of a textured ground plus a moving square.
+
+    The crop origin moves by a straight line plus integer jitter; ground content
+    therefore moves by minus the origin's step. The square moves by ``(3, -2)``
+    px per frame relative to the ground. Counts reads and frames alive.
+    """
+
+    def __init__(self, n: int, seed: int = 0, step=(3, -2), sq: int = SQ):
+        rng = np.random.default_rng(seed)
+        self.sq = sq
+        self.n = n
+        self.ground = _texture(rng, SIZE + 4 * n + 40, SIZE + 4 * n + 40)
+        t = np.arange(n)
+        jitter = rng.integers(-2, 3, size=(n, 2))
+        self.origin = np.column_stack([2 * t, t]) + jitter + 10  # crop origin (x, y) on the ground
+        self.content_path = -(self.origin - self.origin[0]).astype(float)  # cumulative ground displacement
+        self.square_ground = np.column_stack([30 + step[0] * t, 60 + step[1] * t]) + self.origin[0]  # top-left on the ground
+        self.reads = 0
+
+    def __len__(self):
+        return self.n
+
+    def square_topleft(self, i):  # in frame i pixels
+        return self.square_ground[i] - self.origin[i]
+
+    def __getitem__(self, i):
+        if not 0 <= i < self.n:
+            raise IndexError(i)
+        self.reads += 1
+        ox, oy = self.origin[i]
+        img = self.ground[oy:oy + SIZE, ox:ox + SIZE].copy()
+        sx, sy = self.square_topleft(i)
+        img[max(sy, 0):sy + self.sq, max(sx, 0):sx + self.sq] = SQUARE
+        return img.astype(np.uint8)
+
+
+BASE = {
+    "name": "oracle",
+    "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 8}},
+    "jitter": {"model": "line"},
+    "compensation": "shift",
+    "flow": {"method": "_square_oracle_flow"},
+    "threshold": {"min_magnitude_px": 1.0},
+    "spatial": True,
+    "temporal": True,
+    "detection": {"min_magnitude_px": 1.0, "min_area_px": 10},
+    "tracking": {"point": True, "multi": {"gate_px": 5.0, "birth_hits": 2}},
+}
+
+
+def _run(p: Pipeline, frames, seeds=None):
+    out = list(p.run(frames, seeds=seeds))
+    assert all(isinstance(e, PairEstimate) for e in out[:-1]) and isinstance(out[-1], SequenceEstimate)
+    assert [e.index for e in out[:-1]] == list(range(len(frames) - 1))
+    return out[:-1], out[-1]
+
+
+def test_run_recovers_global_shifts_total_flow_jitter_and_the_square():
+    frames = Frames(10)
+    centre0 = frames.square_topleft(0) + (SQ - 1) / 2
+    d = dict(BASE, tracking={"point": {"field": "local"}, "multi": {"gate_px": 5.0, "birth_hits": 2}})
+    pairs, seq = _run(Pipeline.from_dict(d), frames, seeds=[(42, *centre0)])
+    true_shifts = np.diff(frames.content_path, axis=0)
+    np.testing.assert_array_equal(seq.shifts_px, true_shifts)
+    np.testing.assert_array_equal(seq.cumulative_px, frames.content_path)
+    np.testing.assert_allclose(seq.jitter_px, frames.content_path - fit_flight_path(frames.content_path), atol=1e-9)
+    for e in pairs:
+        t = e.index
+        s = true_shifts[t]
+        np.testing.assert_array_equal(e.global_shift_px, s)
+        np.testing.assert_array_equal(e.flow_global[5, 5], s)
+        sx, sy = frames.square_topleft(t)
+        on_square = np.zeros((SIZE, SIZE), bool)
+        on_square[sy:sy + SQ, sx:sx + SQ] = True
+        # total = camera + object motion on the square, camera alone on the ground (where valid)
+        np.testing.assert_allclose(e.flow_total[on_square], np.broadcast_to(s + (3.0, -2.0), (SQ * SQ, 2)), atol=1e-5)
+        ground = e.valid & ~cv2.dilate(on_square.astype(np.uint8), np.ones((3, 3))).astype(bool)
+        np.testing.assert_allclose(e.flow_total[ground], np.broadcast_to(s, (ground.sum(), 2)), atol=1e-6)
+        # one detection, at the square's centre in frame t; the temporal filter (eq. 4.12, pixel by
+        # pixel) mixes in the square's places in t-1 and t+1, several px away, so allow 1.5 px
+        assert len(e.detections) == 1
+        np.testing.assert_allclose(e.detections[0][:2], (sx + (SQ - 1) / 2, sy + (SQ - 1) / 2), atol=1.5)
+        assert set(e.stage_ms) >= {"global_motion", "flow", "threshold", "spatial", "temporal", "tracking"}
+    tr = seq.tracks
+    point = tr[tr.source == "point"].sort_values("frame")
+    assert list(point.frame) == list(range(10)) and set(point.seed_vehicle_id) == {42}
+    last = frames.square_topleft(9) + (SQ - 1) / 2
+    # global shift + exact local flow at the point: followed exactly
+    np.testing.assert_allclose(point[["x_px", "y_px"]].to_numpy()[-1], last, atol=1e-4)
+    multi = tr[tr.source == "multi"]
+    assert multi.track_id.nunique() == 1 and len(multi) == 9
+    xy = multi.sort_values("frame")[["x_filt_px", "y_filt_px"]].to_numpy()
+    truth = np.array([frames.square_topleft(t) + (SQ - 1) / 2 for t in range(9)])
+    assert np.abs(xy - truth).max() < 1.5  # no worse than the detections it filters
+
+
+def test_affine_compensation_of_a_translating_ground_is_the_shift():
+    frames = Frames(4, seed=1)
+    frames.square_ground[:] = frames.origin + 200  # ground only: ECC sees a pure translation
+    d = dict(BASE, compensation="affine", tracking={"point": False, "multi": None})
+    pairs, seq = _run(Pipeline.from_dict(d), frames)
+    for e in pairs:
+        s = seq.shifts_px[e.index]
+        # ECC's six affine parameters fitted on 80x80 px: a tenth of a pixel at the corners
+        np.testing.assert_allclose(e.flow_global[e.valid], np.broadcast_to(s, (e.valid.sum(), 2)), atol=0.1)
+        # the oracle sees no local motion after compensation: total = global there
+        np.testing.assert_allclose(e.flow_total, e.flow_global, atol=1e-5)
+
+
+def test_warp_compensation_and_composition_are_exact():
+    # M: rotation by 2 degrees about (20, 15) then a shift; I1(M x) = I0(x) by construction
+    a = np.deg2rad(2.0)
+    R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    C = np.array([[1, 0, 20], [0, 1, 15], [0, 0, 1.0]])
+    M = np.array([[1, 0, 1.5], [0, 1, -0.5], [0, 0, 1.0]]) @ C @ R @ np.linalg.inv(C)
+    w = np.zeros((30, 40, 2), np.float32)
+    w[10, 12] = (0.5, -1.0)
+    total = _compose(M, w, is_shift=False)
+    p = M @ np.array([12 + 0.5, 10 - 1.0, 1.0])
+    np.testing.assert_allclose(total[10, 12], p[:2] - (12, 10), atol=1e-5)
+    q = M @ np.array([3.0, 7.0, 1.0])
+    np.testing.assert_allclose(total[7, 3], q[:2] - (3, 7), atol=1e-5)
+    # a smooth image and its M-warped version: compensation brings frame t+1 back onto frame t
+    ys, xs = np.mgrid[0:30, 0:40].astype(np.float32)
+    f = lambda x, y: 100 + 40 * np.sin(0.3 * x) * np.cos(0.2 * y)  # noqa: E731
+    I0 = f(xs, ys)
+    Minv = np.linalg.inv(M)
+    X = Minv[0, 0] * xs + Minv[0, 1] * ys + Minv[0, 2]
+    Y = Minv[1, 0] * xs + Minv[1, 1] * ys + Minv[1, 2]
+    I1 = f(X, Y).astype(np.float32)  # I1(M x) = I0(x)
+    I1c, fg, inside = _compensate(I1, M)
+    inner = inside.copy()
+    inner[:2], inner[-2:], inner[:, :2], inner[:, -2:] = False, False, False, False
+    assert np.abs(I1c - I0)[inner].max() < 1.0  # bilinear sampling of a smooth image
+    np.testing.assert_allclose(fg, _compose(M, np.zeros_like(w), is_shift=False), atol=1e-5)
+
+
+class _Guarded(Frames):
+    """Counts frames handed out and still referenced (their arrays are tracked by weak finalizers)."""
+
+    def __init__(self, n):
+        super().__init__(n)
+        self.alive = 0
+        self.max_alive = 0
+
+    def __getitem__(self, i):
+        img = super().__getitem__(i).view(_Tracked)
+        self.alive += 1
+        self.max_alive = max(self.max_alive, self.alive)
+        import weakref
+        weakref.finalize(img, self._gone)
+        return img
+
+    def _gone(self):
+        self.alive -= 1
+
+
+class _Tracked(np.ndarray):
+    pass
+
+
+def _peak_bytes(n: int) -> int:
+    frames = Frames(n)
+    p = Pipeline.from_dict(dict(BASE, tracking={"point": False, "multi": None}))
+    gc.collect()
+    tracemalloc.start()
+    for _ in p.run(frames):
+        pass  # the consumer keeps nothing
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak  # the ground texture was allocated before tracing started
+
+
+def test_streaming_reads_each_frame_a_bounded_number_of_times_and_memory_does_not_grow():
+    frames = _Guarded(12)
+    for _ in Pipeline.from_dict(BASE).run(frames):
+        gc.collect()
+    assert frames.reads == 2 * 12  # pass 1 and pass 2 read each frame once
+    assert frames.max_alive <= 2
+    small, large = _peak_bytes(6), _peak_bytes(30)
+    assert large < 1.3 * small, (small, large)
+
+
+BAD = [
+    ({"flow": {"method": "lucas_kanade"}}, r"name: missing"),
+    ({"name": "x"}, r"flow: missing"),
+    (dict(BASE, flw={}), r"flw: unknown key; valid: name, description"),
+    (dict(BASE, flow={"method": "lucas_kanad"}), r"flow.method: unknown flow method 'lucas_kanad'; valid: .*horn_schunck.*lucas_kanade"),
+    (dict(BASE, flow={"method": "lucas_kanade", "window": 15}), r"flow.window: unknown key; .*flow.params"),
+    (dict(BASE, flow={"method": "lucas_kanade", "params": {"windw": 15}}), r"flow.params.windw: unknown parameter of lucas_kanade; valid: window"),
+    (dict(BASE, flow={"method": "lucas_kanade", "params": {"window": "15"}}), r"flow.params.window: expected an integer, got '15'"),
+    (dict(BASE, global_motion={"method": "phase"}), r"global_motion.method: unknown global motion method 'phase'; valid: ncc_global_motion"),
+    (dict(BASE, jitter={"model": "spline"}), r"jitter.model: expected one of line, smooth"),
+    (dict(BASE, jitter={"window_frames": 4}), r"jitter.window_frames: expected an odd integer"),
+    (dict(BASE, compensation="warp"), r"compensation.model: expected one of none, shift, affine, homography"),
+    (dict(BASE, spatial="yes"), r"spatial: expected true/false, got 'yes'"),
+    (dict(BASE, threshold={"min_magnitude_px": float("nan")}), r"threshold.min_magnitude_px: expected a finite number"),
+    (dict(BASE, threshold={"direction": [0, 0]}), r"threshold: direction: expected an angle"),
+    (dict(BASE, tracking={"multi": {"birth_hits": 0}}), r"tracking.multi: birth_hits: expected an integer >= 1"),
+    (dict(BASE, tracking={"point": {"kalman": {"q": 1.0, "Q": 2}}}), r"tracking.point.kalman.Q: unknown key"),
+]
+
+
+@pytest.mark.parametrize("d, match", BAD)
+def test_from_dict_rejects_bad_descriptions_naming_the_field(d, match):
+    with pytest.raises(PipelineError, match=match):
+        Pipeline.from_dict(d)
+
+
+def test_builtin_pipelines_validate_and_hash_is_stable():
+    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis", "farneback", "tvl1"} <= set(PIPELINES)
+    hashes = set()
+    for name, d in PIPELINES.items():
+        p = get_pipeline(name)
+        assert d["description"] and p.name == name
+        assert Pipeline.from_dict(p.to_dict()).hash == p.hash  # resolving is idempotent
+        hashes.add(p.hash)
+    assert len(hashes) == len(PIPELINES)
+    a = Pipeline.from_dict(BASE)
+    b = Pipeline.from_dict(dict(reversed(list(BASE.items())), name="other", description="same stages"))
+    assert a.hash == b.hash  # name and key order do not change what is computed
+    c = Pipeline.from_dict(dict(BASE, spatial=False))
+    assert c.hash != a.hash
+    with pytest.raises(KeyError, match="unknown pipeline 'nope'; valid: dis"):
+        get_pipeline("nope")
+    assert "_square_oracle_flow" in FLOW_METHODS
+
+
+def test_thesis_lk_on_the_synthetic_sequence():
+    # single-level LK (thesis) needs slow targets: a 10 px square moving (1, -1) px per frame
+    frames = Frames(5, seed=3, step=(1, -1), sq=10)
+    d = get_pipeline("thesis-lk").to_dict()
+    d["global_motion"]["params"]["max_shift"] = 8
+    d["detection"] = {"min_magnitude_px": 0.5, "min_area_px": 10}
+    pairs, seq = _run(Pipeline.from_dict(d), frames)
+    np.testing.assert_array_equal(seq.shifts_px, np.diff(frames.content_path, axis=0))
+    for e in pairs:
+        sx, sy = frames.square_topleft(e.index) + 4.5
+        # found where it is, within 3 px: LK's 15x15 window spreads its motion up to 7 px around
+        assert any(abs(x - sx) < 3 and abs(y - sy) < 3 for x, y, _ in e.detections), e.detections
+        np.testing.assert_allclose(e.flow_local[int(sy), int(sx)], (1.0, -1.0), atol=0.3)
