@@ -1,1 +1,63 @@
-"""aerobench algorithms package."""
+"""aerobench algorithms: pure estimation code on arrays (imports nothing else of the project).
+
+The public API is re-exported here and loaded lazily (PEP 562), so that
+``import algorithms.flow`` (what ``scenes`` needs) does not pull in numba,
+scikit-image or the pipeline:
+
+* flow convention: ``as_gray``, ``check_frame_pair``, ``check_flow``, ``warp_backward``,
+  ``flow_to_color``, ``color_wheel_image`` (``algorithms.flow``)
+* registries: ``FLOW_METHODS``, ``STAGES``, ``register_flow``, ``register_stage``,
+  ``get_flow_method``, ``get_stage`` (``algorithms.registry``)
+* flow methods ``flow, valid = f(frame0, frame1, **params)``: ``farneback``, ``dis``,
+  ``tvl1``, ``ilk``; ``lucas_kanade`` and ``horn_schunck`` share their modules' names (the
+  package attribute becomes the module once it is imported), so take them from
+  ``FLOW_METHODS[name]`` or ``from algorithms.lucas_kanade import lucas_kanade``
+* global motion: ``ncc_global_motion``, ``affine_global_motion``, ``global_flow``
+* jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``spatial_filter``,
+  ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
+  ``ConstantVelocityKalman``, ``kalman_cv_filter``; tracking: ``detect_moving_objects``,
+  ``PointTracker``, ``MultiTargetTracker``
+* the pipeline: ``Pipeline``, ``PIPELINES``, ``get_pipeline``, ``PairEstimate``, ``SequenceEstimate``
+"""
+
+from __future__ import annotations
+
+import importlib
+
+# public name -> the module that defines it
+_EXPORTS: dict[str, str] = {}
+for _module, _names in {
+    "algorithms.flow": ("FLOW_DTYPE", "as_gray", "check_frame_pair", "check_flow", "warp_backward",
+                        "flow_to_color", "color_wheel_image"),
+    "algorithms.registry": ("FLOW_METHODS", "STAGES", "register_flow", "register_stage", "get_flow_method",
+                            "get_stage", "describe"),
+    "algorithms.reference": ("farneback", "dis", "tvl1", "ilk"),
+    "algorithms.global_motion": ("GlobalMotion", "GlobalModel", "ncc_global_motion", "affine_global_motion",
+                                 "global_flow"),
+    "algorithms.jitter": ("JitterResult", "cumulative_path", "fit_flight_path", "remove_jitter"),
+    "algorithms.filters": ("threshold_flow", "spatial_filter", "temporal_filter"),
+    "algorithms.kalman": ("THESIS_KALMAN", "scalar_kalman", "ConstantVelocityKalman", "CVFilterResult",
+                          "kalman_cv_filter"),
+    "algorithms.tracking": ("TRACK_COLUMNS", "detect_moving_objects", "PointTracker", "MultiTargetTracker"),
+    "algorithms.pipeline": ("Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
+                            "get_pipeline", "pipeline_hash"),
+}.items():
+    for _name in _names:
+        _EXPORTS[_name] = _module
+del _module, _names, _name
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'algorithms' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # cache: later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
