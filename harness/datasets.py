@@ -222,10 +222,17 @@ def evaluate_flow_dataset(root: str | os.PathLike, *, format: str, method: str |
 
     Returns a results-schema table (:func:`harness.results.rows_to_frame`):
     ``scene`` = ``"<format>:<pair name>"``, ``pipeline`` = the method name,
-    ``frame`` 0, one row per metric (``coverage`` included), so
+    ``frame`` 0, one row per metric (``coverage`` included); ``method`` is a
+    name of ``algorithms.registry.FLOW_METHODS`` or a callable of the same
+    signature ``(frame0, frame1, **params) -> (flow, valid)``, so
     ``summarize`` / ``aggregate`` work on it as on synthetic results.
     """
-    fn = get_flow_method(method) if isinstance(method, str) else method
+    if isinstance(method, str):
+        import algorithms.pipeline  # noqa: F401  (its imports fill the flow method registry)
+
+        fn = get_flow_method(method)
+    else:
+        fn = method
     name = method if isinstance(method, str) else getattr(method, "__name__", "method")
     params = dict(params or {})
     parts = []

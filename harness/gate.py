@@ -333,6 +333,10 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
             msg.append(f"{len(only_base)} in the baseline but not in the results: {fmt(only_base)}")
         if only_cur:
             msg.append(f"{len(only_cur)} in the results but not in the baseline: {fmt(only_cur)}")
+        if "status" in current.columns and (current["status"] != "ok").any():
+            bad = current[current["status"] != "ok"].drop_duplicates("cell_id")
+            msg.append(f"{len(bad)} cell(s) failed: " + "; ".join(
+                f"{r.scene}/{r.pipeline}: {r.error}" for r in bad.head(5).itertuples()))
         raise GateError("metrics on one side only (re-make the baseline if the suite changed): " + " | ".join(msg))
     same_machine = bool(machine) and machine == baseline.get("machine")
     if not same_machine:

@@ -84,8 +84,9 @@ HIST_BIN_PX = 0.01
 HIST_MAX_PX = 100.0
 HIST_NBINS = int(round(HIST_MAX_PX / HIST_BIN_PX)) + 1  # the last bin is the overflow
 REDUCES = ("mean", "rms", "rate", "total", "quantile")
-STAGES = ("global_motion", "jitter", "compensation", "flow", "threshold", "spatial", "temporal",
-          "tracking", "total")
+# stages of algorithms.pipeline that report wall time (others are registered on first use)
+STAGES = ("global_motion", "jitter", "compensation", "flow", "compose", "threshold", "spatial", "temporal",
+          "detection", "tracking", "total")
 
 
 @dataclass(frozen=True)

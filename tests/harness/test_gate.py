@@ -89,6 +89,14 @@ def test_metric_on_one_side_only_is_an_error(baseline):
         G.compare(fewer, baseline)
 
 
+def test_a_failed_cell_is_named_in_the_error(baseline):
+    failed = R.rows_to_frame([{"metric": "cell_failed", "value": float("nan"), "sum": float("nan"), "count": 0}],
+                             cell_id="c", scene="tiny", pipeline="thesis-lk", status="failed",
+                             error="RuntimeError: boom")
+    with pytest.raises(G.GateError, match="1 cell\\(s\\) failed: tiny/thesis-lk: RuntimeError: boom"):
+        G.compare(failed, baseline)
+
+
 def test_rules_are_parsed_statements(tmp_path):
     p = tmp_path / "rules.yaml"
     p.write_text("rules:\n  epe_mean: abs 0.02\n  'time_*': rel 10%\n  track_fde: 'off'\n")
