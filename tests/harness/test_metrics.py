@@ -278,3 +278,18 @@ def test_association_keeps_a_correspondence_within_the_gate():
     assert not a["switch"].any()
     tight = M.associate_tracks(est, truth, gate_px=0.5)  # frame 0 (1 px off) falls outside the gate
     assert tight["frame"].tolist() == [1] and tight["track_id"].tolist() == [2]
+
+
+def test_score_flow_per_region_equals_flow_rows_on_the_region_mask():
+    rng = np.random.default_rng(7)
+    truth = _pair(16, 20)
+    est = (truth.flow + rng.normal(scale=0.7, size=truth.flow.shape)).astype(np.float32)
+    valid = rng.random(truth.valid.shape) > 0.1
+    rows = M.score_flow(est, truth.flow, valid, instances=truth.instances, boundary_px=2)
+    masks = M.region_masks(valid, truth.instances, boundary_px=2)
+    for region, mask in masks.items():
+        direct = {r["metric"]: r for r in M.flow_rows(est, truth.flow, mask, region=region)}
+        for metric, r in direct.items():
+            got = _by(rows, metric, region)
+            assert got["count"] == r["count"] and got["hist"] == r["hist"], (metric, region)
+            assert got["value"] == pytest.approx(r["value"], rel=1e-12, nan_ok=True), (metric, region)
