@@ -3,17 +3,56 @@
 from __future__ import annotations
 
 import cv2
+import numba
 import numpy as np
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
-from algorithms.pyramid import coarse_to_fine, target_inside
+from algorithms.pyramid import coarse_to_fine
 from algorithms.registry import register_flow
 
 __all__ = ["lucas_kanade", "lk_increment"]
 
 
+@numba.njit(cache=True)
+def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow, valid) -> None:
+    """Per pixel: the eigenvalue test and the 2x2 solve of eq. 2.9, written into ``flow`` and ``valid``.
+
+    The smallest eigenvalue of ``[[Sxx, Sxy], [Sxy, Syy]]`` reaches ``m`` exactly
+    when ``m <= trace / 2`` and the characteristic polynomial
+    ``m^2 - trace m + det`` is not negative at ``m`` (``m`` lies at or below
+    both roots), which needs no square root.
+    """
+    h, w = Sxx.shape
+    m = min_eigenvalue
+    zero = np.float32(0.0)
+    for i in range(h):
+        for j in range(w):
+            a = Sxx[i, j]
+            b = Sxy[i, j]
+            c = Syy[i, j]
+            trace = a + c
+            det = a * c - b * b
+            ok = (m + m <= trace) and (m * m - m * trace + det >= zero)
+            if ok:
+                inv_det = np.float32(1.0) / det
+                # eq. 2.9: (Vx, Vy) = -(A^T A)^-1 A^T It
+                u = (b * Syt[i, j] - c * Sxt[i, j]) * inv_det
+                v = (b * Sxt[i, j] - a * Syt[i, j]) * inv_det
+                if check_inside:
+                    x = np.float32(j) + u
+                    y = np.float32(i) + v
+                    ok = x >= zero and x <= np.float32(w - 1) and y >= zero and y <= np.float32(h - 1)
+            else:
+                u = zero
+                v = zero
+            flow[i, j, 0] = u
+            flow[i, j, 1] = v
+            valid[i, j] = ok
+
+
 def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue: float,
-                 gaussian_window: bool = False, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 gaussian_window: bool = False, weight: np.ndarray | None = None,
+                 check_inside: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """One Lucas-Kanade solve per pixel: the flow that takes ``f0`` to ``f1``.
 
     Parameters
@@ -31,23 +70,26 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
     weight : ndarray, (H, W) bool, optional
         Pixels that take part in the window sums (e.g. where a warp sampled
         inside frame t+1); the others contribute nothing.
+    check_inside : bool
+        Also clear ``valid`` where ``x + flow`` falls outside the frame.
 
     Returns
     -------
     flow : ndarray, (H, W, 2) float32
         0 where the system is singular.
     valid : ndarray, (H, W) bool
-        Where the smallest eigenvalue reaches ``min_eigenvalue``.
+        Where the smallest eigenvalue reaches ``min_eigenvalue`` (and, with
+        ``check_inside``, ``x + flow`` lies inside the frame).
     """
     # Ix, Iy at t + 1/2: Sobel 3x3 (central difference with [1, 2, 1] smoothing, /8)
     # of the mean of both frames, as the derivatives in eq. 2.4 are taken between them.
-    mean = 0.5 * (f0 + f1)
+    mean = cv2.addWeighted(f0, 0.5, f1, 0.5, 0.0, dtype=cv2.CV_32F)
     Ix = cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
     Iy = cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
-    It = f1 - f0
+    It = cv2.subtract(f1, f0, dtype=cv2.CV_32F)
     if weight is not None:
         w = weight.astype(np.float32)
-        Ix, Iy, It = Ix * w, Iy * w, It * w
+        Ix, Iy, It = cv2.multiply(Ix, w), cv2.multiply(Iy, w), cv2.multiply(It, w)
 
     if gaussian_window:
         sigma = window / 4.0
@@ -59,21 +101,14 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
             return cv2.blur(a, (window, window), borderType=cv2.BORDER_REPLICATE)
 
     # A^T A and A^T b of eq. 2.8, averaged over the window
-    Sxx = window_mean(Ix * Ix)
-    Sxy = window_mean(Ix * Iy)
-    Syy = window_mean(Iy * Iy)
-    Sxt = window_mean(Ix * It)
-    Syt = window_mean(Iy * It)
-
-    half_trace = 0.5 * (Sxx + Syy)
-    lambda_min = half_trace - np.sqrt((0.5 * (Sxx - Syy)) ** 2 + Sxy * Sxy)
-    valid = lambda_min >= min_eigenvalue
-    det = Sxx * Syy - Sxy * Sxy
-    inv_det = np.divide(1.0, det, out=np.zeros_like(det), where=valid)
+    Sxx = window_mean(cv2.multiply(Ix, Ix))
+    Sxy = window_mean(cv2.multiply(Ix, Iy))
+    Syy = window_mean(cv2.multiply(Iy, Iy))
+    Sxt = window_mean(cv2.multiply(Ix, It))
+    Syt = window_mean(cv2.multiply(Iy, It))
     flow = np.empty(f0.shape + (2,), dtype=FLOW_DTYPE)
-    # eq. 2.9: (Vx, Vy) = -(A^T A)^-1 A^T It
-    flow[..., 0] = (Sxy * Syt - Syy * Sxt) * inv_det
-    flow[..., 1] = (Sxy * Sxt - Sxx * Syt) * inv_det
+    valid = np.empty(f0.shape, dtype=np.bool_)
+    _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, np.float32(min_eigenvalue), check_inside, flow, valid)
     return flow, valid
 
 
@@ -136,9 +171,8 @@ def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, le
         median_px = 0 if thesis_form else 5
 
     if thesis_form:
-        flow, valid = lk_increment(g0, g1, window=window, min_eigenvalue=min_eigenvalue,
-                                   gaussian_window=gaussian_window)
-        return flow, valid & target_inside(flow)
+        return lk_increment(g0, g1, window=window, min_eigenvalue=min_eigenvalue,
+                            gaussian_window=gaussian_window, check_inside=True)
 
     def update(f0: np.ndarray, f1w: np.ndarray, flow: np.ndarray,
                inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
