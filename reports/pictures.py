@@ -1,0 +1,83 @@
+"""Flow pictures for the report: frame, ground truth, each method's flow, endpoint-error maps.
+
+Images are PNG bytes (OpenCV's encoder: deterministic) embedded as base64
+data URIs, so the HTML stays one offline file.
+"""
+
+from __future__ import annotations
+
+import base64
+
+import cv2
+import numpy as np
+from matplotlib import colormaps
+
+from algorithms.flow import color_wheel_image, flow_to_color
+
+__all__ = ["png_data_uri", "flow_row", "epe_map", "epe_colorbar", "wheel_legend"]
+
+_EPE_CMAP = "magma"
+
+
+def png_data_uri(rgb: np.ndarray) -> str:
+    """``data:image/png;base64,...`` of a uint8 RGB or gray image."""
+    a = np.ascontiguousarray(rgb)
+    if a.dtype != np.uint8:
+        raise ValueError(f"image: expected uint8, got {a.dtype}")
+    if a.ndim == 3:
+        a = cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+    if not ok:
+        raise ValueError("image: PNG encoding failed")
+    return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+
+
+def row_max_magnitude(truth: np.ndarray | None, estimates: list[np.ndarray], valid: np.ndarray | None) -> float:
+    """The magnitude [px] that saturates colours across a row: the largest true magnitude.
+
+    Without ground truth, the largest estimated magnitude. At least 1e-6.
+    """
+    fields = [truth] if truth is not None else estimates
+    best = 0.0
+    for f in fields:
+        mag = np.hypot(f[..., 0], f[..., 1])
+        if valid is not None and valid.shape == mag.shape:
+            mag = mag[valid]
+        mag = mag[np.isfinite(mag)]
+        if mag.size:
+            best = max(best, float(mag.max()))
+    return max(best, 1e-6)
+
+
+def flow_row(flow: np.ndarray, *, max_magnitude: float, valid: np.ndarray | None = None) -> np.ndarray:
+    """Middlebury colour coding of ``flow`` with a shared ``max_magnitude`` [px]."""
+    return flow_to_color(flow, max_magnitude=max_magnitude, valid=valid)
+
+
+def epe_map(estimate: np.ndarray, truth: np.ndarray, *, max_epe_px: float,
+            valid: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Endpoint-error heat map ``|w_est - w_true|`` (px) coloured 0..``max_epe_px``; unknown black.
+
+    Returns the RGB image and the mean endpoint error over known pixels [px].
+    """
+    d = estimate.astype(np.float64) - truth.astype(np.float64)
+    epe = np.hypot(d[..., 0], d[..., 1])
+    known = np.isfinite(epe)
+    if valid is not None and valid.shape == epe.shape:
+        known &= valid
+    scaled = np.clip(np.where(known, epe, 0.0) / max(max_epe_px, 1e-6), 0.0, 1.0)
+    rgb = (colormaps[_EPE_CMAP](scaled)[..., :3] * 255.0).round().astype(np.uint8)
+    rgb[~known] = 0
+    mean = float(epe[known].mean()) if known.any() else float("nan")
+    return rgb, mean
+
+
+def epe_colorbar(width: int = 256, height: int = 12) -> np.ndarray:
+    """A horizontal 0 -> max gradient in the endpoint-error colour map."""
+    ramp = np.linspace(0.0, 1.0, width)[None, :].repeat(height, axis=0)
+    return (colormaps[_EPE_CMAP](ramp)[..., :3] * 255.0).round().astype(np.uint8)
+
+
+def wheel_legend(size: int = 101) -> np.ndarray:
+    """The flow colour wheel (disc edge = the row's max magnitude)."""
+    return color_wheel_image(size)

@@ -1,0 +1,235 @@
+"""Matplotlib figures of the report, returned as inline SVG text (deterministic bytes).
+
+Every function takes plain tables (pandas) and returns an ``<svg>`` string with
+no XML prolog, DOCTYPE or namespace URLs, ready to sit inside HTML. Output is
+byte-identical between runs: a fixed ``svg.hashsalt``, no date metadata.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless, set before pyplot is imported
+
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+__all__ = ["pipeline_colors", "fig_to_svg", "difficulty_curves", "stabilisation_figure",
+           "jitter_figure", "tracking_figure", "tracking_error_figure"]
+
+_RC = {
+    "svg.hashsalt": "aerobench-report",
+    "svg.fonttype": "none",      # text stays text: small files, browser fonts
+    "font.size": 9,
+    "axes.titlesize": 9,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "figure.dpi": 100,
+}
+# Colour-blind-safe palette (Okabe-Ito), one colour per pipeline in suite order.
+_PALETTE = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#F0E442"]
+
+
+def pipeline_colors(pipelines: list[str]) -> dict[str, str]:
+    """A fixed colour per pipeline, the same in every figure of a report."""
+    return {p: _PALETTE[i % len(_PALETTE)] for i, p in enumerate(pipelines)}
+
+
+def fig_to_svg(fig) -> str:
+    """Render ``fig`` to SVG text fit for inline HTML and close it."""
+    buf = io.StringIO()
+    with matplotlib.rc_context(_RC):
+        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None})
+    plt.close(fig)
+    svg = buf.getvalue()
+    svg = svg[svg.index("<svg"):]
+    # the RDF metadata block names schema URLs and says nothing a reader needs
+    svg = re.sub(r"<metadata>.*?</metadata>\s*", "", svg, flags=re.S)
+    # namespaces are implied for <svg> inside HTML; dropping them keeps URLs out of the file
+    svg = re.sub(r'\s+xmlns(:xlink)?="[^"]*"', "", svg, count=2)
+    # let CSS size the figure: keep the aspect ratio through viewBox
+    svg = re.sub(r'<svg([^>]*?) width="([^"]*)" height="[^"]*"',
+                 r'<svg\1 style="width:100%;height:auto;max-width:\2"', svg, count=1)
+    return svg.strip()
+
+
+def _figure(nrows: int, ncols: int, *, width_in: float, height_in: float):
+    with matplotlib.rc_context(_RC):
+        fig, axes = plt.subplots(nrows, ncols, figsize=(width_in, height_in), squeeze=False,
+                                 layout="constrained")
+    return fig, axes
+
+
+def difficulty_curves(curves: pd.DataFrame, *, param: str, metrics: list[tuple[str, str]],
+                      colors: dict[str, str]) -> str:
+    """One panel per metric: pooled value against the swept parameter, one line per pipeline.
+
+    Parameters
+    ----------
+    curves : DataFrame
+        Columns ``pipeline, sweep_value, metric, value`` (pooled sum / count).
+    metrics : list of (metric name, axis label with unit and direction)
+    """
+    n = len(metrics)
+    ncols = min(3, n)
+    nrows = int(np.ceil(n / ncols))
+    with matplotlib.rc_context(_RC):
+        fig, axes = _figure(nrows, ncols, width_in=3.3 * ncols, height_in=2.5 * nrows + 0.5)
+        handles = {}
+        for k, (metric, label) in enumerate(metrics):
+            ax = axes[k // ncols][k % ncols]
+            sub = curves[curves["metric"] == metric]
+            for pipe, color in colors.items():
+                g = sub[sub["pipeline"] == pipe].sort_values("sweep_value")
+                if g.empty:
+                    continue
+                (h,) = ax.plot(g["sweep_value"].to_numpy(float), g["value"].to_numpy(float), "o-",
+                               color=color, label=pipe, lw=1.5, ms=4)
+                handles[pipe] = h
+            ax.set_title(label)
+            ax.set_xlabel(param)
+        for k in range(n, nrows * ncols):
+            axes[k // ncols][k % ncols].set_visible(False)
+        if handles:
+            fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center",
+                       ncols=min(len(handles), 5), frameon=False)
+    return fig_to_svg(fig)
+
+
+def _fit_line(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least-squares straight line through (t, y), evaluated at t (thesis 3.2)."""
+    ok = np.isfinite(y)
+    if ok.sum() < 2:
+        return np.full_like(y, np.nan)
+    A = np.stack([t[ok], np.ones(ok.sum())], axis=1)
+    coef, *_ = np.linalg.lstsq(A, y[ok], rcond=None)
+    return coef[0] * t + coef[1]
+
+
+def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
+    """The thesis's figs. 3.1 and 3.2 for one cell, for the x and y shift.
+
+    Top row (fig. 3.1): estimated cumulative shift (blue), its least-squares
+    flight line (red) and the correction (green). Bottom row (fig. 3.2): the
+    same after stabilisation: the true cumulative shift plus the applied
+    correction, its refitted line and the remaining difference.
+
+    Returns the SVG and whether the bottom row used ground truth (False: no
+    true cumulative shift known, bottom row left out).
+    """
+    t = stab["frame"].to_numpy(float)
+    have_truth = bool(np.isfinite(stab[["cum_true_x", "cum_true_y"]].to_numpy(float)).any())
+    nrows = 2 if have_truth else 1
+    with matplotlib.rc_context(_RC):
+        fig, axes = _figure(nrows, 2, width_in=7.5, height_in=2.4 * nrows + 0.4)
+        for j, a in enumerate("xy"):
+            ax = axes[0][j]
+            ax.plot(t, stab[f"cum_{a}"], color="#0072B2", lw=1.5, label="cumulative shift (estimated)")
+            ax.plot(t, stab[f"line_{a}"], color="#D55E00", lw=1.5, label="fitted flight line")
+            ax.plot(t, stab[f"corr_{a}"], color="#009E73", lw=1.5, label="correction")
+            ax.set_title(f"before (fig. 3.1), {a} [px]")
+            ax.set_xlabel("frame")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            if have_truth:
+                after = stab[f"cum_true_{a}"].to_numpy(float) + stab[f"corr_{a}"].to_numpy(float)
+                line = _fit_line(t, after)
+                ax = axes[1][j]
+                ax.plot(t, after, color="#0072B2", lw=1.5)
+                ax.plot(t, line, color="#D55E00", lw=1.5)
+                ax.plot(t, line - after, color="#009E73", lw=1.5)
+                ax.set_title(f"after stabilisation (fig. 3.2), {a} [px]")
+                ax.set_xlabel("frame")
+                ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        h, lab = axes[0][0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside lower center", ncols=3, frameon=False)
+        fig.suptitle(title)
+    return fig_to_svg(fig), have_truth
+
+
+def jitter_figure(jitters: dict[str, pd.DataFrame], *, colors: dict[str, str], title: str) -> str:
+    """Estimated jitter per pipeline against the true jitter, x and y panels (px)."""
+    with matplotlib.rc_context(_RC):
+        fig, axes = _figure(1, 2, width_in=7.5, height_in=2.8)
+        truth_drawn = False
+        for j, a in enumerate("xy"):
+            ax = axes[0][j]
+            for pipe, stab in jitters.items():
+                t = stab["frame"].to_numpy(float)
+                ax.plot(t, stab[f"jit_{a}"], "-", color=colors.get(pipe, "#555555"), lw=1.2, label=pipe)
+            first = next(iter(jitters.values()))
+            t = first["frame"].to_numpy(float)
+            true = first[f"jit_true_{a}"].to_numpy(float)
+            if np.isfinite(true).sum() >= 2:
+                # the estimate is measured from a fitted line: measure the truth the same way
+                ax.plot(t, true - _fit_line(t, true), "k--", lw=1.8, label="true jitter (detrended)")
+                truth_drawn = True
+            ax.set_title(f"jitter {a} [px]")
+            ax.set_xlabel("frame")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        h, lab = axes[0][0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside lower center", ncols=min(len(lab), 6), frameon=False)
+        fig.suptitle(title + ("" if truth_drawn else " (true jitter unknown)"))
+    return fig_to_svg(fig)
+
+
+def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *, title: str) -> str:
+    """Trajectories over a frame, one panel per pipeline: truth, raw flow track, Kalman track."""
+    n = len(tracks)
+    ncols = min(3, n)
+    nrows = int(np.ceil(n / ncols))
+    aspect = frame.shape[0] / frame.shape[1] if frame is not None else 0.75
+    with matplotlib.rc_context(_RC):
+        # rows tall enough for the image at its aspect plus a title, so panels never overlap
+        fig, axes = _figure(nrows, ncols, width_in=3.3 * ncols, height_in=(3.0 * aspect + 0.6) * nrows + 0.7)
+        for k, (pipe, tr) in enumerate(tracks.items()):
+            ax = axes[k // ncols][k % ncols]
+            ax.grid(False)
+            if frame is not None:
+                ax.imshow(frame, interpolation="nearest")
+            for _, g in tr.groupby("track_id", sort=True):
+                ax.plot(g["x_true"], g["y_true"], "-", color="#FFFFFF", lw=2.5, label="ground truth")
+                ax.plot(g["x_true"], g["y_true"], "-", color="#000000", lw=1.0)
+                ax.plot(g["x"], g["y"], "o--", color="#E69F00", lw=1.2, ms=3, label="flow track (raw)")
+                ax.plot(g["x_filt"], g["y_filt"], "s-", color="#0072B2", lw=1.2, ms=3, label="Kalman track")
+            if frame is not None:
+                ax.set_xlim(-0.5, frame.shape[1] - 0.5)
+                ax.set_ylim(frame.shape[0] - 0.5, -0.5)
+            else:
+                ax.invert_yaxis()
+            ax.set_title(pipe)
+        for k in range(n, nrows * ncols):
+            axes[k // ncols][k % ncols].set_visible(False)
+        h, lab = axes[0][0].get_legend_handles_labels()
+        keep = dict(zip(lab, h))
+        fig.legend(list(keep.values()), list(keep.keys()), loc="outside lower center", ncols=3, frameon=False)
+        fig.suptitle(title)
+    return fig_to_svg(fig)
+
+
+def tracking_error_figure(errors: dict[str, pd.DataFrame], *, colors: dict[str, str], title: str) -> str:
+    """Per-frame position error [px]: raw flow track dashed, Kalman track solid, per pipeline.
+
+    ``errors[pipeline]`` has columns ``frame, err_raw, err_kalman`` (px, mean over tracks).
+    """
+    with matplotlib.rc_context(_RC):
+        fig, axes = _figure(1, 1, width_in=7.5, height_in=2.8)
+        ax = axes[0][0]
+        for pipe, e in errors.items():
+            c = colors.get(pipe, "#555555")
+            ax.plot(e["frame"], e["err_raw"], "--", color=c, lw=1.0)
+            ax.plot(e["frame"], e["err_kalman"], "-", color=c, lw=1.6, label=pipe)
+        ax.set_xlabel("frame")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_ylabel("position error [px] \u2193")
+        ax.set_title("solid: Kalman track, dashed: raw flow track")
+        h, lab = ax.get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside lower center", ncols=min(len(errors), 5), frameon=False)
+        fig.suptitle(title)
+    return fig_to_svg(fig)

@@ -1,0 +1,575 @@
+"""``write_report``: one self-contained ``report.html`` and a ``report.md`` from a run folder.
+
+The report reads only the run folder (run.json, results.parquet, the cell
+artifacts) and the sequence folders in the cache dir named in run.json. The
+HTML has no external resource: CSS inline, figures as inline SVG, pictures as
+base64 PNG. The output is deterministic: the same run folder gives the same
+bytes (the date shown is the run's, from run.json).
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from reports import pictures, plots
+from reports.load import (RunData, find_sequence_dir, load_run, picture_frames, read_frame_truth,
+                          read_stabilisation, read_tracks, scene_base)
+from reports.tables import (Column, MetricTable, baseline_diffs, format_value, gate_view, headline_columns,
+                            metric_table, per_scene_rows, region_table, sweep_curves)
+from scenes.formats import atomic_write_bytes, read_flo
+
+__all__ = ["write_report", "build_report"]
+
+_MAX_PICTURE_FRAMES = 2
+
+_CSS = """
+:root { --fg:#1b1f24; --muted:#57606a; --line:#d0d7de; --bg-alt:#f6f8fa; --best:#dafbe1; --bad:#ffebe9; }
+* { box-sizing: border-box; }
+body { margin:0; font: 15px/1.45 system-ui, -apple-system, "Segoe UI", Roboto, "DejaVu Sans", sans-serif;
+       color: var(--fg); background:#fff; }
+main { max-width: 1180px; margin: 0 auto; padding: 16px; }
+h1 { font-size: 1.6em; margin: 0.2em 0 0.4em; }
+h2 { font-size: 1.3em; border-bottom: 1px solid var(--line); padding-bottom: 4px; margin-top: 1.8em; }
+h3 { font-size: 1.05em; margin: 1.2em 0 0.4em; }
+p.note, .note { color: var(--muted); font-size: 0.9em; }
+nav ul { display:flex; flex-wrap:wrap; gap: 4px 14px; padding:0; list-style:none; margin: 0.5em 0; }
+nav a { color:#0969da; text-decoration:none; }
+.scroll { overflow-x: auto; -webkit-overflow-scrolling: touch; margin: 0.4em 0 0.8em; }
+table { border-collapse: collapse; font-size: 0.9em; }
+th, td { border: 1px solid var(--line); padding: 4px 8px; vertical-align: top; }
+th { background: var(--bg-alt); text-align: left; font-weight: 600; }
+th small { font-weight: 400; color: var(--muted); display:block; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+td.best { background: var(--best); font-weight: 700; }
+td.worse { background: var(--bad); }
+table.meta th { width: 12em; }
+table.meta td { word-break: break-word; }
+.verdict { padding: 10px 14px; border-radius: 6px; font-weight: 700; margin: 0.6em 0; }
+.verdict.pass { background: var(--best); border: 1px solid #4ac26b; }
+.verdict.fail { background: var(--bad); border: 1px solid #ff8182; }
+.verdict.unknown { background: var(--bg-alt); border: 1px solid var(--line); }
+figure { margin: 0.6em 0 1.2em; }
+figcaption { color: var(--muted); font-size: 0.88em; margin-top: 4px; }
+.plot { overflow-x: auto; }
+.plot svg { display:block; }
+.gallery { display: grid; grid-template-columns: repeat(auto-fill, minmax(170px, 1fr)); gap: 10px; }
+.gallery figure { margin: 0; }
+.gallery img { width: 100%; height: auto; display: block; border: 1px solid var(--line); }
+img.pix { image-rendering: pixelated; }
+img.legend { max-width: 120px; border: none !important; }
+img.bar { width: 100%; height: 14px; }
+pre { white-space: pre-wrap; word-break: break-word; background: var(--bg-alt); padding: 8px;
+      font-size: 0.82em; max-height: 18em; overflow: auto; }
+.missing { color: var(--muted); font-style: italic; }
+@media (max-width: 600px) {
+  body { font-size: 14px; }
+  main { padding: 10px; }
+  .gallery { grid-template-columns: repeat(2, 1fr); }
+  .plot svg { min-width: 520px; }  /* scroll sideways rather than shrink text below legibility */
+}
+@media print {
+  nav { display: none; }
+  main { max-width: none; padding: 0; }
+  .scroll { overflow: visible; }
+  pre { max-height: none; overflow: visible; }
+  figure, table, .gallery { break-inside: avoid; page-break-inside: avoid; }
+  h2 { break-after: avoid; page-break-after: avoid; }
+  td.best { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+}
+"""
+
+_SECTIONS = [
+    ("provenance", "What was run"),
+    ("verdict", "Gate and baseline"),
+    ("headline", "Headline"),
+    ("per-scene", "Per scene"),
+    ("regions", "By region and motion"),
+    ("all-metrics", "All metrics"),
+    ("difficulty", "Difficulty curves"),
+    ("pictures", "Pictures"),
+    ("stabilisation", "Stabilisation"),
+    ("tracking", "Tracking"),
+    ("failed", "Failed cells"),
+]
+
+
+def _e(x) -> str:
+    """Escape any text that comes from data."""
+    return html.escape("" if x is None else str(x), quote=True)
+
+
+def _missing(text: str) -> str:
+    return f'<p class="missing">{_e(text)}</p>'
+
+
+# ------------------------------------------------------------------------------ sections
+
+def _provenance_rows(data: RunData) -> list[tuple[str, str]]:
+    run, prov = data.run, data.run.get("provenance") or {}
+    t = data.table
+
+    def first(col):
+        v = t[col].astype(str)
+        v = v[v != ""]
+        return v.iloc[0] if len(v) else ""
+
+    commit = prov.get("git_commit") or first("git_commit")
+    dirty = prov.get("git_dirty")
+    if dirty is None and len(t):
+        dirty = bool(t["git_dirty"].any())
+    versions = prov.get("versions") or {}
+    if isinstance(versions, dict):
+        versions = ", ".join(f"{k} {v}" for k, v in sorted(versions.items()))
+    sweeps = sorted(set(data.table["sweep_param"].astype(str)) - {""})
+    n_cells = data.table["cell_id"].nunique()
+    return [
+        ("Suite", str(run.get("suite") or "(run.json has no suite name)")),
+        ("Scenes", ", ".join(dict.fromkeys(scene_base(s) for s in data.scenes))
+         + f" ({len(data.scenes)} variants)"),
+        ("Swept parameters", ", ".join(sweeps) or "none"),
+        ("Pipelines", ", ".join(data.pipelines)),
+        ("Seeds", ", ".join(str(s) for s in data.seeds)),
+        ("Cells", f"{n_cells} ({n_cells - len(data.failed)} ok, {len(data.failed)} failed)"),
+        ("Git commit", f"{commit}{' (dirty tree)' if dirty else ''}" if commit else "unknown"),
+        ("Config hash", str(run.get("config_hash") or first("config_hash") or "unknown")),
+        ("Versions", str(versions or "not recorded")),
+        ("Renderer", str(prov.get("renderer") or first("renderer") or "unknown")),
+        ("Machine", str(prov.get("machine") or first("machine") or "unknown")),
+        ("Date", f"started {run.get('started') or '?'}, finished {run.get('finished') or '?'}"),
+        ("Run status", str(run.get("status") or "unknown")),
+        ("Aggregation", "Every figure and table pools the results table's totals (sum and count) over "
+                        "frames, tracks, seeds and cells, then reduces them by each metric's rule "
+                        "(mean = sum / count, rms = sqrt(sum / count), rate = 100 sum / count); never an "
+                        "average of averages. Flow metrics: region 'all', motion 'total' unless a table "
+                        "says otherwise; track metrics pool both trackers. Failed cells are left out."),
+    ]
+
+
+def _col_header(c: Column) -> str:
+    unit = f" [{_e(c.unit)}]" if c.unit else ""
+    return (f'<th scope="col" title="{_e(c.direction)}">{_e(c.label)}{unit} {c.arrow}'
+            f"<small>{_e(c.metric)}, {_e(c.direction)}</small></th>")
+
+
+def _metric_table_html(t: MetricTable, *, caption: str = "") -> str:
+    if not t.pipelines:
+        return _missing("No results for these metrics.")
+    head = "".join(_col_header(c) for c in t.columns)
+    body = []
+    for p in t.pipelines:
+        cells = []
+        for c in t.columns:
+            v = t.values.get((p, c.metric), math.nan)
+            if p in t.best.get(c.metric, set()):
+                cells.append(f'<td class="num best" title="best">{format_value(v)} \u2605</td>')
+            else:
+                cells.append(f'<td class="num">{format_value(v)}</td>')
+        body.append(f'<tr><th scope="row">{_e(p)}</th>{"".join(cells)}<td class="num">{_e(t.cells[p])}</td></tr>')
+    cap = f"<caption class=\"note\">{_e(caption)}</caption>" if caption else ""
+    return (f'<div class="scroll"><table class="metrics">{cap}<thead><tr><th scope="col">Pipeline</th>{head}'
+            f'<th scope="col">Cells<small>ok / total</small></th></tr></thead><tbody>{"".join(body)}'
+            "</tbody></table></div>")
+
+
+def _metric_table_md(t: MetricTable) -> str:
+    if not t.pipelines:
+        return "_No results for these metrics._\n"
+    head = ["Pipeline"] + [f"{c.label} [{c.unit}] {c.arrow}" if c.unit else f"{c.label} {c.arrow}"
+                           for c in t.columns] + ["Cells ok/total"]
+    lines = ["| " + " | ".join(_md(h) for h in head) + " |", "|" + "---|" * len(head)]
+    for p in t.pipelines:
+        vals = []
+        for c in t.columns:
+            s = format_value(t.values.get((p, c.metric), math.nan))
+            vals.append(f"**{s}**" if p in t.best.get(c.metric, set()) else s)
+        lines.append("| " + " | ".join([_md(p), *vals, t.cells[p]]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _md(x) -> str:
+    return str(x).replace("|", "\\|").replace("\n", " ")
+
+
+def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> str:
+    out = []
+    if gate is not None:
+        cls = {True: "pass", False: "fail"}.get(gate["passed"], "unknown")
+        word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
+        out.append(f'<div class="verdict {cls}">Gate: {word} ({_e(gate["verdict"])})</div>')
+        if gate["messages"]:
+            out.append("<ul>" + "".join(f"<li>{_e(m)}</li>" for m in gate["messages"]) + "</ul>")
+    else:
+        out.append(_missing("No gate result was given."))
+    if diffs is None:
+        out.append(_missing("No baseline was given: no diff column."))
+    elif note:
+        out.append(_missing(note))
+    if diffs is not None and len(diffs):
+        rows = []
+        for r in diffs.itertuples(index=False):
+            cls = " worse" if r.change == "worse" else (" best" if r.change == "better" else "")
+            pct = "" if not np.isfinite(r.diff_pct) else f" ({r.diff_pct:+.1f} %)"
+            diff = "\u2013" if not np.isfinite(r.diff) else f"{r.diff:+.4g}{pct}"
+            rows.append(f'<tr><th scope="row">{_e(r.pipeline)}</th><td>{_e(r.scene or "all")}</td>'
+                        f"<td>{_e(r.metric)}</td><td>{_e(r.unit)}</td>"
+                        f'<td class="num">{format_value(r.current)}</td><td class="num">{format_value(r.baseline)}</td>'
+                        f'<td class="num{cls}">{_e(diff)}</td><td>{_e(r.change)}</td></tr>')
+        out.append('<div class="scroll"><table><thead><tr><th>Pipeline</th><th>Scene</th><th>Metric</th>'
+                   "<th>Unit</th><th>Current</th><th>Baseline</th><th>Diff (current \u2212 baseline)</th>"
+                   f"<th>Change</th></tr></thead><tbody>{''.join(rows)}</tbody></table></div>")
+    return "".join(out)
+
+
+def _difficulty_html(data: RunData, curves: dict[str, pd.DataFrame], cols: list[Column],
+                     colors: dict[str, str]) -> str:
+    if not curves:
+        return _missing("No parameter was swept in this run: no difficulty curves.")
+    out = ['<p class="note">Each point pools every scene and seed run at that value of the parameter. '
+           "A line that climbs steeply marks where a method breaks.</p>"]
+    for param, agg in curves.items():
+        present = [c for c in cols if c.metric in set(agg["metric"])]
+        if agg["sweep_value"].isna().all() or not present:
+            out.append(_missing(f"{param}: sweep values are not numeric; no curve drawn."))
+            continue
+        metrics = [(c.metric, f"{c.label} [{c.unit}] {c.arrow}" if c.unit else f"{c.label} {c.arrow}")
+                   for c in present]
+        svg = plots.difficulty_curves(agg, param=param, metrics=metrics, colors=colors)
+        out.append(f'<h3>Against {_e(param)}</h3><figure class="plot">{svg}<figcaption>'
+                   f"Pooled value per pipeline at each {_e(param)}; arrows give the better direction."
+                   "</figcaption></figure>")
+    return "".join(out)
+
+
+def _cell_index(data: RunData) -> pd.DataFrame:
+    """One row per ok cell: cell_id, scene, scene_hash, seed, pipeline, sweep."""
+    cols = ["cell_id", "scene", "scene_hash", "seed", "pipeline", "sweep_param", "sweep_value"]
+    return data.ok[cols].drop_duplicates("cell_id").reset_index(drop=True)
+
+
+def _variant_for(data: RunData, cells: pd.DataFrame, base: str, want) -> tuple[pd.DataFrame, Path | None]:
+    """The first variant (scene label, seed) of scene ``base`` whose cells satisfy ``want(cell_dir)``."""
+    sub = cells[cells["scene"].map(scene_base) == base]
+    for (label, seed), g in sub.groupby(["scene", "seed"], sort=False):
+        dirs = [data.run_dir / "cells" / c for c in g["cell_id"]]
+        if any(want(d) for d in dirs):
+            seq = find_sequence_dir(data, scene=label, scene_hash=str(g["scene_hash"].iloc[0]))
+            return g, seq
+    return sub.iloc[:0], None
+
+
+def _img(uri: str, *, cls: str = "", alt: str) -> str:
+    return f'<img class="{cls}" src="{uri}" alt="{_e(alt)}">'
+
+
+def _pictures_html(data: RunData, cells: pd.DataFrame) -> str:
+    out = []
+    for base in dict.fromkeys(cells["scene"].map(scene_base)):
+        g, seq = _variant_for(data, cells, base, lambda d: bool(picture_frames(d)))
+        if g.empty:
+            out.append(f"<h3>{_e(base)}</h3>" + _missing("No cell saved estimated flow for pictures."))
+            continue
+        label = str(g["scene"].iloc[0])
+        order = {p: i for i, p in enumerate(data.pipelines)}
+        g = g.sort_values("pipeline", key=lambda s: s.map(order))
+        frames = sorted(set().union(*(picture_frames(data.run_dir / "cells" / c) for c in g["cell_id"])))
+        for f in frames[:_MAX_PICTURE_FRAMES]:
+            img, truth, valid = read_frame_truth(seq, f) if seq is not None else (None, None, None)
+            ests = {}
+            for r in g.itertuples(index=False):
+                p = data.run_dir / "cells" / r.cell_id / f"flow_{f:06d}.flo"
+                if p.is_file():
+                    ests[r.pipeline] = read_flo(p)
+            if truth is not None and valid is not None and valid.shape != truth.shape[:2]:
+                valid = None
+            max_mag = pictures.row_max_magnitude(truth, list(ests.values()), valid)
+            small = (img.shape[1] if img is not None else next(iter(ests.values())).shape[1]) < 200
+            pix = "pix" if small else ""
+            tiles = []
+            if img is not None:
+                tiles.append(f"<figure>{_img(pictures.png_data_uri(img), cls=pix, alt='frame')}"
+                             f"<figcaption>frame {f}</figcaption></figure>")
+            if truth is not None:
+                tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.flow_row(truth, max_magnitude=max_mag, valid=valid)), cls=pix, alt='ground-truth flow')}"
+                             "<figcaption>ground truth</figcaption></figure>")
+            for pipe, flow in ests.items():
+                tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.flow_row(flow, max_magnitude=max_mag)), cls=pix, alt=pipe + ' flow')}"
+                             f"<figcaption>{_e(pipe)}</figcaption></figure>")
+            tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.wheel_legend()), cls='legend', alt='colour wheel')}"
+                         f"<figcaption>colour wheel: hue = direction (+x right, +y down), full saturation = "
+                         f"{max_mag:.2f} px</figcaption></figure>")
+            where = f"{label}, seed {g['seed'].iloc[0]}, pair {f} \u2192 {f + 1}"
+            out.append(f"<h3>{_e(where)}</h3><div class=\"gallery\">{''.join(tiles)}</div>")
+            if seq is None:
+                out.append(_missing("Sequence folder not found in the cache dir: no frame or ground truth."))
+            if truth is not None and ests:
+                epes = {}
+                for pipe, flow in ests.items():
+                    d = np.hypot(*(flow.astype(np.float64) - truth.astype(np.float64)).transpose(2, 0, 1))
+                    known = np.isfinite(d) & (valid if valid is not None else True)
+                    epes[pipe] = d[known]
+                scale = max([float(np.percentile(v, 99)) for v in epes.values() if v.size] + [1e-3])
+                etiles = []
+                for pipe, flow in ests.items():
+                    rgb, mean = pictures.epe_map(flow, truth, max_epe_px=scale, valid=valid)
+                    etiles.append(f"<figure>{_img(pictures.png_data_uri(rgb), cls=pix, alt=pipe + ' endpoint error')}"
+                                  f"<figcaption>{_e(pipe)}: mean EPE {format_value(mean)} px</figcaption></figure>")
+                bar = _img(pictures.png_data_uri(pictures.epe_colorbar()), cls="bar", alt="EPE colour scale")
+                etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {scale:.2f} px (99th "
+                              "percentile of the row; brighter is worse; black = no ground truth)"
+                              "</figcaption></figure>")
+                out.append(f"<div class=\"gallery\">{''.join(etiles)}</div>")
+        out.append('<p class="note">Flow in the Middlebury colour coding, the same maximum magnitude across '
+                   "the row (the largest true magnitude); estimates beyond it saturate.</p>")
+    return "".join(out) or _missing("No pictures.")
+
+
+def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
+    out = []
+    for base in dict.fromkeys(cells["scene"].map(scene_base)):
+        g, seq = _variant_for(data, cells, base, lambda d: (d / "stabilisation.csv").is_file())
+        if g.empty:
+            out.append(f"<h3>{_e(base)}</h3>" + _missing("No stabilisation data (no stabilisation.csv)."))
+            continue
+        label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
+        stabs = {}
+        for pipe in data.pipelines:
+            r = g[g["pipeline"] == pipe]
+            if len(r):
+                s = read_stabilisation(data.run_dir / "cells" / r["cell_id"].iloc[0], seq)
+                if s is not None:
+                    stabs[pipe] = s
+        if not stabs:
+            out.append(f"<h3>{_e(base)}</h3>" + _missing("stabilisation.csv lacks the cumulative / line columns."))
+            continue
+        thesis = next((p for p in stabs if "thesis" in p), next(iter(stabs)))
+        svg, after = plots.stabilisation_figure(stabs[thesis], title=f"{label}, seed {seed}: {thesis}")
+        cap = ("Top (thesis fig. 3.1): estimated cumulative shift (blue), least-squares flight line (red), "
+               "correction (green). ")
+        cap += ("Bottom (fig. 3.2): after stabilisation, i.e. the true cumulative shift plus the applied "
+                "correction, its refitted line and the difference left." if after else
+                "No true cumulative shift known: the after-stabilisation row is left out.")
+        out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3><figure class=\"plot\">{svg}"
+                   f"<figcaption>{_e(cap)}</figcaption></figure>")
+        jsvg = plots.jitter_figure(stabs, colors=colors, title=f"{label}: estimated vs true jitter")
+        out.append(f"<figure class=\"plot\">{jsvg}<figcaption>Estimated jitter (cumulative shift minus "
+                   "fitted line) per pipeline against the true jitter, detrended by its own least-squares line "
+                   "so both are measured from a straight flight line.</figcaption></figure>")
+    return "".join(out) or _missing("No stabilisation data.")
+
+
+def _table41_html(tr: pd.DataFrame, pipe: str) -> str:
+    """Table 4.1 of the thesis for one track: vertical motion per frame, flow vs Kalman, and errors."""
+    tr = tr.sort_values("frame")
+    dy_raw, dy_k, dy_t = tr["y"].diff(), tr["y_filt"].diff(), tr["y_true"].diff()
+    e_raw = np.hypot(tr["x"] - tr["x_true"], tr["y"] - tr["y_true"])
+    e_k = np.hypot(tr["x_filt"] - tr["x_true"], tr["y_filt"] - tr["y_true"])
+    rows = []
+    for i in range(len(tr)):
+        rows.append(f'<tr><th scope="row">Frame {int(tr["frame"].iloc[i])}</th>'
+                    + "".join(f'<td class="num">{format_value(float(v))}</td>'
+                              for v in (dy_raw.iloc[i], dy_k.iloc[i], dy_t.iloc[i], e_raw.iloc[i], e_k.iloc[i]))
+                    + "</tr>")
+    return ('<div class="scroll"><table><caption class="note">In the style of thesis Table 4.1: '
+            f"{_e(pipe)}, track {_e(tr['track_id'].iloc[0])}; vertical motion per frame [px] from the optical-flow "
+            "track and the Kalman estimate, the true motion, and each position error [px] (lower is better)."
+            "</caption><thead><tr><th>Frame</th><th>Optical flow \u0394y [px]</th><th>Kalman filter \u0394y [px]</th>"
+            "<th>True \u0394y [px]</th><th>Flow position error [px]</th><th>Kalman position error [px]</th>"
+            f"</tr></thead><tbody>{''.join(rows)}</tbody></table></div>")
+
+
+def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
+    out = []
+    for base in dict.fromkeys(cells["scene"].map(scene_base)):
+        g, seq = _variant_for(data, cells, base, lambda d: read_tracks(d) is not None)
+        if g.empty:
+            out.append(f"<h3>{_e(base)}</h3>" + _missing("No tracks in this scene's cells."))
+            continue
+        label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
+        tracks = {}
+        for pipe in data.pipelines:
+            r = g[g["pipeline"] == pipe]
+            if len(r):
+                t = read_tracks(data.run_dir / "cells" / r["cell_id"].iloc[0])
+                if t is not None:
+                    tracks[pipe] = t
+        first = int(min(t["frame"].min() for t in tracks.values()))
+        frame = read_frame_truth(seq, first)[0] if seq is not None else None
+        out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
+        svg = plots.tracking_figure(frame, tracks, title=f"trajectories over frame {first}")
+        out.append(f'<figure class="plot">{svg}<figcaption>Ground truth (black on white), the raw optical-flow '
+                   "track (orange, dashed) and the Kalman track (blue) per pipeline."
+                   + ("" if frame is not None else " Sequence frame not found: drawn without the image.")
+                   + "</figcaption></figure>")
+        have_truth = all(t[["x_true", "y_true"]].notna().any().all() for t in tracks.values())
+        if have_truth:
+            errs = {}
+            for pipe, t in tracks.items():
+                e = pd.DataFrame({"frame": t["frame"],
+                                  "err_raw": np.hypot(t["x"] - t["x_true"], t["y"] - t["y_true"]),
+                                  "err_kalman": np.hypot(t["x_filt"] - t["x_true"], t["y_filt"] - t["y_true"])})
+                errs[pipe] = e.groupby("frame", as_index=False).mean()
+            esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error")
+            out.append(f'<figure class="plot">{esvg}<figcaption>Position error per frame, mean over the '
+                       "pipeline's tracks.</figcaption></figure>")
+            thesis = next((p for p in tracks if "thesis" in p), next(iter(tracks)))
+            t = tracks[thesis]
+            tid = sorted(t["track_id"].unique())[0]
+            out.append(_table41_html(t[t["track_id"] == tid], thesis))
+        else:
+            out.append(_missing("tracks.csv has no ground-truth columns: no position errors."))
+    return "".join(out) or _missing("No tracks.")
+
+
+def _failed_html(data: RunData) -> str:
+    if data.failed.empty:
+        return "<p>No cell failed.</p>"
+    rows = []
+    for r in data.failed.itertuples(index=False):
+        tb = f"<details><summary>traceback</summary><pre>{_e(r.traceback)}</pre></details>" if r.traceback else ""
+        rows.append(f'<tr><th scope="row">{_e(r.cell_id)}</th><td>{_e(r.scene)}</td><td>{_e(r.seed)}</td>'
+                    f"<td>{_e(r.pipeline)}</td><td>{_e(r.status)}</td><td>{_e(r.error)}{tb}</td></tr>")
+    return (f"<p>{len(data.failed)} cell(s) failed; their rows are left out of every aggregate.</p>"
+            '<div class="scroll"><table class="failed"><thead><tr><th>Cell</th><th>Scene</th><th>Seed</th>'
+            f"<th>Pipeline</th><th>Status</th><th>Error</th></tr></thead><tbody>{''.join(rows)}</tbody>"
+            "</table></div>")
+
+
+# ------------------------------------------------------------------------------ assembly
+
+def build_report(run_dir: str | os.PathLike, *, baseline=None, gate_result=None) -> tuple[str, str]:
+    """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`)."""
+    data = load_run(run_dir)
+    colors = plots.pipeline_colors(data.pipelines)
+    cols = headline_columns(data)
+    all_cols = headline_columns(data, include_others=True)
+    cells = _cell_index(data)
+    gate = gate_view(gate_result)
+    diffs, note = (baseline_diffs(data, baseline) if baseline is not None else (None, ""))
+    head_t = metric_table(data, data.ok, cols)
+    scene_ts = {s: metric_table(data, rows, cols) for s, rows in per_scene_rows(data).items()}
+    curves = sweep_curves(data)
+    title = f"aerobench report: {data.run.get('suite') or Path(run_dir).name}"
+
+    sec: dict[str, str] = {}
+    sec["provenance"] = ('<div class="scroll"><table class="meta"><tbody>'
+                         + "".join(f'<tr><th scope="row">{_e(k)}</th><td>{_e(v)}</td></tr>'
+                                   for k, v in _provenance_rows(data))
+                         + "</tbody></table></div>")
+    sec["verdict"] = _verdict_html(gate, diffs, note)
+    sec["headline"] = (
+        '<p class="note">Pipelines side by side, pooled over every scene, sweep value and seed. '
+        "\u2193 lower is better, \u2191 higher is better; the best value per column is shaded and starred "
+        "(\u2605).</p>" + (_metric_table_html(head_t) if cols else _missing("None of the headline metrics is in "
+                                                                          "the results table.")))
+    sec["per-scene"] = "".join(f"<h3>{_e(s)}</h3>{_metric_table_html(t)}" for s, t in scene_ts.items()) \
+        or _missing("No scenes.")
+    region_parts = []
+    for c in cols[:2]:
+        wide = region_table(data, c.metric)
+        if wide.shape[1] > 1:
+            head = "".join(f"<th>{_e(w)}</th>" for w in wide.columns)
+            body = "".join(f'<tr><th scope="row">{_e(p)}</th>'
+                           + "".join(f'<td class="num">{format_value(float(v))}</td>' for v in row)
+                           + "</tr>" for p, row in wide.iterrows())
+            region_parts.append(f"<h3>{_e(c.label)} [{_e(c.unit)}] {c.arrow} by region / motion</h3>"
+                                f'<div class="scroll"><table><thead><tr><th>Pipeline</th>{head}</tr></thead>'
+                                f"<tbody>{body}</tbody></table></div>")
+    sec["regions"] = ("".join(region_parts) + '<p class="note">Regions: all valid pixels, background, '
+                      "vehicles, interior (away from boundaries). Motion total scores the whole flow; local "
+                      "scores the flow left after the global motion.</p>") if region_parts else \
+        _missing("The table has no region or motion breakdown.")
+    sec["all-metrics"] = _metric_table_html(metric_table(data, data.ok, all_cols))
+    sec["difficulty"] = _difficulty_html(data, curves, cols, colors)
+    sec["pictures"] = _pictures_html(data, cells) if len(cells) else _missing("No completed cells.")
+    sec["stabilisation"] = _stabilisation_html(data, cells, colors) if len(cells) else _missing("No completed cells.")
+    sec["tracking"] = _tracking_html(data, cells, colors) if len(cells) else _missing("No completed cells.")
+    sec["failed"] = _failed_html(data)
+
+    nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
+    body = "".join(f'<section id="{k}"><h2>{_e(v)}</h2>{sec[k]}</section>' for k, v in _SECTIONS)
+    html_text = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+                 '<meta name="viewport" content="width=device-width, initial-scale=1">'
+                 f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>"
+                 f"<h1>{_e(title)}</h1><nav><ul>{nav}</ul></nav>{body}</main></body></html>\n")
+
+    md = [f"# {_md(title)}", ""]
+    md += [f"- **{_md(k)}**: {_md(v)}" for k, v in _provenance_rows(data)] + [""]
+    if gate is not None:
+        word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
+        md += [f"## Gate: {word} ({_md(gate['verdict'])})", ""] + [f"- {_md(m)}" for m in gate["messages"]] + [""]
+    if diffs is not None:
+        md += ["## Against the baseline", ""]
+        if note:
+            md += [f"_{_md(note)}_", ""]
+        if len(diffs):
+            md += ["| Pipeline | Scene | Metric | Current | Baseline | Diff | Change |", "|---|---|---|---|---|---|---|"]
+            for r in diffs.itertuples(index=False):
+                d = "\u2013" if not np.isfinite(r.diff) else f"{r.diff:+.4g}" + (
+                    f" ({r.diff_pct:+.1f} %)" if np.isfinite(r.diff_pct) else "")
+                md.append(f"| {_md(r.pipeline)} | {_md(r.scene or 'all')} | {_md(r.metric)} | "
+                          f"{format_value(r.current)} | {format_value(r.baseline)} | {d} | {r.change} |")
+            md.append("")
+    md += ["## Headline", "", "Pooled over every scene, sweep value and seed; best value in bold; "
+           "\u2193 lower is better, \u2191 higher is better.", "", _metric_table_md(head_t)]
+    md += ["## Per scene", ""]
+    for s, t in scene_ts.items():
+        md += [f"### {_md(s)}", "", _metric_table_md(t)]
+    if curves and cols:
+        md += ["## Difficulty", ""]
+        c = cols[0]
+        for param, agg in curves.items():
+            sub = agg[agg["metric"] == c.metric]
+            if sub.empty:
+                continue
+            xs = sorted(sub["sweep_value"].dropna().unique())
+            md += [f"{c.label} [{c.unit}] {c.arrow} against {_md(param)}:", "",
+                   "| Pipeline | " + " | ".join(f"{x:g}" for x in xs) + " |", "|---|" + "---|" * len(xs)]
+            for p in data.pipelines:
+                vals = {float(r.sweep_value): r.value for r in sub[sub["pipeline"] == p].itertuples()}
+                if vals:
+                    md.append(f"| {_md(p)} | " + " | ".join(format_value(vals.get(x, math.nan)) for x in xs) + " |")
+            md.append("")
+    else:
+        md += ["## Difficulty", "", "_No parameter was swept in this run._", ""]
+    md += ["## Failed cells", ""]
+    if data.failed.empty:
+        md += ["No cell failed.", ""]
+    else:
+        md += [f"- `{_md(r.cell_id)}` ({_md(r.pipeline)}): {_md(r.error)}" for r in data.failed.itertuples()] + [""]
+    md += ["Figures (difficulty curves, flow pictures, stabilisation, tracking): see report.html.", ""]
+    return html_text, "\n".join(md)
+
+
+def write_report(run_dir: str | os.PathLike, *, baseline=None, gate_result=None,
+                 out_dir: str | os.PathLike | None = None) -> dict[str, Path]:
+    """Write ``report.html`` and ``report.md`` for the run folder ``run_dir``.
+
+    Parameters
+    ----------
+    run_dir : path
+        A run folder (run.json, results.parquet, cells/).
+    baseline : dict, list or path, optional
+        A loaded baseline JSON (or its path); diffs against the current pooled
+        values are computed here (see :func:`reports.tables.baseline_records`).
+    gate_result : mapping or object, optional
+        A gate result (``passed`` / ``verdict`` / ``failures``); shown, not recomputed.
+    out_dir : path, optional
+        Where to write; default ``run_dir``.
+
+    Returns
+    -------
+    dict
+        ``{"html": Path, "md": Path}``.
+    """
+    html_text, md_text = build_report(run_dir, baseline=baseline, gate_result=gate_result)
+    out = Path(out_dir) if out_dir is not None else Path(run_dir)
+    paths = {"html": out / "report.html", "md": out / "report.md"}
+    atomic_write_bytes(paths["html"], html_text.encode("utf-8"))
+    atomic_write_bytes(paths["md"], md_text.encode("utf-8"))
+    return paths
