@@ -278,3 +278,19 @@ def test_thesis_lk_on_the_synthetic_sequence():
         # found where it is, within 3 px: LK's 15x15 window spreads its motion up to 7 px around
         assert any(abs(x - sx) < 3 and abs(y - sy) < 3 for x, y, _ in e.detections), e.detections
         np.testing.assert_allclose(e.flow_local[int(sy), int(sx)], (1.0, -1.0), atol=0.3)
+
+
+@pytest.mark.parametrize("name", sorted(PIPELINES))
+def test_every_builtin_pipeline_runs_end_to_end(name):
+    frames = Frames(4, seed=3, step=(1, -1), sq=10)
+    d = get_pipeline(name).to_dict()
+    d["global_motion"]["params"]["max_shift"] = 8
+    pairs, seq = _run(Pipeline.from_dict(d), frames, seeds=[(1, 34.5, 64.5)])
+    # integer or parabola-refined NCC peak on integer shifts: within a tenth of a pixel
+    np.testing.assert_allclose(seq.shifts_px, np.diff(frames.content_path, axis=0), atol=0.1)
+    for e in pairs:
+        assert np.isfinite(e.flow_total).all() and e.valid.mean() > 0.5
+        np.testing.assert_allclose(e.flow_total - e.flow_global, e.flow_local, atol=1e-4)  # shift model
+    point = seq.tracks[seq.tracks.source == "point"]
+    assert list(point.frame) == [0, 1, 2, 3]
+    assert seq.pipeline == name and seq.pipeline_hash == Pipeline.from_dict(d).hash != get_pipeline(name).hash
