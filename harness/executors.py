@@ -23,7 +23,7 @@ from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from contextlib import contextmanager
 
-__all__ = ["EXECUTORS", "ExecutorError", "default_workers", "open_executor"]
+__all__ = ["EXECUTORS", "ExecutorError", "check_executor", "default_workers", "open_executor"]
 
 EXECUTORS = ("process", "dask", "dask-local")
 
@@ -50,6 +50,23 @@ def _import_distributed():
     return distributed
 
 
+def check_executor(kind: str, *, workers: int | None = None, scheduler: str | None = None) -> None:
+    """Raise :class:`ExecutorError` now if :func:`open_executor` would refuse these arguments.
+
+    The runner calls this before it writes anything, so a bad request leaves no run folder.
+    """
+    if kind not in EXECUTORS:
+        raise ExecutorError(f"unknown executor {kind!r}; valid: {', '.join(EXECUTORS)}")
+    if workers is not None and workers < 1:
+        raise ExecutorError(f"workers: expected a positive number, got {workers}")
+    if scheduler is not None and kind != "dask":
+        raise ExecutorError(f"--scheduler is for the dask executor, not {kind!r}")
+    if kind == "dask" and not scheduler:
+        raise ExecutorError("the dask executor needs a scheduler address (--scheduler tcp://HOST:8786)")
+    if kind in ("dask", "dask-local"):
+        _import_distributed()
+
+
 @contextmanager
 def open_executor(
     kind: str = "process", *, workers: int | None = None, scheduler: str | None = None
@@ -65,12 +82,7 @@ def open_executor(
     scheduler : str, optional
         Scheduler address; required for ``dask``, refused for the others.
     """
-    if kind not in EXECUTORS:
-        raise ExecutorError(f"unknown executor {kind!r}; valid: {', '.join(EXECUTORS)}")
-    if workers is not None and workers < 1:
-        raise ExecutorError(f"workers: expected a positive number, got {workers}")
-    if scheduler is not None and kind != "dask":
-        raise ExecutorError(f"--scheduler is for the dask executor, not {kind!r}")
+    check_executor(kind, workers=workers, scheduler=scheduler)
     n = workers or default_workers()
 
     if kind == "process":
@@ -83,8 +95,6 @@ def open_executor(
 
     distributed = _import_distributed()
     if kind == "dask":
-        if not scheduler:
-            raise ExecutorError("the dask executor needs a scheduler address (--scheduler tcp://HOST:8786)")
         try:
             client = distributed.Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:

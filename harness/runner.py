@@ -101,33 +101,18 @@ def _import_plugins(modules: Iterable[str]) -> None:
 def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = ()) -> dict:
     """Render one scene variant into the cache (or find it there); returns where and whether reused."""
     _prepare_worker()
-    t0, started_s = time.perf_counter(), time.time()
+    t0 = time.perf_counter()
     try:
         _import_plugins(imports)
-        from scenes import cached_sequence
+        from scenes import cached_sequence_result
 
-        result = cached_sequence(spec, cache_dir)
+        result = cached_sequence_result(spec, cache_dir)
     except Exception as exc:  # the cells of this scene are recorded as failed, the run goes on
         return {"key": variant_key, "path": None, "reused": False,
                 "error": f"rendering failed: {type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
-    path, reused = _unpack_cached(result, started_s)
-    return {"key": variant_key, "path": str(path), "reused": reused, "error": None,
+    return {"key": variant_key, "path": str(result.path), "reused": not result.rendered, "error": None,
             "render_s": time.perf_counter() - t0}
-
-
-def _unpack_cached(result: Any, started_s: float) -> tuple[Path, bool]:
-    """The sequence folder ``cached_sequence`` returned, and whether it was there before ``started_s``.
-
-    A sequence folder is complete when its MANIFEST.json is written (last); one
-    written before this task started was reused from the cache.
-    """
-    path = Path(result[0] if isinstance(result, tuple) else result)
-    try:
-        reused = (path / "MANIFEST.json").stat().st_mtime < started_s
-    except OSError:
-        reused = False
-    return path, reused
 
 
 class _Frames:
@@ -462,7 +447,7 @@ def run_suite(
     harness.executors.ExecutorError
         the executor cannot be made (dask missing, scheduler unreachable).
     """
-    from harness.executors import EXECUTORS, ExecutorError, open_executor
+    from harness.executors import check_executor
     from harness.provenance import collect as collect_provenance
     from harness.provenance import config_hash
 
@@ -471,8 +456,7 @@ def run_suite(
     source = str(suite) if not isinstance(suite, Suite) else suite.name
     if not isinstance(suite, Suite):
         suite = load_suite(suite)
-    if executor not in EXECUTORS:
-        raise ExecutorError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
+    check_executor(executor, workers=workers, scheduler=scheduler)
     cells = expand(suite, source=source)  # validates everything before a file is written
     suite_dict = suite.model_dump(mode="json")
     suite_hash = config_hash(suite_dict)
@@ -596,7 +580,7 @@ def _execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, s
                             payload["render_error"] = result["error"]
                             payload["render_traceback"] = result.get("traceback", "")
                         pending[pool.submit(cell_task, payload)] = ("cell", c.cell_id)
-                elif result["status"] != "ok":
-                    bar.write(f"cell {key} failed: {result['error']}")
+                elif result["status"] != "ok" and progress:
+                    bar.write(f"cell {key} failed: {result['error']}", file=sys.stderr)
     bar.close()
     return rendered, reused, failed

@@ -198,9 +198,12 @@ def _pipeline_dict(entry: Any) -> dict:
 
 
 def _deep_merge(base: dict, top: Mapping) -> dict:
+    """``top`` over ``base``, mapping by mapping; a section naming another ``method`` replaces the base's
+    (its parameters belong to the old method)."""
     out = copy.deepcopy(base)
     for k, v in top.items():
-        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+        same_method = not (isinstance(v, Mapping) and "method" in v and v["method"] != out.get(k, {}).get("method"))
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) and same_method:
             out[k] = _deep_merge(dict(out[k]), v)
         else:
             out[k] = copy.deepcopy(v)
