@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from algorithms.jitter import fit_flight_path
+from algorithms.jitter import fit_flight_path, remove_jitter
 from algorithms.pipeline import _compensate, _compose
 from algorithms.pipeline import PIPELINES, PairEstimate, Pipeline, PipelineError, SequenceEstimate, get_pipeline
 from algorithms.registry import FLOW_METHODS, register_flow
@@ -294,3 +294,17 @@ def test_every_builtin_pipeline_runs_end_to_end(name):
     point = seq.tracks[seq.tracks.source == "point"]
     assert list(point.frame) == [0, 1, 2, 3]
     assert seq.pipeline == name and seq.pipeline_hash == Pipeline.from_dict(d).hash != get_pipeline(name).hash
+
+
+def test_jitter_iterations_remeasure_the_corrected_frames_and_two_frames_suffice():
+    frames = Frames(8, seed=2)
+    d = dict(BASE, jitter={"model": "line", "iterations": 2}, tracking={"point": False, "multi": None})
+    _, seq = _run(Pipeline.from_dict(d), frames)
+    assert frames.reads == 3 * 8  # pass 1, one re-measuring round, pass 2
+    one = remove_jitter(seq.shifts_px)
+    # the integer NCC of the corrected frames sees at most the rounding of the first correction
+    assert np.abs(seq.correction_px - one.correction_px).max() <= 1.0
+    corrected = seq.cumulative_px + seq.correction_px
+    assert np.abs(corrected - fit_flight_path(corrected)).max() <= np.abs(one.jitter_px).max()
+    pairs, seq2 = _run(Pipeline.from_dict(BASE), Frames(2))
+    assert len(pairs) == 1 and seq2.cumulative_px.shape == (2, 2)
