@@ -146,7 +146,7 @@ def describe_metrics(pattern: str = "*") -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["metric", "unit", "better", "kind", "weighting", "description"])
 
 
-_PIX = "per valid pixel, pooled over frames"
+_PIX = "per ground-truth-valid pixel (dense: the method's own valid mask does not exclude any), pooled over frames"
 register_metric("epe_mean", "px", higher_is_better=False, weighting=_PIX,
                 description="mean endpoint error |w_est - w_true|")
 register_metric("epe_rms", "px", higher_is_better=False, weighting=_PIX, reduce="rms",
@@ -164,7 +164,7 @@ register_metric("fl_all", "%", higher_is_better=False, weighting=_PIX, reduce="r
                 description="KITTI Fl: share of pixels with EPE > 3 px and > 5 % of the true magnitude")
 register_metric("coverage", "%", higher_is_better=True, weighting="per ground-truth-valid pixel, pooled",
                 reduce="rate", description="share of ground-truth-valid pixels the method marks valid "
-                "(the other flow metrics count only those)")
+                "(the flow errors still score every ground-truth-valid pixel)")
 register_metric("shift_error", "px", higher_is_better=False, weighting="per frame pair, mean over pairs",
                 description="|estimated global shift - true global shift| (camera.csv global_dx/dy_px)")
 register_metric("jitter_residual_rms", "px", higher_is_better=False, weighting="per frame, RMS over frames",
@@ -360,22 +360,23 @@ def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarr
                boundary_px: int = 3) -> list[dict]:
     """Flow rows of one field in every region, plus ``coverage``.
 
-    Scored pixels: valid in the truth (and finite there), valid in the estimate
-    (``valid_est``, default all) and finite in the estimate. Regions are built
-    from the truth's validity and instances (:func:`region_masks`).
+    Scored pixels: every pixel valid (and finite) in the truth, whatever the
+    method's own ``valid_est`` says, so that a method cannot improve its errors
+    by declining hard pixels (Middlebury and KITTI score dense fields the same
+    way); ``valid_est`` only feeds ``coverage``. A non-finite estimate is an
+    error, not a pixel to skip. Regions are built from the truth's validity and
+    instances (:func:`region_masks`).
     """
     t = check_flow(flow_true, name="flow_true", allow_nan=True)
-    e = check_flow(flow_est, name="flow_est", shape=t.shape[:2], allow_nan=True)
+    e = check_flow(flow_est, name="flow_est", shape=t.shape[:2])
     vt = np.asarray(valid_true, bool)
     if vt.shape != t.shape[:2]:
         raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt.shape}")
     vt = vt & np.isfinite(t).all(-1)
-    ve = np.isfinite(e).all(-1)
-    if valid_est is not None:
-        ve &= np.asarray(valid_est, bool)
+    ve = np.ones(vt.shape, bool) if valid_est is None else np.asarray(valid_est, bool)
     masks = region_masks(vt, instances, boundary_px=boundary_px, regions=regions)
     # per-pixel errors once for the whole field, then indexed per region
-    scored = vt & ve
+    scored = vt
     e64, t64 = e[scored].astype(np.float64), t[scored].astype(np.float64)
     epe = np.hypot(e64[:, 0] - t64[:, 0], e64[:, 1] - t64[:, 1])
     ae = angular_error_deg(e64, t64)

@@ -114,16 +114,29 @@ def test_total_and_local_motion_separate_a_stabilisation_error():
     assert all(r["frame"] == 3 for r in rows)
 
 
-def test_estimate_invalid_pixels_lower_coverage_not_error():
+def test_declined_pixels_lower_coverage_and_are_still_scored():
     truth = _pair()
     ft = truth.flow.copy()
-    ft[0, :] = np.nan                   # the method gives up on the first row
+    ft[0, :] = 0.0                      # the method gives up on the first row: zero flow there
     ve = np.ones(truth.valid.shape, bool)
     ve[0, :] = False
     est = SimpleNamespace(flow_total=ft, flow_global=truth.flow_camera, valid=ve, stage_ms={})
     rows = M.score_pair(est, truth, frame=0)
-    assert _by(rows, "epe_mean")["value"] == 0.0
+    row = _by(rows, "epe_mean")
+    declined = truth.valid[0, :] & np.isfinite(truth.flow[0, :]).all(-1)
+    expected = np.hypot(truth.flow[0, declined, 0], truth.flow[0, declined, 1]).sum() / row["count"]
+    assert row["count"] == int(truth.valid.sum())  # dense: every truth-valid pixel counts
+    assert row["value"] == pytest.approx(expected) and row["value"] > 0
     assert _by(rows, "coverage")["value"] == pytest.approx(100 * 11 / 12)
+
+
+def test_a_nan_estimate_is_an_error_not_a_skipped_pixel():
+    truth = _pair()
+    ft = truth.flow.copy()
+    ft[0, 0] = np.nan
+    est = SimpleNamespace(flow_total=ft, flow_global=truth.flow_camera, valid=truth.valid, stage_ms={})
+    with pytest.raises(ValueError, match="flow_est: 2 value"):
+        M.score_pair(est, truth, frame=0)
 
 
 def test_wrong_flow_layout_is_rejected():
