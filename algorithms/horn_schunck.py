@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
-from algorithms.pyramid import coarse_to_fine, target_inside
+from algorithms.pyramid import coarse_to_fine
 from algorithms.registry import register_flow
 
 __all__ = ["horn_schunck", "hs_derivatives", "hs_iterate", "cube_to_pixels", "pixels_to_cube"]
@@ -139,29 +139,75 @@ def pixels_to_cube(a: np.ndarray) -> np.ndarray:
     return 0.25 * (a[:-1, :-1] + a[:-1, 1:] + a[1:, :-1] + a[1:, 1:])
 
 
-def _hs_on_cube(f0: np.ndarray, f1: np.ndarray, flow: np.ndarray, *, alpha: float, iterations: int,
-                tol: float | None, inside: np.ndarray | None = None) -> np.ndarray:
-    """HS from the initial pixel-centred ``flow``: frame t+1 is already warped back by it.
+@numba.njit(cache=True)
+def _hs_linearise(Ex, Ey, Et, flow, inside, use_inside, u, v) -> None:
+    """Start (u, v) on the cube grid from the pixel-centred ``flow`` and linearise Et about it, in place.
+
+    ``u, v = pixels_to_cube(flow)``; ``Et <- Et - Ex u - Ey v``; where a cube
+    corner lies outside frame t+1 (``use_inside`` and ``inside`` False) the
+    data term is dropped: Ex = Ey = Et = 0.
+    """
+    h, w = Ex.shape
+    zero = np.float32(0.0)
+    for i in range(h):
+        for j in range(w):
+            u0 = np.float32(0.25) * (flow[i, j, 0] + flow[i, j + 1, 0] + flow[i + 1, j, 0] + flow[i + 1, j + 1, 0])
+            v0 = np.float32(0.25) * (flow[i, j, 1] + flow[i, j + 1, 1] + flow[i + 1, j, 1] + flow[i + 1, j + 1, 1])
+            u[i, j] = u0
+            v[i, j] = v0
+            if use_inside and not (inside[i, j] and inside[i, j + 1] and inside[i + 1, j] and inside[i + 1, j + 1]):
+                Ex[i, j] = zero
+                Ey[i, j] = zero
+                Et[i, j] = zero
+            else:
+                Et[i, j] = Et[i, j] - Ex[i, j] * u0 - Ey[i, j] * v0
+
+
+@numba.njit(cache=True)
+def _cube_flow_to_pixels(u, v, flow, valid) -> None:
+    """:func:`cube_to_pixels` of ``u`` and ``v`` into ``flow`` ``(h + 1, w + 1, 2)``, and ``valid``:
+    where ``x + flow`` lies inside the frame (:func:`algorithms.pyramid.target_inside`)."""
+    h, w = u.shape
+    H, W = h + 1, w + 1
+    q = np.float32(0.25)
+    zero = np.float32(0.0)
+    for i in range(H):
+        i0 = max(i - 1, 0)
+        i1 = min(i, h - 1)
+        for j in range(W):
+            j0 = max(j - 1, 0)
+            j1 = min(j, w - 1)
+            a = q * (u[i0, j0] + u[i0, j1] + u[i1, j0] + u[i1, j1])
+            b = q * (v[i0, j0] + v[i0, j1] + v[i1, j0] + v[i1, j1])
+            flow[i, j, 0] = a
+            flow[i, j, 1] = b
+            x = np.float32(j) + a
+            y = np.float32(i) + b
+            valid[i, j] = x >= zero and x <= np.float32(W - 1) and y >= zero and y <= np.float32(H - 1)
+
+
+def _hs_on_cube(f0: np.ndarray, f1: np.ndarray, flow: np.ndarray | None, *, alpha: float, iterations: int,
+                tol: float | None, inside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """HS from the initial pixel-centred ``flow`` (None: zero): frame t+1 is already warped back by it.
 
     The constraint is linearised about ``flow`` (u0, v0) and the smoothness acts
     on the total flow: with Et' = Et - Ex u0 - Ey v0, eqs. 2.21-2.22 iterate the
     total (u, v) unchanged. Cubes with a corner that the warp sampled outside
     frame t+1 (``inside`` False) carry no data term: smoothness fills them in.
+    Returns the pixel-centred flow and where ``x + flow`` lies inside the frame.
     """
     Ex, Ey, Et = hs_derivatives(np.ascontiguousarray(f0, np.float32), np.ascontiguousarray(f1, np.float32))
-    u = np.ascontiguousarray(pixels_to_cube(flow[..., 0]), dtype=np.float32)
-    v = np.ascontiguousarray(pixels_to_cube(flow[..., 1]), dtype=np.float32)
-    Et = (Et - Ex * u - Ey * v).astype(np.float32)
-    if inside is not None and not inside.all():
-        outside = pixels_to_cube(inside.astype(np.float32)) < 1.0
-        Ex[outside] = 0.0
-        Ey[outside] = 0.0
-        Et[outside] = 0.0
+    u = np.zeros(Ex.shape, dtype=np.float32)
+    v = np.zeros(Ex.shape, dtype=np.float32)
+    if flow is not None:
+        use_inside = inside is not None and not inside.all()
+        mask = inside if use_inside else np.ones((1, 1), dtype=np.bool_)
+        _hs_linearise(Ex, Ey, Et, np.ascontiguousarray(flow, dtype=np.float32), mask, use_inside, u, v)
     hs_iterate(Ex, Ey, Et, u, v, float(alpha), int(iterations), float(tol or 0.0))
     out = np.empty(f0.shape + (2,), dtype=FLOW_DTYPE)
-    out[..., 0] = cube_to_pixels(u)
-    out[..., 1] = cube_to_pixels(v)
-    return out
+    valid = np.empty(f0.shape, dtype=np.bool_)
+    _cube_flow_to_pixels(u, v, out, valid)
+    return out, valid
 
 
 @register_flow
@@ -221,12 +267,10 @@ def horn_schunck(frame0: np.ndarray, frame1: np.ndarray, *, alpha: float = 15.0,
 
     def update(f0: np.ndarray, f1w: np.ndarray, flow: np.ndarray,
                inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return _hs_on_cube(f0, f1w, flow, alpha=alpha, iterations=iterations, tol=tol, inside=inside), inside
+        return _hs_on_cube(f0, f1w, flow, alpha=alpha, iterations=iterations, tol=tol, inside=inside)[0], inside
 
     if levels == 1 and warps == 1:
-        flow = _hs_on_cube(g0, g1, np.zeros(g0.shape + (2,), FLOW_DTYPE), alpha=alpha,
-                           iterations=iterations, tol=tol)
-        valid = target_inside(flow)
+        flow, valid = _hs_on_cube(g0, g1, None, alpha=alpha, iterations=iterations, tol=tol)
     else:
         flow, valid = coarse_to_fine(g0, g1, update, levels=levels, warps=warps, scale=scale,
                                      median_px=median_px)
