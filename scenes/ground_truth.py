@@ -68,6 +68,7 @@ class FrameSurface:
     instances : (H, W) uint16, vehicle id (0 = static world)
     R, C : camera-to-world rotation (3, 3) and centre (3,)
     vehicle_M : list of (4, 4) vehicle-to-world matrices at this frame
+    vehicle_pixels : list of (vehicle id, rows, cols) of the pixels showing each vehicle
     """
 
     depth: np.ndarray
@@ -76,6 +77,7 @@ class FrameSurface:
     R: np.ndarray
     C: np.ndarray
     vehicle_M: list
+    vehicle_pixels: list
 
 
 class GroundTruth:
@@ -96,8 +98,8 @@ class GroundTruth:
         ys = np.arange(self.h, dtype=np.float64)
         self.xn = (xs - self.cx) / self.fx  # (W,) ray x per column
         self.yn = (ys - self.cy) / self.fy  # (H,) ray y per row
-        self.px_x = np.broadcast_to(xs[None, :], (self.h, self.w))
-        self.px_y = np.broadcast_to(ys[:, None], (self.h, self.w))
+        self.xn32, self.yn32 = self.xn.astype(np.float32), self.yn.astype(np.float32)
+        self.xs32, self.ys32 = xs.astype(np.float32), ys.astype(np.float32)
         self.vehicle_boxes = vehicle_boxes
         corners = []
         for boxes in vehicle_boxes:
@@ -113,8 +115,8 @@ class GroundTruth:
 
     # -- per frame ----------------------------------------------------------------------
     def _affine_field(self, a: float, b: float, c: float) -> np.ndarray:
-        """``a xn + b yn + c`` over the image, (H, W) float64 (a ray component is affine in pixels)."""
-        return (a * self.xn)[None, :] + (b * self.yn)[:, None] + c
+        """``a xn + b yn + c`` over the image, (H, W) float32 (a ray component is affine in pixels)."""
+        return (np.float32(a) * self.xn32)[None, :] + (np.float32(b) * self.yn32 + np.float32(c))[:, None]
 
     def vehicle_bboxes(self, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> list:
         """Projected bbox (x0, y0, x1, y1) and centre (x, y) per vehicle, NaN when behind the camera."""
@@ -132,17 +134,19 @@ class GroundTruth:
 
     def surface(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> FrameSurface:
         """Classify the pixels of a rendered frame and give each its exact depth."""
-        D = depth.astype(np.float64)
+        D = np.asarray(depth, np.float32)
         # ground z = 0: Z = C_z / (g . d) with g = R^T (0, 0, -1) the world's down in camera axes
         g = -R[2, :]
         gd = self._affine_field(g[0], g[1], g[2])
-        with np.errstate(divide="ignore"):
-            Zg = np.where(gd > 0, C[2] / gd, np.inf)
-        tol = SURFACE_TOL_REL * D + SURFACE_TOL_ABS_M
+        Zg = np.full_like(gd, np.inf)
+        np.divide(np.float32(C[2]), gd, out=Zg, where=gd > 0)
+        tol = D * np.float32(SURFACE_TOL_REL)
+        tol += np.float32(SURFACE_TOL_ABS_M)
         Z = np.where(np.abs(D - Zg) <= tol, Zg, D)
         Z[D <= 0] = np.inf
         instances = np.zeros((self.h, self.w), np.uint16)
-        best_err = np.full((self.h, self.w), np.inf)
+        best_err = np.full((self.h, self.w), np.inf, np.float32)
+        windows = []
         for vid, ((bbox, _), boxes, M) in enumerate(
                 zip(self.vehicle_bboxes(R, C, vehicle_M), self.vehicle_boxes, vehicle_M), start=1):
             x0, y0, x1, y1 = bbox
@@ -152,14 +156,23 @@ class GroundTruth:
             r0, r1 = max(0, int(np.floor(y0))), min(self.h, int(np.ceil(y1)) + 1)
             if c0 >= c1 or r0 >= r1:
                 continue
-            Zv = self._ray_boxes(R, C, M, boxes, r0, r1, c0, c1)
+            Zv = self._ray_boxes(R, C, M, boxes, r0, r1, c0, c1).astype(np.float32)
             Dw = D[r0:r1, c0:c1]
             err = np.abs(Dw - Zv)
-            hit = (err <= SURFACE_TOL_REL * Dw + SURFACE_TOL_ABS_M) & (Dw > 0) & (err < best_err[r0:r1, c0:c1])
+            # where two vehicles claim a pixel, the one whose surface agrees better with the render wins
+            hit = ((err <= SURFACE_TOL_REL * Dw + SURFACE_TOL_ABS_M) & (Dw > 0)
+                   & (err < best_err[r0:r1, c0:c1]))
             instances[r0:r1, c0:c1][hit] = vid
             Z[r0:r1, c0:c1][hit] = Zv[hit]
             best_err[r0:r1, c0:c1][hit] = err[hit]
-        return FrameSurface(depth=depth, Z=Z, instances=instances, R=R, C=C, vehicle_M=vehicle_M)
+            windows.append((vid, r0, r1, c0, c1))
+        pixels = []
+        for vid, r0, r1, c0, c1 in windows:
+            rows, cols = np.nonzero(instances[r0:r1, c0:c1] == vid)
+            if rows.size:
+                pixels.append((vid, rows + r0, cols + c0))
+        return FrameSurface(depth=D, Z=Z, instances=instances, R=R, C=C, vehicle_M=vehicle_M,
+                            vehicle_pixels=pixels)
 
     def _ray_boxes(self, R, C, M, boxes, r0, r1, c0, c1) -> np.ndarray:
         """Depth of the nearest hit of each pixel ray in the window with the vehicle's boxes (slab method)."""
@@ -186,59 +199,71 @@ class GroundTruth:
 
     # -- per pair -----------------------------------------------------------------------
     def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows=None, cols=None):
-        """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` (d the pixel rays)."""
-        xn = self.xn if cols is None else self.xn[cols]
-        yn = self.yn if rows is None else self.yn[rows]
+        """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` (d the pixel rays).
+
+        Whole image (float32, in place) when ``rows`` is None, else the listed pixels (float64).
+        """
         if rows is None:
-            Ad = [self._affine_field(A[k, 0], A[k, 1], A[k, 2]) for k in range(3)]
-        else:  # scattered pixels: xn, yn are per-pixel vectors
-            Ad = [A[k, 0] * xn + A[k, 1] * yn + A[k, 2] for k in range(3)]
-        X = Z * Ad[0] + b[0]
-        Y = Z * Ad[1] + b[1]
-        W = Z * Ad[2] + b[2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x1 = self.fx * X / W + self.cx
-            y1 = self.fy * Y / W + self.cy
-        return x1, y1, W
+            X = self._affine_field(A[0, 0], A[0, 1], A[0, 2])
+            Y = self._affine_field(A[1, 0], A[1, 1], A[1, 2])
+            W = self._affine_field(A[2, 0], A[2, 1], A[2, 2])
+            for F, bk in ((X, b[0]), (Y, b[1]), (W, b[2])):
+                F *= Z
+                F += np.float32(bk)
+            inv = np.float32(1.0) / W
+            X *= inv
+            X *= np.float32(self.fx)
+            X += np.float32(self.cx)
+            Y *= inv
+            Y *= np.float32(self.fy)
+            Y += np.float32(self.cy)
+            return X, Y, W
+        xn, yn = self.xn[cols], self.yn[rows]
+        Zd = Z.astype(np.float64)
+        X = Zd * (A[0, 0] * xn + A[0, 1] * yn + A[0, 2]) + b[0]
+        Y = Zd * (A[1, 0] * xn + A[1, 1] * yn + A[1, 2]) + b[1]
+        W = Zd * (A[2, 0] * xn + A[2, 1] * yn + A[2, 2]) + b[2]
+        return self.fx * X / W + self.cx, self.fy * Y / W + self.cy, W
 
     def pair(self, s0: FrameSurface, s1: FrameSurface) -> tuple[PairTruth, tuple[float, float]]:
         """Ground truth of the pair (s0 -> s1) and the global shift (dx, dy) in px (NaN if no static pixel)."""
         R0, C0, R1, C1 = s0.R, s0.C, s1.R, s1.C
         A = R1.T @ R0
         b = R1.T @ (C0 - C1)
-        Z = s0.Z
-        sky = ~np.isfinite(Z)
-        Zs = np.where(sky, 1.0, Z)
-        x1, y1, W1 = self._project_affine(Zs, A, b)
-        flow_cam = np.stack([x1 - self.px_x, y1 - self.px_y], axis=-1)
+        sky = ~np.isfinite(s0.Z)
+        has_sky = bool(sky.any())
+        Z = np.where(sky, np.float32(1.0), s0.Z) if has_sky else s0.Z
+        x1, y1, Z1 = self._project_affine(Z, A, b)
+        flow_cam = np.empty((self.h, self.w, 2), np.float32)
+        np.subtract(x1, self.xs32[None, :], out=flow_cam[..., 0])
+        np.subtract(y1, self.ys32[:, None], out=flow_cam[..., 1])
         flow = flow_cam.copy()
-        X1, Y1, Z1 = x1, y1, W1
-        for vid, (M0, M1) in enumerate(zip(s0.vehicle_M, s1.vehicle_M), start=1):
-            rows, cols = np.nonzero(s0.instances == vid)
-            if rows.size == 0:
-                continue
+        for vid, rows, cols in s0.vehicle_pixels:
+            M0, M1 = s0.vehicle_M[vid - 1], s1.vehicle_M[vid - 1]
             Mrel = M1 @ np.linalg.inv(M0)
             Av = R1.T @ Mrel[:3, :3] @ R0
             bv = R1.T @ (Mrel[:3, :3] @ C0 + Mrel[:3, 3] - C1)
-            xv, yv, zv = self._project_affine(Z[rows, cols], Av, bv, rows=rows, cols=cols)
+            xv, yv, zv = self._project_affine(s0.Z[rows, cols], Av, bv, rows=rows, cols=cols)
             flow[rows, cols, 0] = xv - cols
             flow[rows, cols, 1] = yv - rows
-            X1 = X1.copy() if X1 is x1 else X1
-            Y1 = Y1.copy() if Y1 is y1 else Y1
-            Z1 = Z1.copy() if Z1 is W1 else Z1
-            X1[rows, cols], Y1[rows, cols], Z1[rows, cols] = xv, yv, zv
-        inside = (X1 >= 0) & (X1 <= self.w - 1) & (Y1 >= 0) & (Y1 <= self.h - 1) & (Z1 > 0) & ~sky
-        D1 = cv2.remap(s1.depth.astype(np.float32), X1.astype(np.float32), Y1.astype(np.float32),
-                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        visible = (D1 > 0) & (Z1 <= D1 * (1 + OCCLUSION_TOL_REL) + OCCLUSION_TOL_ABS_M)
-        valid = inside & visible
-        flow[sky] = 0.0
-        flow_cam[sky] = 0.0
+            x1[rows, cols], y1[rows, cols], Z1[rows, cols] = xv, yv, zv
+        inside = (x1 >= 0) & (x1 <= self.w - 1) & (y1 >= 0) & (y1 <= self.h - 1) & (Z1 > 0)
+        if has_sky:
+            inside &= ~sky
+        D1 = cv2.remap(s1.depth, x1, y1, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        # not occluded: the point is not behind what frame t+1 rendered where it lands
+        limit = D1 * np.float32(1 + OCCLUSION_TOL_REL)
+        limit += np.float32(OCCLUSION_TOL_ABS_M)
+        valid = inside & (D1 > 0) & (Z1 <= limit)
+        if has_sky:
+            flow[sky] = 0.0
+            flow_cam[sky] = 0.0
         static = valid & (s0.instances == 0)
-        if static.any():
-            shift = (float(flow_cam[..., 0][static].mean()), float(flow_cam[..., 1][static].mean()))
+        n_static = int(np.count_nonzero(static))
+        if n_static:
+            m = cv2.mean(flow_cam, mask=static.view(np.uint8))
+            shift = (float(m[0]), float(m[1]))
         else:
             shift = (float("nan"), float("nan"))
-        truth = PairTruth(flow=flow.astype(np.float32), flow_camera=flow_cam.astype(np.float32),
-                          valid=valid, instances=s0.instances)
+        truth = PairTruth(flow=flow, flow_camera=flow_cam, valid=valid, instances=s0.instances)
         return truth, shift

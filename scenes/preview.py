@@ -8,13 +8,10 @@ colour-wheel legend at the end.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numpy as np
 
 from algorithms.flow import color_wheel_image, flow_to_color
-from scenes.formats import write_png
 
 __all__ = ["PreviewCollector"]
 
@@ -43,9 +40,10 @@ class PreviewCollector:
         if fo.pair is not None and fo.pair_index in self.pick:
             self.flows[fo.pair_index] = (fo.pair.flow, fo.pair.valid)
 
-    def write(self, path: Path, tracks: list[dict]) -> None:
+    def sheet(self, tracks: list[dict]) -> np.ndarray | None:
+        """The contact sheet, (h, w, 3) uint8 RGB, or None before any frame."""
         if not self.frames:
-            return
+            return None
         h, w = next(iter(self.frames.values())).shape[:2]
         scale = min(1.0, THUMB_WIDTH_PX / w)
         tw, th = int(round(w * scale)), int(round(h * scale))
@@ -78,5 +76,4 @@ class PreviewCollector:
         legend[4:4 + size, (th - size) // 2:(th - size) // 2 + size] = color_wheel_image(size)
         cv2.putText(legend, f"{max_mag:.1f} px", (4, th - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
         blank = np.full((th, th, 3), 255, np.uint8)
-        sheet = np.vstack([np.hstack(top + [blank]), np.hstack(bottom + [legend])])
-        write_png(path, sheet)
+        return np.vstack([np.hstack(top + [blank]), np.hstack(bottom + [legend])])

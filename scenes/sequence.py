@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from scenes.formats import FormatError, atomic_write_bytes, read_flo, read_png, write_flo, write_png
+from scenes.formats import FormatError, atomic_write_bytes, encode_flo, encode_png, read_flo, read_png
 from scenes.ground_truth import PairTruth
 from scenes.spec import GENERATOR_VERSION, SceneSpec, load_scene_spec, spec_hash, spec_to_yaml
 
@@ -41,6 +41,8 @@ MANIFEST_NAME = "MANIFEST.json"
 # files up to this size are hashed whole by the quick check; larger ones by size + sampled blocks
 QUICK_FULL_HASH_BYTES = 256 * 1024
 _SAMPLE_BYTES = 64 * 1024
+# zlib level of the per-frame PNGs: level 1 encodes textured 640x480 frames ~3x faster than 3
+PNG_COMPRESSION = 1
 
 Progress = Callable[[int, int], None]
 
@@ -67,16 +69,45 @@ def _sample_hash(path: Path, size: int) -> str:
     return h.hexdigest()
 
 
+def _file_record(data: bytes) -> dict:
+    size = len(data)
+    h = hashlib.sha256()
+    for off in sorted({0, max(0, size // 2 - _SAMPLE_BYTES // 2), max(0, size - _SAMPLE_BYTES)}):
+        h.update(data[off:off + _SAMPLE_BYTES])
+    return {"size": size, "sha256": hashlib.sha256(data).hexdigest(), "sample_sha256": h.hexdigest()}
+
+
+class _FolderWriter:
+    """Writes the files of a folder that is still under its temporary name, hashing as it goes.
+
+    No per-file rename or fsync: the whole folder is renamed into place once
+    complete, and the manifest (recorded from the bytes written) catches any
+    file that did not reach the disk intact.
+    """
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.records: dict[str, dict] = {}
+
+    def write(self, rel: str, data: bytes) -> None:
+        path = self.folder / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as fh:
+            fh.write(data)
+        self.records[rel] = _file_record(data)
+
+    def write_manifest(self, extra: dict | None = None) -> None:
+        doc = {"generator_version": GENERATOR_VERSION, **(extra or {}), "files": dict(sorted(self.records.items()))}
+        atomic_write_bytes(self.folder / MANIFEST_NAME, json.dumps(doc, indent=1, sort_keys=True).encode())
+
+
 def write_manifest(folder: Path, extra: dict | None = None) -> None:
     """Hash every file under ``folder`` into ``MANIFEST.json`` (written last, atomically)."""
-    files = {}
+    w = _FolderWriter(folder)
     for p in sorted(folder.rglob("*")):
         if p.is_file() and p.name != MANIFEST_NAME:
-            size = p.stat().st_size
-            files[p.relative_to(folder).as_posix()] = {
-                "size": size, "sha256": _sha256_file(p), "sample_sha256": _sample_hash(p, size)}
-    doc = {"generator_version": GENERATOR_VERSION, **(extra or {}), "files": files}
-    atomic_write_bytes(folder / MANIFEST_NAME, json.dumps(doc, indent=1, sort_keys=True).encode())
+            w.records[p.relative_to(folder).as_posix()] = _file_record(p.read_bytes())
+    w.write_manifest(extra)
 
 
 def verify_manifest(folder: str | os.PathLike, *, full: bool = False) -> dict:
@@ -114,7 +145,7 @@ def verify_manifest(folder: str | os.PathLike, *, full: bool = False) -> dict:
     return doc
 
 
-def _write_csv(path: Path, columns: list[str], rows: list[dict]) -> None:
+def _csv_bytes(columns: list[str], rows: list[dict]) -> bytes:
     import io
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -123,7 +154,7 @@ def _write_csv(path: Path, columns: list[str], rows: list[dict]) -> None:
         w.writerow(["" if r[c] is None or (isinstance(r[c], float) and not np.isfinite(r[c]))
                     else (repr(float(r[c])) if isinstance(r[c], (float, np.floating)) else r[c])
                     for c in columns])
-    atomic_write_bytes(path, buf.getvalue().encode())
+    return buf.getvalue().encode()
 
 
 def _prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
@@ -193,8 +224,7 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
     from scenes.render import gl_info
 
     n = spec.image.n_frames
-    for sub in ("frames", "flow", "flow_camera", "valid", "instances"):
-        (folder / sub).mkdir()
+    out = _FolderWriter(folder)
     t_gen = t_write = 0.0
     t0 = time.perf_counter()
     gen = SceneGenerator(spec)
@@ -206,32 +236,35 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
         fo = next(frames)
         t1 = time.perf_counter()
         name = f"{fo.index:06d}"
-        write_png(folder / "frames" / f"{name}.png", fo.rgb)
-        write_png(folder / "instances" / f"{name}.png", fo.instances)
+        out.write(f"frames/{name}.png", encode_png(fo.rgb, compression=PNG_COMPRESSION))
+        out.write(f"instances/{name}.png", encode_png(fo.instances, compression=PNG_COMPRESSION))
         if fo.pair is not None:
             pname = f"{fo.pair_index:06d}"
-            write_flo(folder / "flow" / f"{pname}.flo", fo.pair.flow)
-            write_flo(folder / "flow_camera" / f"{pname}.flo", fo.pair.flow_camera)
-            write_png(folder / "valid" / f"{pname}.png", fo.pair.valid.astype(np.uint8) * 255)
+            out.write(f"flow/{pname}.flo", encode_flo(fo.pair.flow))
+            out.write(f"flow_camera/{pname}.flo", encode_flo(fo.pair.flow_camera))
+            out.write(f"valid/{pname}.png", encode_png(fo.pair.valid.view(np.uint8) * np.uint8(255),
+                                                           compression=PNG_COMPRESSION))
         preview.add(fo)
         t_gen += t1 - t0
         t_write += time.perf_counter() - t1
         if progress is not None:
             progress(i + 1, n)
     t0 = time.perf_counter()
-    _write_csv(folder / "camera.csv", CAMERA_COLUMNS, gen.camera_rows())
+    out.write("camera.csv", _csv_bytes(CAMERA_COLUMNS, gen.camera_rows()))
     tracks = gen.track_table()
-    _write_csv(folder / "tracks.csv", TRACK_COLUMNS, tracks)
-    atomic_write_bytes(folder / "scene.yaml", spec_to_yaml(spec).encode())
+    out.write("tracks.csv", _csv_bytes(TRACK_COLUMNS, tracks))
+    out.write("scene.yaml", spec_to_yaml(spec).encode())
     K = gen.path.K
     meta = {"width": spec.image.width_px, "height": spec.image.height_px, "n_frames": n,
             "fps": spec.image.fps, "K": K.tolist(), "generator_version": GENERATOR_VERSION,
             "spec_hash": spec_hash(spec), "seed": spec.seed, "name": spec.name,
             "gsd_m": spec.gsd_m(), "texel_m": gen.world.texel_m, "n_vehicles": len(gen.vehicles),
             "n_buildings": len(gen.world.buildings), **gl_info()}
-    atomic_write_bytes(folder / "meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
-    preview.write(folder / "preview.png", tracks)
-    write_manifest(folder, {"spec_hash": spec_hash(spec)})
+    out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
+    sheet = preview.sheet(tracks)
+    if sheet is not None:
+        out.write("preview.png", encode_png(sheet))
+    out.write_manifest({"spec_hash": spec_hash(spec)})
     t_write += time.perf_counter() - t0
     if timings is not None:
         timings.update({"render_truth_s": t_gen, "write_s": t_write, "n_frames": n})
