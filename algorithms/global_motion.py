@@ -68,15 +68,24 @@ def _parabola_offset(left: float, centre: float, right: float) -> float:
 
 
 def ncc_global_motion(frame0: np.ndarray, frame1: np.ndarray, *, max_shift: int = 16, subpixel: bool = False,
-                      min_peak: float = 0.3) -> GlobalMotion:
+                      min_peak: float = 0.3, template_px: int | None = 256) -> GlobalMotion:
     """Global shift by normalized cross-correlation (thesis 3.1, eq. 3.1).
 
-    The central part of frame t (``max_shift`` px in from every side) is the
-    template; eq. 3.1, with the means removed, is evaluated at every integer
-    shift within ``+/- max_shift`` px in frame t+1 (``cv2.matchTemplate`` with
-    ``TM_CCOEFF_NORMED``) and the best one taken, an integer shift as in the
-    thesis. ``subpixel=True`` refines the peak with a parabola through its
-    neighbours, separately in x and y.
+    A centred window of frame t is the template; eq. 3.1, with the means
+    removed, is evaluated at every integer shift within ``+/- max_shift`` px in
+    frame t+1 (``cv2.matchTemplate`` with ``TM_CCOEFF_NORMED``) and the best one
+    taken, an integer shift as in the thesis. ``subpixel=True`` refines the
+    peak with a parabola through its neighbours, separately in x and y.
+
+    The thesis does not size the template. It is the central part of frame t
+    that stays inside frame t+1 at every searched shift, ``(H - 2 max_shift,
+    W - 2 max_shift)``, cropped about its centre to at most the larger of
+    ``template_px`` and half of it per side: a global shift gives the same
+    peak from any part of the frame and the peak stays sharp with tens of
+    thousands of pixels, while the correlation costs about a seventh (0.5 ms
+    rather than 3.6 ms at 512x512, one thread). Frames up to
+    ``template_px + 2 max_shift`` per side use the whole central part, as does
+    ``template_px=None``.
 
     Parameters
     ----------
@@ -88,6 +97,8 @@ def ncc_global_motion(frame0: np.ndarray, frame1: np.ndarray, *, max_shift: int 
         Parabolic peak refinement.
     min_peak : float
         Smallest NCC that counts as a match.
+    template_px : int, optional
+        Template side cap in px (see above), at least 8; None: no cap.
 
     Returns
     -------
@@ -101,12 +112,20 @@ def ncc_global_motion(frame0: np.ndarray, frame1: np.ndarray, *, max_shift: int 
     if min(h, w) < 2 * max_shift + 8:
         raise ValueError(f"frames of {h}x{w} px are too small for max_shift {max_shift} px "
                          f"(each side must exceed {2 * max_shift + 8})")
+    if template_px is not None and template_px < 8:
+        raise ValueError(f"template_px: expected at least 8 px or None, got {template_px}")
     s = int(max_shift)
-    template = g0[s:h - s, s:w - s]
-    if np.ptp(template) == 0 or np.ptp(g1) == 0:
+    th, tw = h - 2 * s, w - 2 * s
+    if template_px is not None:
+        th = min(th, max(int(template_px), th // 2))
+        tw = min(tw, max(int(template_px), tw // 2))
+    top, left = (h - th) // 2, (w - tw) // 2
+    template = g0[top:top + th, left:left + tw]
+    search = g1[top - s:top + th + s, left - s:left + tw + s]
+    if np.ptp(template) == 0 or np.ptp(search) == 0:
         return GlobalMotion((0.0, 0.0), float("nan"), False)
     # r[dy + s, dx + s]: NCC of the template against frame t+1 shifted by (dx, dy)
-    r = cv2.matchTemplate(g1, template, cv2.TM_CCOEFF_NORMED)
+    r = cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED)
     r = np.where(np.isfinite(r), r, -1.0)
     iy, ix = np.unravel_index(int(np.argmax(r)), r.shape)
     peak = float(r[iy, ix])

@@ -16,6 +16,17 @@ def test_integer_shift_recovered_exactly_with_sign(make_pair):
     assert g.valid and g.peak > 0.99
 
 
+def test_cropped_template_finds_the_same_shift_as_the_whole_central_part(make_pair):
+    f0, f1 = make_pair(translation(-9.0, 4.0), shape=(200, 240))
+    cropped = ncc_global_motion(f0, f1, template_px=40, subpixel=True)  # 84 x 104 px of 168 x 208
+    whole = ncc_global_motion(f0, f1, template_px=None, subpixel=True)
+    assert cropped.valid and whole.valid
+    np.testing.assert_allclose(cropped.shift_px, (-9.0, 4.0), atol=0.05)
+    np.testing.assert_allclose(whole.shift_px, (-9.0, 4.0), atol=0.05)
+    with pytest.raises(ValueError, match="template_px: expected at least 8"):
+        ncc_global_motion(f0, f1, template_px=4)
+
+
 def test_subpixel_peak(make_pair):
     f0, f1 = make_pair(translation(3.3, -2.6), shape=(128, 128))
     integer = ncc_global_motion(f0, f1)
