@@ -179,6 +179,23 @@ def jitter_figure(jitters: dict[str, pd.DataFrame], *, colors: dict[str, str], t
     return fig_to_svg(fig)
 
 
+def _zoom_box(tracks: list[pd.DataFrame], frame: np.ndarray | None) -> tuple[float, float, float, float]:
+    """The part of the frame the tracks cover, with a margin, at the frame's aspect (px)."""
+    xs = np.concatenate([t[c].to_numpy(float) for t in tracks for c in ("x", "x_filt", "x_true")])
+    ys = np.concatenate([t[c].to_numpy(float) for t in tracks for c in ("y", "y_filt", "y_true")])
+    xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
+    h, w = frame.shape[:2] if frame is not None else (float(np.ptp(ys)) + 1, float(np.ptp(xs)) + 1)
+    if frame is None or not xs.size:
+        return (float(xs.min()) - 1, float(xs.max()) + 1, float(ys.min()) - 1, float(ys.max()) + 1) \
+            if xs.size else (0.0, 1.0, 0.0, 1.0)
+    span = max(np.ptp(xs) + 40.0, (np.ptp(ys) + 40.0) * w / h, 0.25 * w)
+    span_x = min(span, w)
+    span_y = min(span_x * h / w, h)
+    cx = float(np.clip((xs.min() + xs.max()) / 2, span_x / 2 - 0.5, w - 0.5 - span_x / 2))
+    cy = float(np.clip((ys.min() + ys.max()) / 2, span_y / 2 - 0.5, h - 0.5 - span_y / 2))
+    return cx - span_x / 2, cx + span_x / 2, cy - span_y / 2, cy + span_y / 2
+
+
 def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *, title: str) -> str:
     """Trajectories over a frame, one panel per pipeline: truth, raw flow track, Kalman track."""
     n = len(tracks)
@@ -198,11 +215,9 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
                 ax.plot(g["x_true"], g["y_true"], "-", color="#000000", lw=1.0)
                 ax.plot(g["x"], g["y"], "o--", color="#E69F00", lw=1.2, ms=3, label="flow track (raw)")
                 ax.plot(g["x_filt"], g["y_filt"], "s-", color="#0072B2", lw=1.2, ms=3, label="Kalman track")
-            if frame is not None:
-                ax.set_xlim(-0.5, frame.shape[1] - 0.5)
-                ax.set_ylim(frame.shape[0] - 0.5, -0.5)
-            else:
-                ax.invert_yaxis()
+            x0, x1, y0, y1 = _zoom_box(list(tracks.values()), frame)
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y1, y0)  # image rows grow downwards
             ax.set_title(pipe)
         for k in range(n, nrows * ncols):
             axes[k // ncols][k % ncols].set_visible(False)

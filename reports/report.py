@@ -204,6 +204,7 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
         out.append(f'<div class="verdict {cls}">Gate: {word} ({_e(gate["verdict"])})</div>')
         if gate["messages"]:
             out.append("<ul>" + "".join(f"<li>{_e(m)}</li>" for m in gate["messages"]) + "</ul>")
+        out += [f'<p class="note">{_e(n)}</p>' for n in gate["notes"]]
     else:
         out.append(_missing("No gate result was given."))
     if diffs is None:
@@ -216,11 +217,11 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
             cls = " worse" if r.change == "worse" else (" best" if r.change == "better" else "")
             pct = "" if not np.isfinite(r.diff_pct) else f" ({r.diff_pct:+.1f} %)"
             diff = "\u2013" if not np.isfinite(r.diff) else f"{r.diff:+.4g}{pct}"
-            rows.append(f'<tr><th scope="row">{_e(r.pipeline)}</th><td>{_e(r.scene or "all")}</td>'
+            rows.append(f'<tr><td>{_e(r.where)}</td><th scope="row">{_e(r.pipeline)}</th>'
                         f"<td>{_e(r.metric)}</td><td>{_e(r.unit)}</td>"
                         f'<td class="num">{format_value(r.current)}</td><td class="num">{format_value(r.baseline)}</td>'
                         f'<td class="num{cls}">{_e(diff)}</td><td>{_e(r.change)}</td></tr>')
-        out.append('<div class="scroll"><table><thead><tr><th>Pipeline</th><th>Scene</th><th>Metric</th>'
+        out.append('<div class="scroll"><table><thead><tr><th>Where</th><th>Pipeline</th><th>Metric</th>'
                    "<th>Unit</th><th>Current</th><th>Baseline</th><th>Diff (current \u2212 baseline)</th>"
                    f"<th>Change</th></tr></thead><tbody>{''.join(rows)}</tbody></table></div>")
     return "".join(out)
@@ -356,7 +357,18 @@ def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, st
                 "No true cumulative shift known: the after-stabilisation row is left out.")
         out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3><figure class=\"plot\">{svg}"
                    f"<figcaption>{_e(cap)}</figcaption></figure>")
-        jsvg = plots.jitter_figure(stabs, colors=colors, title=f"{label}: estimated vs true jitter")
+        # pipelines that share a global-motion stage estimate the same jitter: draw it once
+        groups: dict[str, pd.DataFrame] = {}
+        for pipe, st in stabs.items():
+            same = next((k for k, v in groups.items()
+                         if np.allclose(v[["jit_x", "jit_y"]].to_numpy(float), st[["jit_x", "jit_y"]].to_numpy(float),
+                                        equal_nan=True) and len(v) == len(st)), None)
+            if same is None:
+                groups[pipe] = st
+            else:
+                groups[f"{same} = {pipe}"] = groups.pop(same)
+        group_colors = {k: colors[k.split(" = ")[0]] for k in groups}
+        jsvg = plots.jitter_figure(groups, colors=group_colors, title=f"{label}: estimated vs true jitter")
         out.append(f"<figure class=\"plot\">{jsvg}<figcaption>Estimated jitter (cumulative shift minus "
                    "fitted line) per pipeline against the true jitter, detrended by its own least-squares line "
                    "so both are measured from a straight flight line.</figcaption></figure>")
@@ -452,7 +464,9 @@ def build_report(run_dir: str | os.PathLike, *, baseline=None, gate_result=None)
     gate = gate_view(gate_result)
     diffs, note = (baseline_diffs(data, baseline) if baseline is not None else (None, ""))
     head_t = metric_table(data, data.ok, cols)
-    scene_ts = {s: metric_table(data, rows, cols) for s, rows in per_scene_rows(data).items()}
+    bases = data.table["scene"].map(scene_base)
+    scene_ts = {s: metric_table(data, rows, cols, all_rows=data.table[bases == s])
+                for s, rows in per_scene_rows(data).items()}
     curves = sweep_curves(data)
     title = f"aerobench report: {data.run.get('suite') or Path(run_dir).name}"
 
@@ -502,17 +516,18 @@ def build_report(run_dir: str | os.PathLike, *, baseline=None, gate_result=None)
     md += [f"- **{_md(k)}**: {_md(v)}" for k, v in _provenance_rows(data)] + [""]
     if gate is not None:
         word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
-        md += [f"## Gate: {word} ({_md(gate['verdict'])})", ""] + [f"- {_md(m)}" for m in gate["messages"]] + [""]
+        md += [f"## Gate: {word} ({_md(gate['verdict'])})", ""] + [f"- {_md(m)}" for m in gate["messages"]]
+        md += [f"_{_md(n)}_" for n in gate["notes"]] + [""]
     if diffs is not None:
         md += ["## Against the baseline", ""]
         if note:
             md += [f"_{_md(note)}_", ""]
         if len(diffs):
-            md += ["| Pipeline | Scene | Metric | Current | Baseline | Diff | Change |", "|---|---|---|---|---|---|---|"]
+            md += ["| Where | Pipeline | Metric | Current | Baseline | Diff | Change |", "|---|---|---|---|---|---|---|"]
             for r in diffs.itertuples(index=False):
                 d = "\u2013" if not np.isfinite(r.diff) else f"{r.diff:+.4g}" + (
                     f" ({r.diff_pct:+.1f} %)" if np.isfinite(r.diff_pct) else "")
-                md.append(f"| {_md(r.pipeline)} | {_md(r.scene or 'all')} | {_md(r.metric)} | "
+                md.append(f"| {_md(r.where)} | {_md(r.pipeline)} | {_md(r.metric)} | "
                           f"{format_value(r.current)} | {format_value(r.baseline)} | {d} | {r.change} |")
             md.append("")
     md += ["## Headline", "", "Pooled over every scene, sweep value and seed; best value in bold; "

@@ -7,7 +7,6 @@ as plain Python structures that the HTML and Markdown writers both render.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -18,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness.results import summarize
 from reports.load import RunData, pooled, primary_rows, scene_base
 
 __all__ = ["HEADLINE", "Column", "MetricTable", "headline_columns", "metric_table", "format_value",
@@ -112,8 +112,13 @@ def best_pipelines(values: dict[tuple[str, str], float], col: Column, pipelines:
     return {p for p, v in finite.items() if v == target}
 
 
-def metric_table(data: RunData, rows: pd.DataFrame, columns: list[Column]) -> MetricTable:
-    """Pool ``rows`` (a subset of ``data.ok``) per pipeline for ``columns``."""
+def metric_table(data: RunData, rows: pd.DataFrame, columns: list[Column], *,
+                 all_rows: pd.DataFrame | None = None) -> MetricTable:
+    """Pool ``rows`` (a subset of ``data.ok``) per pipeline for ``columns``.
+
+    ``all_rows`` (default the whole table) are the rows, failed cells included,
+    of the same scenes: they give the "total" of the cell count.
+    """
     agg = pooled(primary_rows(rows), ["pipeline"]) if len(rows) else None
     values, counts = {}, {}
     if agg is not None:
@@ -123,7 +128,7 @@ def metric_table(data: RunData, rows: pd.DataFrame, columns: list[Column]) -> Me
     pipes = [p for p in data.pipelines if any((p, c.metric) in values for c in columns)]
     best = {c.metric: best_pipelines(values, c, pipes) for c in columns}
     cells = {}
-    all_cells = data.table.groupby("pipeline")["cell_id"].nunique()
+    all_cells = (data.table if all_rows is None else all_rows).groupby("pipeline")["cell_id"].nunique()
     ok_cells = rows.groupby("pipeline")["cell_id"].nunique() if len(rows) else pd.Series(dtype=int)
     for p in pipes:
         cells[p] = f"{int(ok_cells.get(p, 0))} / {int(all_cells.get(p, 0))}"
@@ -139,7 +144,14 @@ def region_table(data: RunData, metric: str) -> pd.DataFrame:
     agg["where"] = agg["region"].astype(str) + " / " + agg["motion"].astype(str)
     wide = agg.pivot(index="pipeline", columns="where", values="value")
     order = [p for p in data.pipelines if p in wide.index]
-    return wide.loc[order]
+    rank_r = {r: i for i, r in enumerate(("all", "background", "vehicles", "interior"))}
+    rank_m = {m: i for i, m in enumerate(("total", "local"))}
+
+    def key(w: str):
+        r, m = w.split(" / ", 1)
+        return (rank_m.get(m, 9), m, rank_r.get(r, 9), r)
+
+    return wide.loc[order, sorted(wide.columns, key=key)]
 
 
 def sweep_curves(data: RunData) -> dict[str, pd.DataFrame]:
@@ -161,14 +173,19 @@ def per_scene_rows(data: RunData) -> dict[str, pd.DataFrame]:
 
 # ------------------------------------------------------------------------------ baseline and gate
 
+_KEYS = ("pipeline", "scene", "sweep_param", "sweep_value", "metric", "region", "motion")
+
+
 def baseline_records(baseline) -> tuple[list[dict], str]:
     """Flatten a baseline (a loaded JSON dict, a list, or a path) to records.
 
-    Returns ``(records, note)``; each record has ``pipeline, metric, value`` and
-    optional ``scene, region, motion``. Understood shapes: a list of such
-    records, a dict holding one under ``rows`` / ``summary`` / ``metrics`` /
-    ``entries`` / ``values``, or nested ``{pipeline: {metric: value or
-    {"value": v}}}``. Anything else gives no records and a note saying so.
+    Returns ``(records, note)``; each record has ``pipeline, metric, value`` and,
+    when the baseline has them, ``scene, sweep_param, sweep_value, region,
+    motion`` (the summary keys of :func:`harness.results.summarize`, which
+    harness.gate baselines use). Understood shapes: a list of records, a dict
+    holding one under ``metrics`` / ``rows`` / ``summary`` / ``entries``, or
+    nested ``{pipeline: {metric: value or {"value": v}}}``. Anything else gives
+    no records and a note saying so.
     """
     if isinstance(baseline, (str, os.PathLike)):
         path = Path(baseline)
@@ -177,111 +194,143 @@ def baseline_records(baseline) -> tuple[list[dict], str]:
         except (OSError, ValueError) as exc:
             return [], f"baseline {path}: unreadable ({exc})"
     if isinstance(baseline, Mapping):
-        for key in ("rows", "summary", "metrics", "entries", "values"):
-            if isinstance(baseline.get(key), list):
-                baseline = baseline[key]
-                break
-            if isinstance(baseline.get(key), Mapping):
+        for key in ("metrics", "rows", "summary", "entries"):
+            if isinstance(baseline.get(key), (list, Mapping)):
                 baseline = baseline[key]
                 break
     records = []
     if isinstance(baseline, list):
         for r in baseline:
             if isinstance(r, Mapping) and "pipeline" in r and "metric" in r:
-                v = r.get("value", r.get("mean"))
-                if isinstance(v, (int, float)):
-                    records.append({"pipeline": str(r["pipeline"]), "metric": str(r["metric"]),
-                                    "value": float(v), "scene": str(r.get("scene") or ""),
-                                    "region": str(r.get("region") or "all"),
-                                    "motion": str(r.get("motion") or "")})
+                v = r.get("value")
+                if isinstance(v, (int, float)) and not isinstance(v, bool):
+                    records.append({k: str(r[k]) for k in _KEYS if k in r and r[k] is not None}
+                                   | {"value": float(v)})
     elif isinstance(baseline, Mapping):
         for pipe, metrics in baseline.items():
             if not isinstance(metrics, Mapping):
                 continue
             for m, v in metrics.items():
                 if isinstance(v, Mapping):
-                    v = v.get("value", v.get("mean"))
+                    v = v.get("value")
                 if isinstance(v, (int, float)) and not isinstance(v, bool):
-                    records.append({"pipeline": str(pipe), "metric": str(m), "value": float(v),
-                                    "scene": "", "region": "all", "motion": ""})
+                    records.append({"pipeline": str(pipe), "metric": str(m), "value": float(v)})
     note = "" if records else "baseline given, but no (pipeline, metric, value) entries were found in it"
     return records, note
 
 
+def _change(diff: float, higher_is_better: bool) -> str:
+    if not np.isfinite(diff):
+        return "gone"
+    if diff == 0:
+        return "same"
+    return "better" if (diff > 0) == bool(higher_is_better) else "worse"
+
+
 def baseline_diffs(data: RunData, baseline) -> tuple[pd.DataFrame, str]:
-    """Current pooled values against the baseline's: ``pipeline, scene, metric, unit, current,
-    baseline, diff, diff_pct, change`` (change: better / worse / same / new / gone)."""
+    """Current values against the baseline's, for the headline metrics.
+
+    Baseline records with the full summary keys are matched to the current
+    :func:`harness.results.summarize` rows on those keys; records with only
+    ``pipeline, metric`` to the pooled headline value. Returns ``where,
+    pipeline, metric, unit, current, baseline, diff, diff_pct, change``
+    (change: better / worse / same / gone) and a note (what was left out).
+    """
     records, note = baseline_records(baseline)
-    cols = ["pipeline", "scene", "metric", "unit", "current", "baseline", "diff", "diff_pct", "change"]
+    cols = ["where", "pipeline", "metric", "unit", "current", "baseline", "diff", "diff_pct", "change"]
     if not records:
         return pd.DataFrame(columns=cols), note
+    shown = {c.metric for c in headline_columns(data)}
     prim = primary_rows(data.ok)
-    overall = pooled(prim, ["pipeline"])
-    by_scene = pooled(prim.assign(scene=prim["scene"].map(scene_base)), ["pipeline", "scene"])
-    by_scene_full = pooled(prim, ["pipeline", "scene"])
-    out = []
+    primary_combo = {m: set(zip(g["region"], g["motion"]))
+                     for m, g in data.ok.groupby("metric")} if len(data.ok) else {}
+    # which (region, motion) each headline metric shows: region "all" rows of its primary motion
+    motion_of = dict(zip(prim["metric"], prim["motion"]))
+    full = summarize(data.table)
+    full_idx = {tuple(str(r[k]) for k in _KEYS): r for r in full.to_dict("records")}
+    overall = {(r["pipeline"], r["metric"]): r for r in pooled(prim, ["pipeline"]).to_dict("records")}
+    out, hidden, hidden_worse = [], 0, 0
     for r in records:
-        if r["scene"]:
-            src = by_scene if r["scene"] in set(by_scene["scene"]) else by_scene_full
-            cur = src[(src["pipeline"] == r["pipeline"]) & (src["metric"] == r["metric"])
-                      & (src["scene"] == r["scene"])]
+        keyed = all(k in r for k in _KEYS)
+        if keyed:
+            cur = full_idx.get(tuple(r[k] for k in _KEYS))
+            headline = (r["metric"] in shown and r["motion"] == motion_of.get(r["metric"])
+                        and (r["region"] == "all" or "all" not in {x for x, _ in primary_combo.get(r["metric"], ())}))
+            sweep = f" {r['sweep_param']}={r['sweep_value']}" if r.get("sweep_param") else ""
+            where = f"{r['scene']}{sweep}" + ("" if r["region"] == "all" else f" [{r['region']}]")
         else:
-            cur = overall[(overall["pipeline"] == r["pipeline"]) & (overall["metric"] == r["metric"])]
-        if cur.empty:
-            out.append({**{k: r[k] for k in ("pipeline", "scene", "metric")}, "unit": "", "current": math.nan,
-                        "baseline": r["value"], "diff": math.nan, "diff_pct": math.nan, "change": "gone"})
+            cur = overall.get((r["pipeline"], r["metric"]))
+            headline, where = True, "all scenes"
+        v = float(cur["value"]) if cur is not None else math.nan
+        hib = bool(cur["higher_is_better"]) if cur is not None else False
+        diff = v - r["value"]
+        change = _change(diff, hib)
+        if not headline:
+            hidden += 1
+            hidden_worse += change == "worse"
             continue
-        c = cur.iloc[0]
-        v, b = float(c["value"]), r["value"]
-        diff = v - b
-        pct = 100.0 * diff / abs(b) if b != 0 else math.nan
-        if diff == 0:
-            change = "same"
-        else:
-            change = "better" if (diff > 0) == bool(c["higher_is_better"]) else "worse"
-        out.append({"pipeline": r["pipeline"], "scene": r["scene"], "metric": r["metric"], "unit": str(c["unit"]),
-                    "current": v, "baseline": b, "diff": diff, "diff_pct": pct, "change": change})
+        pct = 100.0 * diff / abs(r["value"]) if r["value"] != 0 and np.isfinite(diff) else math.nan
+        out.append({"where": where, "pipeline": r["pipeline"], "metric": r["metric"],
+                    "unit": str(cur["unit"]) if cur is not None else "", "current": v, "baseline": r["value"],
+                    "diff": diff, "diff_pct": pct, "change": change})
+    if hidden:
+        note = (f"{hidden} further baseline entries (other metrics, regions and motions) were compared but "
+                f"are not listed; {hidden_worse} of them are worse than the baseline.")
     return pd.DataFrame(out, columns=cols), note
 
 
+def _describe_item(item) -> str:
+    if isinstance(item, Mapping):
+        return ", ".join(f"{k}={item[k]}" for k in item)
+    if isinstance(item, str):
+        return item
+    parts = []
+    for attr in ("group", "name"):
+        v = getattr(item, attr, None)
+        if isinstance(v, str):
+            parts.append(v)
+    b, c = getattr(item, "baseline", None), getattr(item, "current", None)
+    if isinstance(b, (int, float)) and isinstance(c, (int, float)):
+        parts.append(f"baseline {b:.4g} \u2192 current {c:.4g}")
+    reason = getattr(item, "reason", None)
+    if reason:
+        parts.append(str(reason))
+    return ": ".join(parts[:2]) + (" " + ", ".join(parts[2:]) if len(parts) > 2 else "") if parts else str(item)
+
+
 def gate_view(gate_result) -> dict | None:
-    """A gate result (mapping, dataclass or object) as ``{"passed": bool | None, "verdict": str,
-    "messages": [str]}``; None when no gate result was given."""
+    """A gate result (mapping or object, e.g. ``harness.gate.GateResult``) as ``{"passed": bool |
+    None, "verdict": str, "messages": [str], "notes": [str]}``; None when none was given."""
     if gate_result is None:
         return None
-    if isinstance(gate_result, Mapping):
-        d = dict(gate_result)
-    elif hasattr(gate_result, "to_dict") and callable(gate_result.to_dict):
-        d = dict(gate_result.to_dict())
-    elif dataclasses.is_dataclass(gate_result) and not isinstance(gate_result, type):
-        d = dataclasses.asdict(gate_result)
-    else:
-        d = {k: getattr(gate_result, k) for k in dir(gate_result)
-             if not k.startswith("_") and not callable(getattr(gate_result, k, None))}
+
+    def get(key):
+        if isinstance(gate_result, Mapping):
+            return gate_result.get(key)
+        try:
+            return getattr(gate_result, key, None)
+        except Exception:  # a property that cannot be computed is simply absent
+            return None
+
     passed = None
     for key in ("passed", "ok", "success"):
-        if isinstance(d.get(key), bool):
-            passed = d[key]
+        if isinstance(get(key), bool):
+            passed = get(key)
             break
     verdict = ""
     for key in ("verdict", "status", "result"):
-        if isinstance(d.get(key), str):
-            verdict = d[key]
+        if isinstance(get(key), str):
+            verdict = get(key)
             break
     if passed is None and verdict:
         passed = verdict.strip().lower() in ("pass", "passed", "ok", "success")
     if not verdict:
         verdict = "passed" if passed else ("failed" if passed is False else "unknown")
     messages = []
-    for key in ("failures", "regressions", "messages", "reasons", "details", "checks"):
-        v = d.get(key)
+    for key in ("failures", "regressions", "messages", "reasons", "details"):
+        v = get(key)
         if isinstance(v, (list, tuple)):
-            for item in v:
-                if isinstance(item, Mapping):
-                    messages.append(", ".join(f"{k}={item[k]}" for k in item))
-                elif dataclasses.is_dataclass(item):
-                    messages.append(", ".join(f"{k}={v2}" for k, v2 in dataclasses.asdict(item).items()))
-                else:
-                    messages.append(str(item))
+            messages = [_describe_item(x) for x in v]
             break
-    return {"passed": passed, "verdict": verdict, "messages": messages}
+    notes = [str(n) for n in (get("notes") or []) if isinstance(get("notes"), (list, tuple))]
+    return {"passed": passed, "verdict": verdict, "messages": messages, "notes": notes}

@@ -128,7 +128,25 @@ def test_baseline_diff_and_gate_verdict(run_dir, tmp_path):
     assert f"{current - current / 2:+.4g} (+100.0 %)" in verdict
     assert "worse" in verdict
     md = out["md"].read_text()
-    assert "## Gate: FAILED" in md and "| dis | all | epe_mean |" in md
+    assert "## Gate: FAILED" in md and "| all scenes | dis | epe_mean |" in md
+
+
+def test_baseline_keyed_like_the_summary(run_dir, tmp_path):
+    """A harness.gate-style baseline (entries keyed like harness.results.summarize) is matched per key."""
+    ok = pooled_table(run_dir)
+    rows = ok[(ok["metric"] == "epe_mean") & (ok["region"] == "all") & (ok["motion"] == "total")
+              & (ok["pipeline"] == "lk_thesis") & (ok["scene"] == "urban[jitter_px=2]")]
+    current = rows["sum"].sum() / rows["count"].sum()
+    entry = {"pipeline": "lk_thesis", "scene": "urban[jitter_px=2]", "sweep_param": "jitter_px",
+             "sweep_value": "2.0", "metric": "epe_mean", "region": "all", "motion": "total",
+             "value": current * 1.25}
+    hidden = dict(entry, region="vehicles", value=0.0)  # compared, counted, not listed
+    out = write_report(run_dir, baseline={"format": "aerobench-baseline/1", "metrics": [entry, hidden]},
+                       out_dir=tmp_path, gate_result={"passed": True, "failures": []})
+    verdict = section(out["html"].read_text(), "verdict")
+    assert "Gate: PASSED" in verdict
+    assert f"{current - current * 1.25:+.4g} (-20.0 %)" in verdict and "better" in verdict
+    assert "1 further baseline entries" in verdict and "1 of them are worse" in verdict
 
 
 def test_missing_parts_are_stated_not_fatal(run_dir, tmp_path):
