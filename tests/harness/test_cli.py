@@ -1,0 +1,117 @@
+"""The aerobench command: listing, exit codes, one-line errors, and the smoke suite gated like CI does."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, TINY_SUITE
+
+from harness.cli import main
+
+SMOKE_BASELINE = ROOT / "harness" / "baselines" / "smoke.json"
+GATE_RULES = ROOT / "harness" / "gate_rules.yaml"
+
+
+def test_list_names_presets_suites_pipelines_and_metrics(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    sections = {}
+    current = None
+    for line in out.splitlines():
+        if line and not line.startswith(" "):
+            current = line.rstrip(":")
+            sections[current] = {}
+        elif line.strip():
+            name, _, desc = line.strip().partition("  ")
+            sections[current][name] = desc.strip()
+    assert list(sections) == ["scene presets", "suites", "pipelines", "metrics"]
+    assert {"tiny", "nominal", "jitter", "drift", "fast-vehicles", "urban-parallax", "noisy"} <= set(sections["scene presets"])
+    assert {"smoke", "standard", "sweep-jitter", "sweep-speed", "sweep-noise"} <= set(sections["suites"])
+    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis"} <= set(sections["pipelines"])
+    assert {"epe_mean", "shift_error", "track_error"} <= set(sections["metrics"])
+    for title in ("suites", "metrics"):
+        missing = [n for n, d in sections[title].items() if not d]
+        assert not missing, f"{title} without a one-line description: {missing}"
+
+
+@pytest.mark.parametrize("text, field", [
+    ("name: x\nscenes: [{preset: tiny}]\nseeds: [1\n", r"YAML syntax error at line \d+"),
+    ("name: x\nscenes: [{preset: tiny, jitter: 1}]\nseeds: [1]\npipelines: [dis]\n", r"scenes\[0\]\.jitter"),
+    ("name: x\nscenes: [{preset: tiny}]\nseeds: [1]\npipelines: [lk]\n", r"pipelines\[0\]: unknown pipeline 'lk'; valid: "),
+    ("name: x\nscenes: [{preset: tiny, sweep: {}}]\nseeds: [1]\npipelines: [dis]\n", r"scenes\[0\]\.sweep: an empty sweep"),
+])
+def test_a_bad_suite_exits_2_with_one_line_and_writes_nothing(tmp_path, capsys, text, field):
+    suite = tmp_path / "bad.yaml"
+    suite.write_text(text)
+    out = tmp_path / "run"
+    assert main(["run", str(suite), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("aerobench: error: ")
+    assert str(suite) in err
+    import re
+
+    assert re.search(field, err), err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+def test_a_non_empty_run_folder_exits_2(tmp_path, capsys, write_suite):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "results.parquet").write_bytes(b"precious")
+    suite = write_suite(copy.deepcopy(TINY_SUITE))
+    assert main(["run", str(suite), "--out", str(tmp_path / "run")]) == 2
+    assert "pass --resume" in capsys.readouterr().err
+    assert (tmp_path / "run" / "results.parquet").read_bytes() == b"precious"
+
+
+def test_usage_errors_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "smoke"])  # --out missing
+    assert exc.value.code == 2
+    assert main(["gate", str(tmp_path), "--baseline", str(tmp_path / "b.json")]) == 2
+    assert "not a finished run folder" in capsys.readouterr().err
+    assert main(["run", "smoke", "--out", str(tmp_path / "r"), "--executor", "dask"]) == 2
+    assert "scheduler" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.gl
+def test_render_writes_a_sequence_folder(tmp_path, capsys):
+    out = tmp_path / "seq"
+    assert main(["render", "tiny", "--out", str(out), "--set", "image.n_frames=3", "--set", "seed=4"]) == 0
+    assert (out / "MANIFEST.json").is_file() and (out / "preview.png").is_file()
+    assert len(list((out / "frames").glob("*.png"))) == 3
+    assert "seed: 4" in (out / "scene.yaml").read_text()
+    assert main(["render", "tiny", "--out", str(tmp_path / "x"), "--set", "image.n_frame=3"]) == 2
+    assert "n_frame" in capsys.readouterr().err
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_smoke_run_passes_the_committed_baseline(tmp_path, cli_env):
+    """What CI does: run the smoke suite end to end (report included), then gate it."""
+    out = tmp_path / "smoke"
+    run = subprocess.run([sys.executable, "-m", "harness.cli", "run", "smoke", "--out", str(out), "--quiet"],
+                         cwd=ROOT, env=cli_env, capture_output=True, text=True, timeout=240)
+    assert run.returncode == 0, run.stderr
+    assert (out / "report.html").is_file() and (out / "report.md").is_file()
+    junit = tmp_path / "gate.xml"
+    gate = subprocess.run([sys.executable, "-m", "harness.cli", "gate", str(out), "--baseline", str(SMOKE_BASELINE),
+                           "--rules", str(GATE_RULES), "--junit", str(junit)],
+                          cwd=ROOT, env=cli_env, capture_output=True, text=True, timeout=60)
+    assert gate.returncode == 0, gate.stdout + gate.stderr
+    assert "<testsuite" in junit.read_text()
+
+
+def test_the_committed_baseline_is_of_the_smoke_suite():
+    from harness.gate import read_baseline
+
+    baseline = read_baseline(SMOKE_BASELINE)
+    assert baseline["suite"] == "smoke"
+    pipelines = {m["pipeline"] for m in baseline["metrics"]}
+    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis"} <= pipelines
+    assert Path(GATE_RULES).is_file()

@@ -1,0 +1,162 @@
+"""The runner: failing cells recorded, same numbers on 1 or 2 workers, kill -9 and resume, run folder rules."""
+
+from __future__ import annotations
+
+import copy
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from conftest import ROOT, TINY_SUITE
+
+from harness.results import read_results, read_run_json
+from harness.runner import RunFolderError, run_suite
+from harness.suites import parse_suite
+
+# Six cells: enough that a kill after the first complete cell leaves work to resume.
+RESUME_SUITE = {**copy.deepcopy(TINY_SUITE), "name": "test-resume", "seeds": [1, 2],
+                "pipelines": ["thesis-lk", "thesis-hs", "dis"]}
+
+KEY = ["scene", "seed", "pipeline", "sweep_param", "sweep_value", "metric", "region", "motion",
+       "frame", "track_id"]
+
+
+def accuracy_table(table: pd.DataFrame) -> pd.DataFrame:
+    """The accuracy rows of a results table (timings vary run to run), in a canonical order."""
+    acc = table[table["kind"] == "accuracy"]
+    cols = [*KEY, "value", "sum", "count", "hist", "status"]
+    return acc[cols].sort_values(KEY, na_position="first").reset_index(drop=True)
+
+
+def _partial_files(run_dir: Path) -> list[str]:
+    return [str(p) for p in run_dir.rglob("*") if p.name.startswith((".tmp-", ".old-")) or p.name.endswith(".tmp")]
+
+
+@pytest.fixture(scope="module")
+def reference_run(tmp_path_factory, render_cache):
+    """RESUME_SUITE run uninterrupted on one worker: the numbers every other run must reproduce."""
+    out = tmp_path_factory.mktemp("runs") / "reference"
+    result = run_suite(parse_suite(copy.deepcopy(RESUME_SUITE)), out, workers=1, cache_dir=render_cache,
+                       progress=False)
+    assert result.ok, result.failed_cells
+    return result
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_run_folder_is_complete(reference_run):
+    run_dir = reference_run.run_dir
+    table = read_results(run_dir)
+    assert table["cell_id"].nunique() == reference_run.cells == 6
+    assert set(table["status"]) == {"ok"}
+    assert {"epe_mean", "shift_error"} <= set(table["metric"])
+    meta = read_run_json(run_dir)
+    assert meta["status"] == "ok" and meta["suite"] == "test-resume"
+    assert len(meta["cells"]) == 6 and meta["config_hash"]
+    assert meta["provenance"]["git_commit"] == table["git_commit"].iloc[0]
+    assert (run_dir / "summary.csv").stat().st_size > 0
+    for cell in meta["cells"]:
+        folder = run_dir / "cells" / cell["cell_id"]
+        assert (folder / "rows.parquet").is_file()
+        assert (folder / "flow_000000.flo").is_file()
+        stab = pd.read_csv(folder / "stabilisation.csv")
+        assert len(stab) == 4 and "true_jitter_x_px" in stab
+        assert (folder / "tracks.csv").is_file()
+        assert not (folder / "error.txt").exists()
+    assert not _partial_files(run_dir)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_two_workers_give_the_same_numbers(reference_run, tmp_path, render_cache):
+    result = run_suite(parse_suite(copy.deepcopy(RESUME_SUITE)), tmp_path / "run", workers=2,
+                       cache_dir=render_cache, progress=False)
+    assert result.ok
+    assert result.scenes_rendered == 0 and result.scenes_reused == 2  # the cache is shared
+    pd.testing.assert_frame_equal(accuracy_table(result.table), accuracy_table(reference_run.table))
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache):
+    # the plugin's flow method raises on 64 px wide frames only: one scene of two fails
+    suite = {**copy.deepcopy(TINY_SUITE), "name": "test-failing", "imports": ["aerobench_test_plugin"],
+             "scenes": [{"preset": "tiny", "overrides": {"image.n_frames": 3}},
+                        {"preset": "tiny", "label": "narrow",
+                         "overrides": {"image.n_frames": 3, "image.width_px": 64, "image.height_px": 48}}],
+             "pipelines": [{"name": "explodes-on-narrow", "base": "thesis-lk",
+                            "spec": {"flow": {"method": "raise_on_narrow", "params": {}}}}]}
+    result = run_suite(parse_suite(suite), tmp_path / "run", workers=2, cache_dir=render_cache, progress=False)
+    assert result.status == "failed"
+    assert len(result.failed_cells) == 1 and "narrow" in result.failed_cells[0]
+    assert "planned failure on a narrow frame" in result.failed_cells[0]
+    table = read_results(tmp_path / "run")
+    failed = table[table["status"] == "failed"]
+    assert set(failed["scene"]) == {"narrow"}
+    assert failed["error"].str.contains("planned failure").all()
+    assert set(table[table["status"] == "ok"]["scene"]) == {"tiny"}
+    folder = tmp_path / "run" / "cells" / failed["cell_id"].iloc[0]
+    assert "RuntimeError" in (folder / "error.txt").read_text()
+    assert read_run_json(tmp_path / "run")["status"] == "failed"
+
+
+def _cli(args: list[str], env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "harness.cli", *args], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_kill_and_resume_finishes_with_the_same_numbers(reference_run, tmp_path, write_suite, cli_env):
+    suite = write_suite(RESUME_SUITE)
+    out = tmp_path / "run"
+    log = tmp_path / "killed.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", str(suite), "--out", str(out),
+                                 "--workers", "1", "--quiet", "--no-report"],
+                                cwd=ROOT, env=cli_env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            done = [p for p in (out / "cells").glob("*/cell.json") if not p.parent.name.startswith(".")]
+            if done or proc.poll() is not None:
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, f"the run ended before the kill: {log.read_text()}"
+        os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its pool workers, like a lost machine
+    finally:
+        proc.wait(timeout=30)
+    assert not (out / "results.parquet").exists(), "the run finished before it was killed"
+
+    again = _cli(["run", str(suite), "--out", str(out)], cli_env)
+    assert again.returncode == 2 and "--resume" in again.stderr  # refused without --resume
+
+    resumed = _cli(["run", str(suite), "--out", str(out), "--resume", "--workers", "2", "--quiet", "--no-report"],
+                   cli_env)
+    assert resumed.returncode == 0, resumed.stderr
+    meta = read_run_json(out)
+    assert meta["status"] == "ok" and meta["cells_reused"] >= 1
+    pd.testing.assert_frame_equal(accuracy_table(read_results(out)), accuracy_table(reference_run.table))
+    assert not _partial_files(out)
+
+
+def test_a_non_empty_folder_is_refused_without_resume(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(RunFolderError, match=r"not empty; pass --resume"):
+        run_suite(parse_suite(copy.deepcopy(TINY_SUITE)), tmp_path, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_two_runs_into_one_folder_are_refused(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    with open(out / ".lock", "w") as fh:  # what a running aerobench holds
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(RunFolderError, match=r"another aerobench run is writing into this folder"):
+            run_suite(parse_suite(copy.deepcopy(TINY_SUITE)), out, resume=True, progress=False)

@@ -1,0 +1,160 @@
+"""Suites: validation with messages that name the file and the field, sweep expansion, stable cell ids."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+from conftest import TINY_SUITE
+
+from harness.suites import SuiteError, builtin_suites, expand, load_suite, parse_suite
+
+
+def _suite(**changes):
+    data = copy.deepcopy(TINY_SUITE)
+    data.update(changes)
+    return data
+
+
+# --------------------------------------------------------------------------- built-ins
+
+
+def test_builtin_suites_exist_and_expand():
+    names = set(builtin_suites())
+    assert {"smoke", "standard", "sweep-jitter", "sweep-speed", "sweep-noise"} <= names
+    for name in names:
+        suite = load_suite(name)
+        cells = expand(suite)
+        n_variants = len({(c.variant.label, c.variant.seed) for c in cells})
+        assert len(cells) == n_variants * len(suite.pipelines), name
+        assert suite.description, f"{name} has no description for `aerobench list`"
+
+
+def test_smoke_covers_lk_hs_and_a_reference_on_tiny_scenes():
+    suite = load_suite("smoke")
+    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis"} <= set(suite.pipelines)
+    assert {s.preset for s in suite.scenes} == {"tiny"}
+
+
+def test_sweep_suites_vary_their_axis():
+    for name, key in (("sweep-jitter", "camera.jitter"), ("sweep-speed", "vehicles.speed"),
+                      ("sweep-noise", "photometry.noise")):
+        cells = expand(load_suite(name))
+        assert all(c.variant.sweep_param.startswith(key) for c in cells), name
+        assert len({str(c.variant.sweep_value) for c in cells}) >= 4, name
+
+
+# --------------------------------------------------------------------------- expansion
+
+
+def test_sweep_expands_to_the_grid_with_values_applied():
+    data = _suite(scenes=[{"preset": "tiny", "overrides": {"image.n_frames": 3},
+                           "sweep": {"photometry.noise_std": [0.0, 2.0, 4.0],
+                                     "camera.altitude_m": [60.0, 90.0]}}],
+                  seeds=[1, 2])
+    cells = expand(parse_suite(data))
+    assert len(cells) == 3 * 2 * 2 * 2  # noise x altitude x seeds x pipelines
+    for c in cells:
+        noise, altitude = (float(x) for x in c.variant.sweep_value.split(","))
+        assert c.variant.spec.photometry.noise_std == noise
+        assert c.variant.spec.camera.altitude_m == altitude
+        assert c.variant.spec.seed == c.variant.seed
+        assert c.variant.spec.image.n_frames == 3
+        assert c.variant.sweep_param == "photometry.noise_std,camera.altitude_m"
+    assert len({c.cell_id for c in cells}) == len(cells)
+    assert len({c.variant.scene_hash for c in cells}) == 3 * 2 * 2
+
+
+def test_single_key_sweep_keeps_the_value():
+    data = _suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_std": [1.5, 3.0]}}])
+    cells = expand(parse_suite(data))
+    assert sorted({c.variant.sweep_value for c in cells}) == [1.5, 3.0]
+    assert {c.variant.label for c in cells} == {"tiny[photometry.noise_std=1.5]", "tiny[photometry.noise_std=3]"}
+
+
+def test_cell_ids_are_stable_and_follow_the_config():
+    a = {c.pipeline: c.cell_id for c in expand(parse_suite(_suite()))}
+    assert a == {c.pipeline: c.cell_id for c in expand(parse_suite(_suite()))}
+    # another pipeline parameter changes that pipeline's cell only
+    changed = _suite(pipelines=["thesis-lk", {"name": "dis", "base": "dis", "spec": {"description": "other"}}])
+    b = {c.pipeline: c.cell_id for c in expand(parse_suite(changed))}
+    assert b["thesis-lk"] == a["thesis-lk"]
+    assert b["dis"] != a["dis"]
+    # another scene parameter changes every cell
+    c = {c.pipeline: c.cell_id for c in expand(parse_suite(_suite(scenes=[{"preset": "tiny"}])))}
+    assert not set(c.values()) & set(a.values())
+
+
+# --------------------------------------------------------------------------- bad suites
+
+
+def test_yaml_syntax_error_gives_the_line(write_suite):
+    path = write_suite("name: x\nscenes:\n  - preset: tiny\nseeds: [1, 2\npipelines: [dis]\n")
+    with pytest.raises(SuiteError, match=rf"{path}: YAML syntax error at line \d+"):
+        load_suite(path)
+
+
+def test_unknown_key_is_named(write_suite):
+    path = write_suite(_suite(scenes=[{"preset": "tiny", "overides": {"seed": 1}}]))
+    with pytest.raises(SuiteError, match=rf"{path}: scenes\[0\]\.overides: Extra inputs are not permitted"):
+        load_suite(path)
+
+
+def test_unknown_top_level_key_is_named(write_suite):
+    path = write_suite(_suite(workers=4))
+    with pytest.raises(SuiteError, match=r"workers: Extra inputs"):
+        load_suite(path)
+
+
+def test_nan_is_refused(write_suite):
+    text = "name: x\nscenes:\n  - preset: tiny\n    overrides: {photometry.noise_std: .nan}\nseeds: [1]\npipelines: [dis]\n"
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.overrides: .*photometry.noise_std: nan is not a finite"):
+        load_suite(write_suite(text))
+    text = "name: x\nscenes:\n  - preset: tiny\n    sweep: {photometry.noise_std: [1.0, .inf]}\nseeds: [1]\npipelines: [dis]\n"
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: .*inf is not a finite"):
+        load_suite(write_suite(text))
+
+
+def test_unknown_pipeline_lists_the_valid_ones(write_suite):
+    path = write_suite(_suite(pipelines=["thesis-lk", "thesis-kl"]))
+    with pytest.raises(SuiteError, match=r"pipelines\[1\]: unknown pipeline 'thesis-kl'; valid: .*thesis-lk"):
+        load_suite(path)
+    path = write_suite(_suite(pipelines=[{"name": "x", "base": "nope"}]))
+    with pytest.raises(SuiteError, match=r"pipelines\[0\]\.base: unknown pipeline 'nope'; valid: .*dis"):
+        load_suite(path)
+
+
+def test_unknown_metric_lists_the_valid_ones(write_suite):
+    path = write_suite(_suite(metrics=["epe_typo"]))
+    with pytest.raises(SuiteError, match=r"metrics\[0\]: unknown metric 'epe_typo'; valid: .*epe"):
+        load_suite(path)
+
+
+def test_empty_sweep_is_an_error(write_suite):
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: an empty sweep"):
+        load_suite(write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {}}])))
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: an empty sweep: 'photometry.noise_std' has no values"):
+        load_suite(write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_std": []}}])))
+
+
+def test_bad_scene_parameter_names_the_scene_and_field(write_suite):
+    path = write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_sd": [1.0]}}]))
+    with pytest.raises(SuiteError, match=r"scenes\[0\] .*noise_sd"):
+        expand(load_suite(path), source=str(path))
+
+
+def test_unknown_preset_lists_the_valid_ones(write_suite):
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.preset: unknown preset 'tinny'; valid: .*tiny"):
+        load_suite(write_suite(_suite(scenes=[{"preset": "tinny"}])))
+
+
+def test_duplicate_key_and_empty_lists_are_refused(write_suite):
+    with pytest.raises(SuiteError, match=r"line 3.*'seeds' appears twice"):
+        load_suite(write_suite("name: x\nseeds: [1]\nseeds: [2]\nscenes: [{preset: tiny}]\npipelines: [dis]\n"))
+    with pytest.raises(SuiteError, match=r"seeds: List should have at least 1 item"):
+        load_suite(write_suite(_suite(seeds=[])))
+
+
+def test_missing_suite_names_the_builtins(tmp_path):
+    with pytest.raises(SuiteError, match=r"no such suite file, and not a built-in suite \(.*smoke"):
+        load_suite(tmp_path / "missing.yaml")
