@@ -91,7 +91,8 @@ class DriftSpec(_Model):
     """Slow, smooth departures from a straight level flight line."""
 
     heading_rate_deg_s: float = Field(0.0, ge=-30, le=30, description="slow turn of the flight line")
-    crab_deg: float = Field(0.0, ge=-45, le=45, description="camera yaw relative to the track (crosswind)")
+    crab_deg: float = Field(0.0, ge=-90, le=90,
+                            description="camera yaw relative to the track (crosswind crab, or a camera mounted sideways)")
     climb_rate_mps: float = Field(0.0, ge=-50, le=50, description="altitude change per second")
 
 
@@ -251,7 +252,7 @@ def _format_errors(err: ValidationError, source: str) -> str:
             msg = "unknown key"
         got = e.get("input")
         shown = "" if isinstance(got, (dict, list)) or e["type"] == "extra_forbidden" else f" (got {got!r})"
-        lines.append(f"  {loc or '(scene)'}: {msg}{shown}")
+        lines.append(f"  {loc}: {msg}{shown}" if loc else f"  {msg}{shown}")
     return f"scene spec {source}: invalid\n" + "\n".join(lines)
 
 
