@@ -7,6 +7,7 @@ Never fork a process that holds a renderer (use the spawn start method).
 
 from __future__ import annotations
 
+import atexit
 import math
 import os
 
@@ -58,6 +59,18 @@ def get_renderer(width_px: int, height_px: int):
         if not _GL_INFO:
             _GL_INFO.update(_query_gl_strings())
     return r
+
+
+@atexit.register
+def _release_at_exit() -> None:
+    # Only at interpreter exit: left to garbage collection during shutdown, pyrender's
+    # destructors run after PyOpenGL's modules are gone and print import errors.
+    while _RENDERERS:
+        _, r = _RENDERERS.popitem()
+        try:
+            r.delete()
+        except Exception:
+            pass
 
 
 def _query_gl_strings() -> dict[str, str]:
@@ -125,13 +138,18 @@ class SceneRenderer:
         self.scene.add(pyrender.Mesh([ground]))
 
         if world.buildings:
-            mat = _textured_material(pyrender, world.building_texture, repeat=True)
+            roof_mat = _textured_material(pyrender, world.building_texture, repeat=True)
+            # walls darker than roofs, so that flat shading still shows the building's edges
+            wall_tex = (world.building_texture.astype(np.float32) * 0.6).astype(np.uint8)
+            wall_mat = _textured_material(pyrender, wall_tex, repeat=True)
             scale_m = world.building_texture.shape[0] * world.texel_m
             prims = []
             for b in world.buildings:
                 m = box_mesh(b, uv_scale_m=scale_m)
-                prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"],
-                                                texcoord_0=m["texcoords"], indices=m["indices"], material=mat))
+                # box_mesh's triangles: 8 walls (+-x, +-y), 2 bottom, 2 top
+                for tris, mat in ((m["indices"][:8], wall_mat), (m["indices"][10:12], roof_mat)):
+                    prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"],
+                                                    texcoord_0=m["texcoords"], indices=tris, material=mat))
             self.scene.add(pyrender.Mesh(prims))
 
         self.vehicle_nodes = []

@@ -228,7 +228,7 @@ def _place_buildings(spec, block_kinds, footprint, rng: np.random.Generator) -> 
             and rect[2] > fx0 and rect[0] < fx1 and rect[3] > fy0 and rect[1] < fy1]
     if not seen:
         return []
-    out = []
+    out: list[Box] = []
     order = rng.permutation(len(seen))
     for k in range(b.count):
         bxa, bya, bxb, byb = seen[order[k % len(seen)]]
@@ -236,12 +236,16 @@ def _place_buildings(spec, block_kinds, footprint, rng: np.random.Generator) -> 
         wmax, hmax = bxb - bxa - 2 * margin, byb - bya - 2 * margin
         if wmax < 2 or hmax < 2:
             continue
-        sx = min(rng.uniform(*b.footprint_range_m), wmax)
-        sy = min(rng.uniform(*b.footprint_range_m), hmax)
-        cx = rng.uniform(bxa + margin + sx / 2, bxb - margin - sx / 2)
-        cy = rng.uniform(bya + margin + sy / 2, byb - margin - sy / 2)
-        h = rng.uniform(*b.height_range_m)
-        out.append(Box(centre=(cx, cy, h / 2), size=(sx, sy, h)))
+        for _attempt in range(10):  # buildings must not intersect: coplanar faces would z-fight
+            sx = min(rng.uniform(*b.footprint_range_m), wmax)
+            sy = min(rng.uniform(*b.footprint_range_m), hmax)
+            cx = rng.uniform(bxa + margin + sx / 2, bxb - margin - sx / 2)
+            cy = rng.uniform(bya + margin + sy / 2, byb - margin - sy / 2)
+            h = rng.uniform(*b.height_range_m)
+            if all(abs(cx - o.centre[0]) > (sx + o.size[0]) / 2 + 1.0
+                   or abs(cy - o.centre[1]) > (sy + o.size[1]) / 2 + 1.0 for o in out):
+                out.append(Box(centre=(cx, cy, h / 2), size=(sx, sy, h)))
+                break
     return out
 
 
