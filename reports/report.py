@@ -80,7 +80,11 @@ pre { white-space: pre-wrap; word-break: break-word; background: var(--bg-alt); 
   pre { max-height: none; overflow: visible; }
   figure, table, .gallery { break-inside: avoid; page-break-inside: avoid; }
   h2 { break-after: avoid; page-break-after: avoid; }
-  td.best { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+  td.best, td.worse { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+  body { font-size: 10pt; }
+  table { font-size: 7.5pt; }
+  th, td { padding: 2px 4px; }
+  th small { display: none; }
 }
 """
 
@@ -201,7 +205,8 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
     if gate is not None:
         cls = {True: "pass", False: "fail"}.get(gate["passed"], "unknown")
         word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
-        out.append(f'<div class="verdict {cls}">Gate: {word} ({_e(gate["verdict"])})</div>')
+        extra = "" if gate["verdict"].strip().upper() in (word, word[:-2]) else f' ({_e(gate["verdict"])})'
+        out.append(f'<div class="verdict {cls}">Gate: {word}{extra}</div>')
         if gate["messages"]:
             out.append("<ul>" + "".join(f"<li>{_e(m)}</li>" for m in gate["messages"]) + "</ul>")
         out += [f'<p class="note">{_e(n)}</p>' for n in gate["notes"]]
@@ -516,7 +521,8 @@ def build_report(run_dir: str | os.PathLike, *, baseline=None, gate_result=None)
     md += [f"- **{_md(k)}**: {_md(v)}" for k, v in _provenance_rows(data)] + [""]
     if gate is not None:
         word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
-        md += [f"## Gate: {word} ({_md(gate['verdict'])})", ""] + [f"- {_md(m)}" for m in gate["messages"]]
+        extra = "" if gate["verdict"].strip().upper() in (word, word[:-2]) else f" ({_md(gate['verdict'])})"
+        md += [f"## Gate: {word}{extra}", ""] + [f"- {_md(m)}" for m in gate["messages"]]
         md += [f"_{_md(n)}_" for n in gate["notes"]] + [""]
     if diffs is not None:
         md += ["## Against the baseline", ""]

@@ -234,7 +234,8 @@ def baseline_diffs(data: RunData, baseline) -> tuple[pd.DataFrame, str]:
     :func:`harness.results.summarize` rows on those keys; records with only
     ``pipeline, metric`` to the pooled headline value. Returns ``where,
     pipeline, metric, unit, current, baseline, diff, diff_pct, change``
-    (change: better / worse / same / gone) and a note (what was left out).
+    (change: worse / gone / better, in that order; unchanged entries are counted in the note, not
+    listed) and a note (what was left out).
     """
     records, note = baseline_records(baseline)
     cols = ["where", "pipeline", "metric", "unit", "current", "baseline", "diff", "diff_pct", "change"]
@@ -273,9 +274,16 @@ def baseline_diffs(data: RunData, baseline) -> tuple[pd.DataFrame, str]:
         out.append({"where": where, "pipeline": r["pipeline"], "metric": r["metric"],
                     "unit": str(cur["unit"]) if cur is not None else "", "current": v, "baseline": r["value"],
                     "diff": diff, "diff_pct": pct, "change": change})
+    order = {"worse": 0, "gone": 1, "better": 2}
+    same = sum(r["change"] == "same" for r in out)
+    out = sorted((r for r in out if r["change"] != "same"), key=lambda r: order.get(r["change"], 3))
+    notes = []
+    if same:
+        notes.append(f"{same} headline entries equal the baseline and are not listed.")
     if hidden:
-        note = (f"{hidden} further baseline entries (other metrics, regions and motions) were compared but "
-                f"are not listed; {hidden_worse} of them are worse than the baseline.")
+        notes.append(f"{hidden} further baseline entries (other metrics, regions and motions) were compared "
+                     f"but are not listed; {hidden_worse} of them are worse than the baseline.")
+    note = " ".join(notes)
     return pd.DataFrame(out, columns=cols), note
 
 

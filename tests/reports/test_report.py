@@ -115,38 +115,60 @@ class _Gate:
     failures: list
 
 
-def test_baseline_diff_and_gate_verdict(run_dir, tmp_path):
-    ok = pooled_table(run_dir)
+def _epe(ok: pd.DataFrame, pipeline: str, scene: str | None = None) -> float:
     rows = ok[(ok["metric"] == "epe_mean") & (ok["region"] == "all") & (ok["motion"] == "total")
-              & (ok["pipeline"] == "dis")]
-    current = rows["sum"].sum() / rows["count"].sum()
-    baseline = {"rows": [{"pipeline": "dis", "metric": "epe_mean", "value": current / 2}]}
+              & (ok["pipeline"] == pipeline)]
+    if scene is not None:
+        rows = rows[rows["scene"] == scene]
+    return rows["sum"].sum() / rows["count"].sum()
+
+
+def test_baseline_diff_and_gate_verdict(run_dir, tmp_path):
+    """Plain (pipeline, metric) entries match the pooled value; entries keyed like
+    harness.results.summarize (as harness.gate writes them) match per key."""
+    ok = pooled_table(run_dir)
+    dis, lk = _epe(ok, "dis"), _epe(ok, "lk_thesis", "urban[jitter_px=2]")
+    keyed = {"pipeline": "lk_thesis", "scene": "urban[jitter_px=2]", "sweep_param": "jitter_px",
+             "sweep_value": "2.0", "metric": "epe_mean", "region": "all", "motion": "total", "value": lk * 1.25}
+    baseline = {"format": "aerobench-baseline/1", "metrics": [
+        {"pipeline": "dis", "metric": "epe_mean", "value": dis / 2},
+        keyed,
+        dict(keyed, region="vehicles", value=0.0),    # compared and counted, not listed
+        dict(keyed, metric="ae_mean", value=1e9),      # headline metric, but no such key: gone
+    ]}
     out = write_report(run_dir, baseline=baseline, out_dir=tmp_path,
                        gate_result=_Gate(passed=False, failures=["dis epe_mean +100 % > 5 %"]))
     verdict = section(out["html"].read_text(), "verdict")
     assert "Gate: FAILED" in verdict and "dis epe_mean +100 % &gt; 5 %" in verdict
-    assert f"{current - current / 2:+.4g} (+100.0 %)" in verdict
-    assert "worse" in verdict
+    assert f"{dis - dis / 2:+.4g} (+100.0 %)" in verdict          # worse: lower is better
+    assert f"{lk - lk * 1.25:+.4g} (-20.0 %)" in verdict          # better
+    assert verdict.index("+100.0 %") < verdict.index("-20.0 %"), "worse rows come first"
+    assert "1 further baseline entries" in verdict and "1 of them are worse" in verdict
     md = out["md"].read_text()
     assert "## Gate: FAILED" in md and "| all scenes | dis | epe_mean |" in md
 
 
-def test_baseline_keyed_like_the_summary(run_dir, tmp_path):
-    """A harness.gate-style baseline (entries keyed like harness.results.summarize) is matched per key."""
-    ok = pooled_table(run_dir)
-    rows = ok[(ok["metric"] == "epe_mean") & (ok["region"] == "all") & (ok["motion"] == "total")
-              & (ok["pipeline"] == "lk_thesis") & (ok["scene"] == "urban[jitter_px=2]")]
-    current = rows["sum"].sum() / rows["count"].sum()
-    entry = {"pipeline": "lk_thesis", "scene": "urban[jitter_px=2]", "sweep_param": "jitter_px",
-             "sweep_value": "2.0", "metric": "epe_mean", "region": "all", "motion": "total",
-             "value": current * 1.25}
-    hidden = dict(entry, region="vehicles", value=0.0)  # compared, counted, not listed
-    out = write_report(run_dir, baseline={"format": "aerobench-baseline/1", "metrics": [entry, hidden]},
-                       out_dir=tmp_path, gate_result={"passed": True, "failures": []})
-    verdict = section(out["html"].read_text(), "verdict")
-    assert "Gate: PASSED" in verdict
-    assert f"{current - current * 1.25:+.4g} (-20.0 %)" in verdict and "better" in verdict
-    assert "1 further baseline entries" in verdict and "1 of them are worse" in verdict
+def test_gate_view_reads_mappings_and_objects():
+    from reports.tables import gate_view
+
+    assert gate_view(None) is None
+    assert gate_view({"passed": True, "failures": []})["passed"] is True
+    assert gate_view({"verdict": "fail"})["passed"] is False
+
+    class Result:  # like harness.gate.GateResult: passed and failures are properties
+        notes = ["machine differs from the baseline's"]
+
+        @property
+        def passed(self):
+            return False
+
+        @property
+        def failures(self):
+            return [{"metric": "epe_mean", "current": 2.0}]
+
+    v = gate_view(Result())
+    assert v["passed"] is False and v["messages"] == ["metric=epe_mean, current=2.0"]
+    assert v["notes"] == ["machine differs from the baseline's"]
 
 
 def test_missing_parts_are_stated_not_fatal(run_dir, tmp_path):
