@@ -14,8 +14,11 @@ __all__ = ["lucas_kanade", "lk_increment"]
 
 
 @numba.njit(cache=True)
-def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow, valid) -> None:
+def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow0, use_flow0, flow, valid) -> None:
     """Per pixel: the eigenvalue test and the 2x2 solve of eq. 2.9, written into ``flow`` and ``valid``.
+
+    With ``use_flow0`` the solve is an increment to ``flow0``; singular pixels
+    get ``flow0`` then, 0 otherwise.
 
     The smallest eigenvalue of ``[[Sxx, Sxy], [Sxy, Syy]]`` reaches ``m`` exactly
     when ``m <= trace / 2`` and the characteristic polynomial
@@ -38,10 +41,16 @@ def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow, valid
                 # eq. 2.9: (Vx, Vy) = -(A^T A)^-1 A^T It
                 u = (b * Syt[i, j] - c * Sxt[i, j]) * inv_det
                 v = (b * Sxt[i, j] - a * Syt[i, j]) * inv_det
+                if use_flow0:
+                    u += flow0[i, j, 0]
+                    v += flow0[i, j, 1]
                 if check_inside:
                     x = np.float32(j) + u
                     y = np.float32(i) + v
                     ok = x >= zero and x <= np.float32(w - 1) and y >= zero and y <= np.float32(h - 1)
+            elif use_flow0:
+                u = flow0[i, j, 0]
+                v = flow0[i, j, 1]
             else:
                 u = zero
                 v = zero
@@ -52,8 +61,18 @@ def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow, valid
 
 def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue: float,
                  gaussian_window: bool = False, weight: np.ndarray | None = None,
-                 check_inside: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                 check_inside: bool = False, flow0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One Lucas-Kanade solve per pixel: the flow that takes ``f0`` to ``f1``.
+
+    With ``flow0``, ``f1`` is frame t+1 already warped back by ``flow0`` and the
+    solve is an increment to the window mean of ``flow0`` (the same window as
+    the sums of eq. 2.8). Added to ``flow0`` pixel by pixel, the increment (a
+    window mean itself) cannot correct the flow errors that the window mean
+    cancels, and those where the box window's response is negative grow with
+    every warp. The window mean preserves a constant or affine flow, so the
+    true flow of a translation, rotation or zoom stays a fixed point (unlike
+    solving for the total flow with eq. 2.4 linearised about ``flow0`` at each
+    pixel of the window, which weights ``flow0`` by the local structure).
 
     Parameters
     ----------
@@ -72,11 +91,14 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
         inside frame t+1); the others contribute nothing.
     check_inside : bool
         Also clear ``valid`` where ``x + flow`` falls outside the frame.
+    flow0 : ndarray, (H, W, 2) float32, optional
+        The flow ``f1`` was warped back by (see above); its window mean is
+        kept where the system is singular.
 
     Returns
     -------
     flow : ndarray, (H, W, 2) float32
-        0 where the system is singular.
+        0 (or the window mean of ``flow0``) where the system is singular.
     valid : ndarray, (H, W) bool
         Where the smallest eigenvalue reaches ``min_eigenvalue`` (and, with
         ``check_inside``, ``x + flow`` lies inside the frame).
@@ -108,22 +130,27 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
     Syt = window_mean(cv2.multiply(Iy, It))
     flow = np.empty(f0.shape + (2,), dtype=FLOW_DTYPE)
     valid = np.empty(f0.shape, dtype=np.bool_)
-    _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, np.float32(min_eigenvalue), check_inside, flow, valid)
+    use_flow0 = flow0 is not None
+    start = window_mean(np.ascontiguousarray(flow0, dtype=np.float32)) if use_flow0 else flow
+    _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, np.float32(min_eigenvalue), check_inside, start, use_flow0, flow, valid)
     return flow, valid
 
 
 @register_flow
 def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, levels: int = 1,
-                 iterations: int = 1, min_eigenvalue: float = 1e-3, gaussian_window: bool | None = None,
+                 iterations: int = 1, min_eigenvalue: float = 1e-3, gaussian_window: bool = False,
                  median_px: int | None = None, scale: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Dense Lucas-Kanade flow: a least-squares 2x2 solve per pixel over a window (eqs. 2.5-2.9).
 
     The defaults are the thesis's: a 15x15 unweighted window at one scale, as the
     old OpenCV ``cvCalcOpticalFlowLK`` (box-filtered structure tensor, one 2x2
     solve per pixel). ``levels > 1`` or ``iterations > 1`` give the coarse-to-fine
-    form with warping (thesis 6.1), whose own defaults are tuned on Middlebury
-    RubberWhale and Yosemite (see ``test_external.py``): pass e.g.
-    ``levels=4, iterations=3, window=11``.
+    form with warping (thesis 6.1): each warp adds the solve to the window mean
+    of the current flow (see :func:`lk_increment`), and a median filter
+    follows every warp. Tuned on Middlebury RubberWhale,
+    Yosemite and an exact sub-pixel translation (``test_external.py``,
+    ``benchmarks/flow_speed.py``): ``levels=4, iterations=3`` with the other
+    defaults.
 
     Parameters
     ----------
@@ -139,9 +166,8 @@ def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, le
         Smallest eigenvalue of the window-mean structure tensor, in
         (intensity units / px)^2 (uint8 frames: gray levels), below which a
         pixel's 2x2 system counts as singular (flat or pure edge).
-    gaussian_window : bool, optional
-        Gaussian-weighted window (sigma = window/4). Default: False at one scale
-        and one iteration (thesis), True otherwise.
+    gaussian_window : bool
+        Gaussian-weighted window (sigma = window/4) instead of the thesis's box.
     median_px : int, optional
         Median filter of the flow after every warp, 0, 3 or 5 px. Default: 0 at
         one scale and one iteration (thesis), 5 otherwise.
@@ -165,8 +191,6 @@ def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, le
     if not min_eigenvalue > 0:
         raise ValueError(f"min_eigenvalue: expected > 0, got {min_eigenvalue}")
     thesis_form = levels == 1 and iterations == 1
-    if gaussian_window is None:
-        gaussian_window = not thesis_form
     if median_px is None:
         median_px = 0 if thesis_form else 5
 
@@ -176,8 +200,7 @@ def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, le
 
     def update(f0: np.ndarray, f1w: np.ndarray, flow: np.ndarray,
                inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d, ok = lk_increment(f0, f1w, window=window, min_eigenvalue=min_eigenvalue,
-                             gaussian_window=gaussian_window, weight=inside)
-        return flow + d, ok
+        return lk_increment(f0, f1w, window=window, min_eigenvalue=min_eigenvalue,
+                            gaussian_window=gaussian_window, weight=inside, flow0=flow)
 
     return coarse_to_fine(g0, g1, update, levels=levels, warps=iterations, scale=scale, median_px=median_px)

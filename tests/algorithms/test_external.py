@@ -3,7 +3,7 @@
 Mean endpoint error in px over every pixel with known ground truth (Yosemite:
 sky masked), the weighting of the reference figures in SOURCES.md: DIS 0.23 /
 0.19, TV-L1 0.27 / 0.14, ilk 0.27 / 0.25. Measured with the settings below:
-LK 0.268 / 0.188, HS 0.239 / 0.104; single-scale HS (alpha 15, 1000 sweeps)
+LK 0.259 / 0.148, HS 0.239 / 0.104; single-scale HS (alpha 15, 1000 sweeps)
 0.323 / 1.02, as SOURCES.md reports.
 """
 

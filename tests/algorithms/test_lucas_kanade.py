@@ -35,6 +35,21 @@ def test_large_translation_needs_and_gets_the_pyramid(make_pair):
     assert np.abs(np.median(single[M:-M, M:-M], axis=(0, 1)) - [3.0, -2.0]).max() > 0.3
 
 
+def test_warps_converge_on_a_translation_with_the_box_window(make_pair):
+    """Each warp adds its solve to the window mean of the current flow: the error settles
+    instead of growing in the modes where the box window's response is negative (an increment
+    added pixel by pixel grew from 0.03 px after 3 warps to 0.07 px after 20)."""
+    f0, f1 = make_pair(translation(0.7, -0.4))
+
+    def mean_error(warps: int) -> float:
+        flow, _ = lucas_kanade(f0, f1, iterations=warps, median_px=0)
+        return float(np.hypot(*(flow - [0.7, -0.4])[M:-M, M:-M].transpose(2, 0, 1)).mean())
+
+    few, many = mean_error(3), mean_error(20)
+    assert many < 0.02
+    assert many <= few + 1e-3
+
+
 def test_small_rotation(make_pair):
     motion = rotation_about(47.5, 47.5, 2.0)  # up to 1.7 px at the corners
     f0, f1 = make_pair(motion)
