@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from scenes.world import World, box_mesh, vehicle_boxes
+from scenes.world import MAX_TEXTURE_PX, World, box_mesh, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -107,6 +107,30 @@ def _colour_primitive(pyrender, mesh: dict, rgb: tuple[int, int, int]):
                               indices=mesh["indices"], material=mat)
 
 
+def _ground_tiles(pyrender, world: World) -> list:
+    """The ground as quads of at most MAX_TEXTURE_PX texels a side, one texture each."""
+    tex = world.ground_texture
+    ht, wt = tex.shape[:2]
+    x0, y0 = world.extent_m[:2]
+    texel = world.texel_m
+    step = MAX_TEXTURE_PX  # a multiple of 4, as GL's row alignment wants
+    prims = []
+    nrm = np.tile(np.array([[0, 0, 1]], np.float32), (4, 1))
+    idx = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+    # pyrender uploads an image's first row at t = 1; our row r lies at y0 + (r + 0.5) texel,
+    # so t runs from 1 at a tile's low y to 0 at its high y
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    for r0 in range(0, ht, step):
+        for c0 in range(0, wt, step):
+            tile = np.ascontiguousarray(tex[r0:r0 + step, c0:c0 + step])
+            xa, xb = x0 + c0 * texel, x0 + (c0 + tile.shape[1]) * texel
+            ya, yb = y0 + r0 * texel, y0 + (r0 + tile.shape[0]) * texel
+            pos = np.array([[xa, ya, 0], [xb, ya, 0], [xb, yb, 0], [xa, yb, 0]], np.float32)
+            prims.append(pyrender.Primitive(positions=pos, normals=nrm, texcoord_0=uv, indices=idx,
+                                            material=_textured_material(pyrender, tile, repeat=False)))
+    return prims
+
+
 class SceneRenderer:
     """A pyrender scene for one sequence: ground, buildings, vehicles and a camera.
 
@@ -126,16 +150,7 @@ class SceneRenderer:
         ambient = (1.0, 1.0, 1.0) if self.flat else (0.35, 0.35, 0.35)
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
-        x0, y0, x1, y1 = world.extent_m
-        pos = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], np.float32)
-        # pyrender uploads an image's first row at t = 1; our row r lies at y0 + (r + 0.5) texel,
-        # so t runs from 1 at y0 to 0 at y1
-        uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
-        nrm = np.tile(np.array([[0, 0, 1]], np.float32), (4, 1))
-        idx = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
-        ground = pyrender.Primitive(positions=pos, normals=nrm, texcoord_0=uv, indices=idx,
-                                    material=_textured_material(pyrender, world.ground_texture, repeat=False))
-        self.scene.add(pyrender.Mesh([ground]))
+        self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
 
         if world.buildings:
             roof_mat = _textured_material(pyrender, world.building_texture, repeat=True)

@@ -30,7 +30,8 @@ __all__ = [
 
 # texel = GSD / TEXELS_PER_PIXEL: a little finer than a pixel, so the texture never looks blurred
 TEXELS_PER_PIXEL = 1.5
-MAX_TEXTURE_PX = 4096
+MAX_TEXTURE_PX = 4096  # per ground tile uploaded to GL
+MAX_GROUND_TEXELS = 60_000_000
 ROAD_RGB = (72, 72, 78)
 MARK_RGB = (235, 235, 228)
 CAR_COLOURS = [(235, 235, 235), (25, 25, 30), (170, 172, 178), (190, 30, 30), (30, 60, 170),
@@ -106,8 +107,9 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     margin = 0.15 * max(fx1 - fx0, fy1 - fy0) + 20.0
     x0, y0, x1, y1 = fx0 - margin, fy0 - margin, fx1 + margin, fy1 + margin
     texel = spec.gsd_m() / TEXELS_PER_PIXEL
-    # the texture's longest side is capped; a coarser texel is the price of a very long flight
-    texel = max(texel, max(x1 - x0, y1 - y0) / MAX_TEXTURE_PX)
+    # the renderer splits the ground into tiles of at most MAX_TEXTURE_PX; only a flight over
+    # more than MAX_GROUND_TEXELS pays with a coarser texel
+    texel = max(texel, math.sqrt((x1 - x0) * (y1 - y0) / MAX_GROUND_TEXELS))
     wt, ht = int(math.ceil((x1 - x0) / texel)), int(math.ceil((y1 - y0) / texel))
     wt += -wt % 4  # GL unpacks texture rows at 4-byte alignment: RGB rows must be a multiple of 4 px
     x1, y1 = x0 + wt * texel, y0 + ht * texel
