@@ -657,8 +657,13 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
         key = key if isinstance(key, tuple) else (key,)
         rec = dict(zip(keys, key))
         metric = rec["metric"]
-        total = float(np.nansum(g["sum"].to_numpy(np.float64)))
-        count = float(g["count"].to_numpy(np.float64).sum())
+        sums = g["sum"].to_numpy(np.float64)
+        counts = g["count"].to_numpy(np.float64)
+        # math.fsum is exactly rounded, so the aggregate does not depend on the order of the rows
+        # (which cell finished first); a row with items but no total (NaN) makes the total NaN
+        # instead of silently dropping its sum while keeping its count
+        total = math.fsum(sums[counts != 0]) if len(sums) else 0.0
+        count = math.fsum(counts)
         hist = None
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
