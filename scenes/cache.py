@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -36,7 +37,8 @@ class CacheResult:
 def cache_key(spec: SceneSpec) -> str:
     """Content hash of the resolved spec and the generator version, 20 hex digits."""
     text = f"{spec_hash(spec)}|{GENERATOR_VERSION}"
-    return f"{spec.name}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
+    label = re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.name).strip("._")[:40] or "scene"
+    return f"{label}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
 
 
 def _discard(path: Path) -> None:

@@ -378,7 +378,9 @@ def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generato
             v0 = rng.uniform(lo, hi)
         vp = VehiclePath(kind=speed_kind, p0=on_lane, d0=d0, v0_mps=float(v0), v_max_mps=float(hi),
                          accel_mps2=vs.acceleration_mps2,
-                         t_stop_start_s=float(rng.uniform(0.1, 0.5) * duration_s),
+                         # stopping vehicles brake early enough to stand still before the end
+                         t_stop_start_s=float(min(rng.uniform(0.1, 0.5) * duration_s,
+                                                  max(0.0, duration_s - v0 / vs.acceleration_mps2 - 0.5))),
                          radius_m=radius_m, **common)
         if kind == "turning":
             turn = 1 if rng.integers(0, 2) else -1
