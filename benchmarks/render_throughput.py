@@ -8,7 +8,9 @@ Run single-threaded, as one worker of a process pool would run:
 (The script sets these variables itself before numpy, cv2 and llvmpipe load,
 and calls cv2.setNumThreads(1).) Figures are medians over ``--runs`` runs of
 the same sequence on the process's one renderer; the world (texture, meshes)
-is built once per run and not counted.
+is built once per run and not counted. CPU-second rates (process time) are
+given beside wall-clock rates because a loaded shared machine slows the wall
+clock; both are medians.
 """
 
 from __future__ import annotations
@@ -44,35 +46,42 @@ def main() -> None:
     cv2.setNumThreads(1)
     spec = load_scene_spec(args.preset, {"image.n_frames": args.frames})
     n = spec.image.n_frames
-    render_fps, gt_fps, seq_fps, write_fps = [], [], [], []
+    wall = {k: [] for k in ("render", "truth", "write", "total")}
+    cpu = {k: [] for k in ("render", "truth")}
     for _ in range(args.runs):
         gen = SceneGenerator(spec)
         gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))  # texture upload
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for i in range(n):
             gen.renderer.render(gen.path.R[i], gen.path.C[i], gen.vehicle_matrices(float(gen.path.t_s[i])))
-        render_fps.append(n / (time.perf_counter() - t0))
+        wall["render"].append(n / (time.perf_counter() - t0))
+        cpu["render"].append(n / (time.process_time() - c0))
 
         gen = SceneGenerator(spec)
         gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _fo in gen.frames():
             pass
-        gt_fps.append(n / (time.perf_counter() - t0))
+        wall["truth"].append(n / (time.perf_counter() - t0))
+        cpu["truth"].append(n / (time.process_time() - c0))
 
         with tempfile.TemporaryDirectory() as tmp:
             timings: dict = {}
             render_sequence(spec, Path(tmp) / "seq", timings=timings)
-            seq_fps.append(n / (timings["render_truth_s"] + timings["write_s"]))
-            write_fps.append(n / timings["write_s"])
+            wall["total"].append(n / (timings["render_truth_s"] + timings["write_s"]))
+            wall["write"].append(n / timings["write_s"])
+    med = {k: statistics.median(v) for k, v in wall.items()}
+    med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
     print(f"preset {args.preset!r}, {spec.image.width_px}x{spec.image.height_px}, {n} frames, "
-          f"lighting {spec.photometry.lighting}, {args.runs} runs, one thread (LP_NUM_THREADS=1, "
-          "OMP/OPENBLAS=1, cv2.setNumThreads(1))")
-    print(f"  render alone            {statistics.median(render_fps):7.1f} frames/s")
-    print(f"  render + ground truth   {statistics.median(gt_fps):7.1f} frames/s")
-    print(f"  file writing alone      {statistics.median(write_fps):7.1f} frames/s")
-    print(f"  render_sequence total   {statistics.median(seq_fps):7.1f} frames/s (incl. world build, files, manifest)")
-    print(f"  ground-truth overhead   {statistics.median(render_fps) / statistics.median(gt_fps):7.2f}x render alone")
+          f"lighting {spec.photometry.lighting}, median of {args.runs} runs, one thread (LP_NUM_THREADS=1, "
+          f"OMP/OPENBLAS=1, cv2.setNumThreads(1)); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print("                           wall frames/s   frames per CPU-second")
+    print(f"  render alone             {med['render']:10.1f}   {med_cpu['render']:10.1f}")
+    print(f"  render + ground truth    {med['truth']:10.1f}   {med_cpu['truth']:10.1f}")
+    print(f"  file writing alone       {med['write']:10.1f}")
+    print(f"  render_sequence total    {med['total']:10.1f}   (world build, truth, files, preview, manifest)")
+    print(f"  ground truth costs {med['render'] / med['truth']:.2f}x render alone (wall), "
+          f"{med_cpu['render'] / med_cpu['truth']:.2f}x (CPU)")
 
 
 if __name__ == "__main__":
