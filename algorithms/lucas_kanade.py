@@ -14,46 +14,81 @@ __all__ = ["lucas_kanade", "lk_increment"]
 
 
 @numba.njit(cache=True)
-def _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, min_eigenvalue, check_inside, flow0, use_flow0, flow, valid) -> None:
+def _lk_products(mean_p, f0, f1, weight, use_weight, flow0, use_flow0, P, Q) -> None:
+    """The per-pixel terms of eq. 2.8, ready for the window sums.
+
+    Ix, Iy: Sobel 3x3 (central difference with [1, 2, 1] smoothing, /8) of the
+    mean of both frames, as the derivatives in eq. 2.4 are taken between them;
+    ``mean_p`` is that mean with a 1 px replicated border. It = f1 - f0; all
+    three times ``weight`` if ``use_weight``. Writes
+    ``P[..., :] = (Ix Ix, Ix Iy, Iy Iy, Ix It)`` and ``Q[..., 0] = Iy It``, then
+    ``Q[..., 1:] = flow0`` if ``use_flow0`` (so one window pass averages it too).
+    """
+    h, w = f0.shape
+    eighth = np.float32(0.125)
+    two = np.float32(2.0)
+    for i in range(h):
+        up = mean_p[i]
+        mid = mean_p[i + 1]
+        dn = mean_p[i + 2]
+        for j in range(w):
+            Ix = eighth * ((up[j + 2] - up[j]) + two * (mid[j + 2] - mid[j]) + (dn[j + 2] - dn[j]))
+            Iy = eighth * ((dn[j] - up[j]) + two * (dn[j + 1] - up[j + 1]) + (dn[j + 2] - up[j + 2]))
+            It = f1[i, j] - f0[i, j]
+            if use_weight:
+                wt = np.float32(1.0) if weight[i, j] else np.float32(0.0)
+                Ix *= wt
+                Iy *= wt
+                It *= wt
+            P[i, j, 0] = Ix * Ix
+            P[i, j, 1] = Ix * Iy
+            P[i, j, 2] = Iy * Iy
+            P[i, j, 3] = Ix * It
+            Q[i, j, 0] = Iy * It
+            if use_flow0:
+                Q[i, j, 1] = flow0[i, j, 0]
+                Q[i, j, 2] = flow0[i, j, 1]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lk_solve(S, T, min_eigenvalue, check_inside, use_flow0, flow, valid) -> None:
     """Per pixel: the eigenvalue test and the 2x2 solve of eq. 2.9, written into ``flow`` and ``valid``.
 
-    With ``use_flow0`` the solve is an increment to ``flow0``; singular pixels
-    get ``flow0`` then, 0 otherwise.
+    ``S``, ``T``: the window means of :func:`_lk_products`' ``P``, ``Q``. With
+    ``use_flow0`` the solve is an increment to the window mean of ``flow0``
+    (``T[..., 1:]``); singular pixels get that mean then, 0 otherwise.
 
     The smallest eigenvalue of ``[[Sxx, Sxy], [Sxy, Syy]]`` reaches ``m`` exactly
     when ``m <= trace / 2`` and the characteristic polynomial
     ``m^2 - trace m + det`` is not negative at ``m`` (``m`` lies at or below
     both roots), which needs no square root.
     """
-    h, w = Sxx.shape
+    h, w = S.shape[:2]
     m = min_eigenvalue
     zero = np.float32(0.0)
+    one = np.float32(1.0)
     for i in range(h):
         for j in range(w):
-            a = Sxx[i, j]
-            b = Sxy[i, j]
-            c = Syy[i, j]
+            a = S[i, j, 0]  # Sxx
+            b = S[i, j, 1]  # Sxy
+            c = S[i, j, 2]  # Syy
+            Sxt = S[i, j, 3]
+            Syt = T[i, j, 0]
             trace = a + c
             det = a * c - b * b
-            ok = (m + m <= trace) and (m * m - m * trace + det >= zero)
-            if ok:
-                inv_det = np.float32(1.0) / det
-                # eq. 2.9: (Vx, Vy) = -(A^T A)^-1 A^T It
-                u = (b * Syt[i, j] - c * Sxt[i, j]) * inv_det
-                v = (b * Sxt[i, j] - a * Syt[i, j]) * inv_det
-                if use_flow0:
-                    u += flow0[i, j, 0]
-                    v += flow0[i, j, 1]
-                if check_inside:
-                    x = np.float32(j) + u
-                    y = np.float32(i) + v
-                    ok = x >= zero and x <= np.float32(w - 1) and y >= zero and y <= np.float32(h - 1)
-            elif use_flow0:
-                u = flow0[i, j, 0]
-                v = flow0[i, j, 1]
-            else:
-                u = zero
-                v = zero
+            ok = (m + m <= trace) & (m * m - m * trace + det >= zero)
+            # branch-free, so that the loop vectorises; det may be 0 where not ok
+            inv_det = one / (det if ok else one)
+            # eq. 2.9: (Vx, Vy) = -(A^T A)^-1 A^T It
+            u = (b * Syt - c * Sxt) * inv_det if ok else zero
+            v = (b * Sxt - a * Syt) * inv_det if ok else zero
+            if use_flow0:
+                u += T[i, j, 1]
+                v += T[i, j, 2]
+            if check_inside:
+                x = np.float32(j) + u
+                y = np.float32(i) + v
+                ok &= (x >= zero) & (x <= np.float32(w - 1)) & (y >= zero) & (y <= np.float32(h - 1))
             flow[i, j, 0] = u
             flow[i, j, 1] = v
             valid[i, j] = ok
@@ -103,16 +138,6 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
         Where the smallest eigenvalue reaches ``min_eigenvalue`` (and, with
         ``check_inside``, ``x + flow`` lies inside the frame).
     """
-    # Ix, Iy at t + 1/2: Sobel 3x3 (central difference with [1, 2, 1] smoothing, /8)
-    # of the mean of both frames, as the derivatives in eq. 2.4 are taken between them.
-    mean = cv2.addWeighted(f0, 0.5, f1, 0.5, 0.0, dtype=cv2.CV_32F)
-    Ix = cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
-    Iy = cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
-    It = cv2.subtract(f1, f0, dtype=cv2.CV_32F)
-    if weight is not None:
-        w = weight.astype(np.float32)
-        Ix, Iy, It = cv2.multiply(Ix, w), cv2.multiply(Iy, w), cv2.multiply(It, w)
-
     if gaussian_window:
         sigma = window / 4.0
 
@@ -122,17 +147,23 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
         def window_mean(a: np.ndarray) -> np.ndarray:
             return cv2.blur(a, (window, window), borderType=cv2.BORDER_REPLICATE)
 
-    # A^T A and A^T b of eq. 2.8, averaged over the window
-    Sxx = window_mean(cv2.multiply(Ix, Ix))
-    Sxy = window_mean(cv2.multiply(Ix, Iy))
-    Syy = window_mean(cv2.multiply(Iy, Iy))
-    Sxt = window_mean(cv2.multiply(Ix, It))
-    Syt = window_mean(cv2.multiply(Iy, It))
-    flow = np.empty(f0.shape + (2,), dtype=FLOW_DTYPE)
-    valid = np.empty(f0.shape, dtype=np.bool_)
+    h, w = f0.shape
     use_flow0 = flow0 is not None
-    start = window_mean(np.ascontiguousarray(flow0, dtype=np.float32)) if use_flow0 else flow
-    _lk_solve(Sxx, Sxy, Syy, Sxt, Syt, np.float32(min_eigenvalue), check_inside, start, use_flow0, flow, valid)
+    use_weight = weight is not None
+    P = np.empty((h, w, 4), dtype=np.float32)
+    Q = np.empty((h, w, 3 if use_flow0 else 1), dtype=np.float32)
+    f0 = np.ascontiguousarray(f0, dtype=np.float32)
+    f1 = np.ascontiguousarray(f1, dtype=np.float32)
+    mean = cv2.addWeighted(f0, 0.5, f1, 0.5, 0.0, dtype=cv2.CV_32F)
+    mean_p = cv2.copyMakeBorder(mean, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
+    _lk_products(mean_p, f0, f1, weight if use_weight else np.ones((1, 1), dtype=np.bool_), use_weight,
+                 flow0 if use_flow0 else np.zeros((1, 1, 2), dtype=np.float32), use_flow0, P, Q)
+    # A^T A and A^T b of eq. 2.8, averaged over the window: 4 + 1 (+ 2 of flow0) channels
+    S = window_mean(P)
+    T = window_mean(Q).reshape(h, w, -1)
+    flow = np.empty((h, w, 2), dtype=FLOW_DTYPE)
+    valid = np.empty((h, w), dtype=np.bool_)
+    _lk_solve(S, T, np.float32(min_eigenvalue), check_inside, use_flow0, flow, valid)
     return flow, valid
 
 
