@@ -110,7 +110,7 @@ def cmd_list(args: argparse.Namespace) -> int:
         print(f"{title}:")
         width = max((len(k) for k in items), default=0)
         for name, desc in sorted(items.items()):
-            print(f"  {name:<{width}}  {desc}".rstrip())
+            print(f"  {name:<{width}}  {_one_line(desc, 110)}".rstrip())
         print()
     return EXIT_OK
 
@@ -212,9 +212,17 @@ def cmd_eval_flow(args: argparse.Namespace) -> int:
 
     if not Path(args.dir).is_dir():
         raise UsageError(f"{args.dir}: no such folder")
+    import algorithms.pipeline  # noqa: F401  (importing it registers every flow method)
+    from algorithms.registry import get_flow_method
+
+    try:
+        get_flow_method(args.method)
+    except KeyError as exc:
+        raise UsageError(f"--method: {exc.args[0]}") from None
     table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method)
     pairs = table["scene"].nunique()
     summary = aggregate(table, by=["pipeline"])
+    summary["count"] = summary["count"].astype("int64")
     cols = ["pipeline", "metric", "value", "unit", "count"]
     print(f"{args.method} on {pairs} {args.format} pair(s) in {args.dir}:")
     print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))

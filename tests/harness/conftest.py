@@ -5,23 +5,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import copy
+
 import pytest
 import yaml
+from harness_testdata import HERE, RESUME_SUITE, ROOT
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
-
-# The smallest suite that still goes through every stage: the tiny preset, few frames.
-TINY_SUITE = {
-    "name": "test-tiny",
-    "description": "two pipelines on a short tiny scene",
-    "scenes": [{"preset": "tiny", "overrides": {"image.n_frames": 4}}],
-    "seeds": [1],
-    "pipelines": ["thesis-lk", "dis"],
-    "picture_pairs": [0],
-}
 
 
 @pytest.fixture(scope="session")
@@ -50,3 +40,16 @@ def cli_env(render_cache) -> dict:
     env["AEROBENCH_CACHE"] = str(render_cache)
     env["PYOPENGL_PLATFORM"] = "egl"
     return env
+
+
+@pytest.fixture(scope="session")
+def reference_run(tmp_path_factory, render_cache):
+    """RESUME_SUITE run uninterrupted on one worker: the numbers every other run must reproduce."""
+    from harness.runner import run_suite
+    from harness.suites import parse_suite
+
+    out = tmp_path_factory.mktemp("runs") / "reference"
+    result = run_suite(parse_suite(copy.deepcopy(RESUME_SUITE)), out, workers=1, cache_dir=render_cache,
+                       progress=False)
+    assert result.ok, result.failed_cells
+    return result

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, TINY_SUITE
+from harness_testdata import ROOT, TINY_SUITE
 
 from harness.cli import main
 
@@ -77,6 +77,8 @@ def test_usage_errors_exit_2(tmp_path, capsys):
     assert main(["run", "smoke", "--out", str(tmp_path / "r"), "--executor", "dask"]) == 2
     assert "scheduler" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+    assert main(["eval-flow", str(tmp_path), "--format", "middlebury", "--method", "lucsa_kanade"]) == 2
+    assert "unknown flow method 'lucsa_kanade'; valid: " in capsys.readouterr().err
 
 
 @pytest.mark.gl

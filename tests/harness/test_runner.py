@@ -13,39 +13,14 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from conftest import ROOT, TINY_SUITE
+from harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
 
 from harness.results import read_results, read_run_json
 from harness.runner import RunFolderError, run_suite
 from harness.suites import parse_suite
 
-# Six cells: enough that a kill after the first complete cell leaves work to resume.
-RESUME_SUITE = {**copy.deepcopy(TINY_SUITE), "name": "test-resume", "seeds": [1, 2],
-                "pipelines": ["thesis-lk", "thesis-hs", "dis"]}
-
-KEY = ["scene", "seed", "pipeline", "sweep_param", "sweep_value", "metric", "region", "motion",
-       "frame", "track_id"]
-
-
-def accuracy_table(table: pd.DataFrame) -> pd.DataFrame:
-    """The accuracy rows of a results table (timings vary run to run), in a canonical order."""
-    acc = table[table["kind"] == "accuracy"]
-    cols = [*KEY, "value", "sum", "count", "hist", "status"]
-    return acc[cols].sort_values(KEY, na_position="first").reset_index(drop=True)
-
-
 def _partial_files(run_dir: Path) -> list[str]:
     return [str(p) for p in run_dir.rglob("*") if p.name.startswith((".tmp-", ".old-")) or p.name.endswith(".tmp")]
-
-
-@pytest.fixture(scope="module")
-def reference_run(tmp_path_factory, render_cache):
-    """RESUME_SUITE run uninterrupted on one worker: the numbers every other run must reproduce."""
-    out = tmp_path_factory.mktemp("runs") / "reference"
-    result = run_suite(parse_suite(copy.deepcopy(RESUME_SUITE)), out, workers=1, cache_dir=render_cache,
-                       progress=False)
-    assert result.ok, result.failed_cells
-    return result
 
 
 @pytest.mark.gl
@@ -133,9 +108,6 @@ def test_kill_and_resume_finishes_with_the_same_numbers(reference_run, tmp_path,
     finally:
         proc.wait(timeout=30)
     assert not (out / "results.parquet").exists(), "the run finished before it was killed"
-
-    again = _cli(["run", str(suite), "--out", str(out)], cli_env)
-    assert again.returncode == 2 and "--resume" in again.stderr  # refused without --resume
 
     resumed = _cli(["run", str(suite), "--out", str(out), "--resume", "--workers", "2", "--quiet", "--no-report"],
                    cli_env)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import copy
 
 import pytest
-from conftest import TINY_SUITE
+from harness_testdata import TINY_SUITE
 
 from harness.suites import SuiteError, builtin_suites, expand, load_suite, parse_suite
 
