@@ -32,6 +32,7 @@ __all__ = [
     "read_stabilisation",
     "read_tracks",
     "picture_frames",
+    "read_frame_truth",
 ]
 
 # The results-table columns of docs/architecture.md (harness.results adds kind, hist, schema_version).

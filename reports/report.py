@@ -78,6 +78,7 @@ pre { white-space: pre-wrap; word-break: break-word; background: var(--bg-alt); 
   main { max-width: none; padding: 0; }
   .scroll { overflow: visible; }
   pre { max-height: none; overflow: visible; }
+  details > *:not(summary) { display: block; }
   figure, table, .gallery { break-inside: avoid; page-break-inside: avoid; }
   h2 { break-after: avoid; page-break-after: avoid; }
   td.best, td.worse { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
@@ -207,8 +208,11 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
         word = {True: "PASSED", False: "FAILED"}.get(gate["passed"], "UNKNOWN")
         extra = "" if gate["verdict"].strip().upper() in (word, word[:-2]) else f' ({_e(gate["verdict"])})'
         out.append(f'<div class="verdict {cls}">Gate: {word}{extra}</div>')
-        if gate["messages"]:
-            out.append("<ul>" + "".join(f"<li>{_e(m)}</li>" for m in gate["messages"]) + "</ul>")
+        msgs = [f"<li>{_e(m)}</li>" for m in gate["messages"]]
+        if msgs:
+            out.append("<ul>" + "".join(msgs[:8]) + "</ul>")
+        if len(msgs) > 8:
+            out.append(f"<details><summary>{len(msgs) - 8} more</summary><ul>{''.join(msgs[8:])}</ul></details>")
         out += [f'<p class="note">{_e(n)}</p>' for n in gate["notes"]]
     else:
         out.append(_missing("No gate result was given."))
