@@ -2,15 +2,26 @@
 
 Run from the project root:
 
-    python benchmarks/flow_speed.py [--repeats 7]
+    python benchmarks/flow_speed.py [--repeats 15] [--cpu 1]
 
-Every time is the median of ``--repeats`` runs after one warm-up call (numba
-compile time is measured separately and reported). Threads are pinned to one:
-OMP/MKL/OpenBLAS/NUMBA env variables are set before the imports and
-``cv2.setNumThreads(1)``. Targets (ratios measured in the same run):
-HS 100 sweeps >= 50x faster than pyoptflow; dense single-level LK <= 5 ms;
-coarse-to-fine LK >= 20x faster than scikit-image ilk at no worse EPE;
-NCC global motion over +/-16 px <= 5 ms.
+Each method and its reference are timed in the same run, interleaved (ours,
+reference, ours, reference, ...) after one warm-up call each, and the medians
+are compared, so a machine that is busy with other work slows both alike.
+Threads are pinned to one: OMP/MKL/OpenBLAS/NUMBA env variables are set before
+the imports, ``cv2.setNumThreads(1)``, and the process is bound to one CPU
+(``--cpu``); the load average is printed before and after.
+
+Targets (ratios measured in the same run):
+HS 100 sweeps >= 50x faster than pyoptflow; dense single-level LK <= 5 ms
+(reference: the same LK written with numpy and cv2.boxFilter, about 3 ms on a
+quiet machine); coarse-to-fine LK >= 20x faster than scikit-image ilk at no
+worse EPE; NCC global motion over +/-16 px <= 5 ms (reference: matchTemplate
+with the whole central part as template, about 3 ms on a quiet machine).
+
+Endpoint errors (mean, px) are reported on three pairs: an exact sub-pixel
+Fourier shift of a smooth texture (512x512, inner part, 32 px from the edges),
+Middlebury RubberWhale and Yosemite (sky masked), the latter two from
+``/work/shared/external`` as in ``tests/algorithms/test_external.py``.
 """
 
 from __future__ import annotations
@@ -23,6 +34,7 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMB
 import argparse  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
@@ -34,6 +46,12 @@ from algorithms.global_motion import ncc_global_motion  # noqa: E402
 from algorithms.horn_schunck import horn_schunck  # noqa: E402
 from algorithms.lucas_kanade import lucas_kanade  # noqa: E402
 from algorithms.reference import dis, ilk  # noqa: E402
+from scenes.formats import read_flo  # noqa: E402
+
+EXTERNAL = Path("/work/shared/external")
+TRUTH_PX = (2.3, -1.7)
+C2F_LK = {"levels": 4, "iterations": 3}
+C2F_HS = {"levels": 4}
 
 
 def textured_pair(rng: np.random.Generator, size: int, shift_px: tuple[float, float]) -> tuple[np.ndarray, ...]:
@@ -49,73 +67,148 @@ def textured_pair(rng: np.random.Generator, size: int, shift_px: tuple[float, fl
     return [((f - lo) / (hi - lo) * 200 + 25).astype(np.float32) for f in (f0, f1)]
 
 
-def median_ms(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
+def lk_box_reference(f0: np.ndarray, f1: np.ndarray, window: int = 15) -> np.ndarray:
+    """Reference anchor: the thesis's dense LK written plainly with numpy and cv2.boxFilter."""
+    mean = 0.5 * (f0 + f1)
+    Ix = cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
+    Iy = cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3, scale=0.125, borderType=cv2.BORDER_REPLICATE)
+    It = f1 - f0
+
+    def box(a: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(a, cv2.CV_32F, (window, window), borderType=cv2.BORDER_REPLICATE)
+
+    Sxx, Sxy, Syy, Sxt, Syt = box(Ix * Ix), box(Ix * Iy), box(Iy * Iy), box(Ix * It), box(Iy * It)
+    det = Sxx * Syy - Sxy * Sxy
+    valid = 0.5 * (Sxx + Syy) - np.sqrt((0.5 * (Sxx - Syy)) ** 2 + Sxy * Sxy) >= 1e-3
+    inv_det = np.divide(1.0, det, out=np.zeros_like(det), where=valid)
+    return np.dstack([(Sxy * Syt - Syy * Sxt) * inv_det, (Sxy * Sxt - Sxx * Syt) * inv_det])
+
+
+def ncc_full_reference(f0: np.ndarray, f1: np.ndarray, s: int = 16) -> tuple[int, int]:
+    """Reference anchor: NCC over +/- s px with the whole central part of frame t as template."""
+    h, w = f0.shape
+    r = cv2.matchTemplate(f1, f0[s:h - s, s:w - s], cv2.TM_CCOEFF_NORMED)
+    iy, ix = np.unravel_index(int(np.argmax(r)), r.shape)
+    return ix - s, iy - s
+
+
+def interleaved_ms(fns: list[Callable[[], object]], repeats: int) -> list[float]:
+    """Median wall time in ms of each function, called in turn ``repeats`` times after a warm-up."""
+    for fn in fns:
         fn()
-        times.append(time.perf_counter() - t)
-    return 1000.0 * float(np.median(times))
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeats):
+        for k, fn in enumerate(fns):
+            t = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t)
+    return [1000.0 * float(np.median(t)) for t in times]
+
+
+def load_external(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Frames (uint8 gray), ground truth and the mask of known pixels, or None when missing."""
+    if name == "RubberWhale":
+        d = EXTERNAL / "middlebury" / "RubberWhale"
+        p0, p1, pf = d / "frame10.png", d / "frame11.png", d / "flow10.flo"
+    else:
+        d = EXTERNAL / "yosemite" / "yosemite"
+        p0, p1, pf = d / "yos9.png", d / "yos10.png", d / "correct_yos.flo"
+    if not (p0.exists() and p1.exists() and pf.exists()):
+        return None
+    g0 = cv2.imread(str(p0), cv2.IMREAD_GRAYSCALE)
+    g1 = cv2.imread(str(p1), cv2.IMREAD_GRAYSCALE)
+    gt = read_flo(pf)
+    known = np.isfinite(gt).all(axis=-1)
+    if name == "Yosemite":
+        known &= g0 > 0  # the black sky's ground truth is a placeholder
+    return g0, g1, gt, known
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--cpu", type=int, default=None,
+                        help="CPU to bind to (default: the highest-numbered one available)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     import numba
     numba.set_num_threads(1)
     import pyoptflow
 
-    truth = (2.3, -1.7)
-    f0, f1 = textured_pair(np.random.default_rng(0), args.size, truth)
+    cpus = sorted(os.sched_getaffinity(0))
+    cpu = args.cpu if args.cpu is not None else cpus[-1]
+    os.sched_setaffinity(0, {cpu})
+    load_before = os.getloadavg()
+
+    f0, f1 = textured_pair(np.random.default_rng(0), args.size, TRUTH_PX)
     inner = (slice(32, -32), slice(32, -32))
 
-    def epe(flow: np.ndarray) -> float:
-        return float(np.hypot(flow[..., 0] - truth[0], flow[..., 1] - truth[1])[inner].mean())
+    def synthetic_epe(flow: np.ndarray) -> float:
+        return float(np.hypot(flow[..., 0] - TRUTH_PX[0], flow[..., 1] - TRUTH_PX[1])[inner].mean())
 
     t = time.perf_counter()
     horn_schunck(f0[:16, :16], f1[:16, :16], iterations=1)
+    lucas_kanade(f0[:16, :16], f1[:16, :16], **C2F_LK)
     compile_ms = 1000.0 * (time.perf_counter() - t)
 
-    rows = []  # (name, ms, reference name, reference ms, epe, reference epe, target)
+    rows = []  # (name, ms, reference name, reference ms, target text, met)
+    n = args.repeats
 
-    def run(fn):
-        fn()  # warm-up
-        return median_ms(fn, args.repeats)
+    hs_ms, po_ms = interleaved_ms([lambda: horn_schunck(f0, f1, iterations=100),
+                                   lambda: pyoptflow.HornSchunck(f0, f1, alpha=15.0, Niter=100)], n)
+    rows.append(("horn_schunck 100 sweeps", hs_ms, "pyoptflow 100", po_ms, "ratio >= 50", po_ms / hs_ms >= 50))
 
-    hs_ms = run(lambda: horn_schunck(f0, f1, iterations=100))
-    po_ms = median_ms(lambda: pyoptflow.HornSchunck(f0, f1, alpha=15.0, Niter=100), max(3, args.repeats // 2))
-    rows.append(("horn_schunck 100 sweeps", hs_ms, "pyoptflow 100", po_ms, None, None, "ratio >= 50"))
+    lk_ms, box_ms = interleaved_ms([lambda: lucas_kanade(f0, f1), lambda: lk_box_reference(f0, f1)], n)
+    rows.append(("lucas_kanade single level", lk_ms, "numpy+boxFilter", box_ms, "<= 5 ms", lk_ms <= 5.0))
 
-    lk_ms = run(lambda: lucas_kanade(f0, f1))
-    rows.append(("lucas_kanade single level", lk_ms, "", None, None, None, "<= 5 ms"))
+    lk2_ms, ilk_ms = interleaved_ms([lambda: lucas_kanade(f0, f1, **C2F_LK), lambda: ilk(f0, f1)], n)
+    rows.append(("lucas_kanade levels 4 x 3", lk2_ms, "skimage ilk", ilk_ms, "ratio >= 20", ilk_ms / lk2_ms >= 20))
 
-    c2f = {"levels": 4, "iterations": 3}
-    lk2_ms = run(lambda: lucas_kanade(f0, f1, **c2f))
-    ilk_ms = median_ms(lambda: ilk(f0, f1), max(3, args.repeats // 2))
-    rows.append(("lucas_kanade levels 4 x 3", lk2_ms, "skimage ilk", ilk_ms,
-                 epe(lucas_kanade(f0, f1, **c2f)[0]), epe(ilk(f0, f1)[0]), "ratio >= 20, EPE <= ilk"))
+    hs2_ms, dis_ms = interleaved_ms([lambda: horn_schunck(f0, f1, **C2F_HS), lambda: dis(f0, f1)], n)
+    rows.append(("horn_schunck levels 4", hs2_ms, "cv2 DIS medium", dis_ms, "(information)", None))
 
-    hs2_ms = run(lambda: horn_schunck(f0, f1, levels=4))
-    dis_ms = run(lambda: dis(f0, f1))
-    rows.append(("horn_schunck levels 4", hs2_ms, "cv2 DIS medium", dis_ms,
-                 epe(horn_schunck(f0, f1, levels=4)[0]), epe(dis(f0, f1)[0]), "(information)"))
+    ncc_ms, full_ms = interleaved_ms([lambda: ncc_global_motion(f0, f1, max_shift=16),
+                                      lambda: ncc_full_reference(f0, f1)], n)
+    rows.append(("ncc_global_motion +/-16", ncc_ms, "whole template", full_ms, "<= 5 ms", ncc_ms <= 5.0))
 
-    ncc_ms = run(lambda: ncc_global_motion(f0, f1, max_shift=16))
-    rows.append(("ncc_global_motion +/-16", ncc_ms, "", None, None, None, "<= 5 ms"))
+    # endpoint errors: ours beside the reference on the same pairs
+    pairs = {"synthetic": (f0, f1, None, None)}
+    for name in ("RubberWhale", "Yosemite"):
+        loaded = load_external(name)
+        if loaded is not None:
+            pairs[name] = loaded
 
-    print(f"{args.size}x{args.size}, 1 thread, median of {args.repeats}; synthetic shift {truth} px; "
-          f"numba compile (first call, cache may hit) {compile_ms:.0f} ms")
-    print(f"{'method':28s} {'ms':>8s}  {'reference':16s} {'ref ms':>8s} {'ratio':>7s} {'EPE px':>7s} "
-          f"{'ref EPE':>7s}  target")
-    for name, ms, ref, ref_ms, e, ref_e, target in rows:
-        ratio = f"{ref_ms / ms:7.1f}" if ref_ms else f"{'':7s}"
-        ref_ms_s = f"{ref_ms:8.1f}" if ref_ms else f"{'':8s}"
-        e_s = f"{e:7.3f}" if e is not None else f"{'':7s}"
-        re_s = f"{ref_e:7.3f}" if ref_e is not None else f"{'':7s}"
-        print(f"{name:28s} {ms:8.1f}  {ref:16s} {ref_ms_s} {ratio} {e_s} {re_s}  {target}")
+    def epe(method: Callable, pair: tuple) -> float:
+        a, b, gt, known = pair
+        flow = method(a, b)[0]
+        if gt is None:
+            return synthetic_epe(flow)
+        return float(np.hypot(*(flow - gt)[known].T).mean())
+
+    methods = {
+        "lucas_kanade levels 4 x 3": lambda a, b: lucas_kanade(a, b, **C2F_LK),
+        "skimage ilk": ilk,
+        "horn_schunck levels 4": lambda a, b: horn_schunck(a, b, **C2F_HS),
+        "cv2 DIS medium": dis,
+    }
+    errors = {m: {p: epe(fn, pair) for p, pair in pairs.items()} for m, fn in methods.items()}
+    lk_no_worse = all(errors["lucas_kanade levels 4 x 3"][p] <= errors["skimage ilk"][p] for p in pairs)
+
+    print(f"{args.size}x{args.size}, 1 thread on CPU {cpu}, median of {n} interleaved runs; "
+          f"numba compile (first calls, cache may hit) {compile_ms:.0f} ms")
+    print(f"load average before {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f}, "
+          f"after {os.getloadavg()[0]:.2f} (2 cores: above ~1 the timings are inflated)")
+    print(f"{'method':28s} {'ms':>8s}  {'reference':16s} {'ref ms':>8s} {'ratio':>7s}  {'target':12s} met")
+    for name, ms, ref, ref_ms, target, met in rows:
+        met_s = "" if met is None else ("yes" if met else "NO")
+        print(f"{name:28s} {ms:8.1f}  {ref:16s} {ref_ms:8.1f} {ref_ms / ms:7.1f}  {target:12s} {met_s}")
+    print()
+    print(f"mean endpoint error, px (synthetic: exact shift {TRUTH_PX} px)")
+    print(f"{'method':28s}" + "".join(f" {p:>12s}" for p in pairs))
+    for m, per_pair in errors.items():
+        print(f"{m:28s}" + "".join(f" {per_pair[p]:12.4f}" for p in pairs))
+    print(f"lucas_kanade levels 4 x 3 EPE <= ilk on every pair: {'yes' if lk_no_worse else 'NO'}")
 
 
 if __name__ == "__main__":
