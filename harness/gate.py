@@ -20,7 +20,9 @@ Without a rule, accuracy metrics get ``abs`` :data:`DEFAULT_ABS` and timings
 :func:`compare` is direction-aware (an improvement never fails). Timings are
 checked only when the current machine equals the baseline's; otherwise they
 are skipped and the result says so. A baseline from another suite, or a key
-present on one side only, raises :class:`GateError` (exit code 2), never a pass.
+present on one side only, raises :class:`GateError` (exit code 2), never a pass; so does a
+comparison with nothing in it. A failed cell in the results is a failing check (exit code 1)
+even when the other seeds fill in its aggregates.
 
 Public functions
 ----------------
@@ -338,6 +340,8 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
             msg.append(f"{len(bad)} cell(s) failed: " + "; ".join(
                 f"{r.scene}/{r.pipeline}: {r.error}" for r in bad.head(5).itertuples()))
         raise GateError("metrics on one side only (re-make the baseline if the suite changed): " + " | ".join(msg))
+    if not base and not cur:
+        raise GateError("nothing to compare: neither the baseline nor the results hold a metric")
     same_machine = bool(machine) and machine == baseline.get("machine")
     if not same_machine:
         result.notes.append(f"timings skipped: baseline machine {baseline.get('machine')!r}, "
@@ -369,6 +373,16 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
                 reason = (f"{'fell' if hib else 'rose'} by {abs(cv - bv):.6g} {b['unit']}, allowed "
                           f"{allowed:.6g} {b['unit']} ({rule.mode} {rule.text or rule.tolerance})")
         result.checks.append(Check(key, str(b["unit"]), hib, kind, bv, cv, rule, status, reason))
+    # A failed cell leaves no rows, so its scene/pipeline aggregate silently comes from the other
+    # seeds (or sweep values): the keys still match and every value may pass. Never a pass.
+    if "status" in current.columns and (current["status"] != "ok").any():
+        bad = current[current["status"] != "ok"].drop_duplicates("cell_id" if "cell_id" in current else None)
+        for r in bad.to_dict("records"):
+            key = {k: str(r.get(k, "")) for k in KEY}
+            key.update(metric="cell_failed", region="all", motion="cell")
+            result.checks.append(Check(key, "", False, "accuracy", math.nan, math.nan, Rule("abs", 0.0, "failed cell"),
+                                       "fail", f"cell {r.get('cell_id', '')} seed {r.get('seed', '')} failed: "
+                                               f"{r.get('error', '') or 'no result'}"))
     return result
 
 

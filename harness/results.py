@@ -54,7 +54,7 @@ from harness.metrics import aggregate
 from scenes.formats import atomic_write_bytes
 
 __all__ = [
-    "SCHEMA_VERSION", "SCHEMA", "COLUMNS", "CELL_COLUMNS", "SUMMARY_KEYS", "SchemaError",
+    "SCHEMA_VERSION", "SCHEMA", "COLUMNS", "CELL_COLUMNS", "SUMMARY_KEYS", "ResultsError", "SchemaError",
     "rows_to_frame", "check_schema", "write_table", "read_table", "read_results", "summarize",
     "collect_cells", "write_run_json", "read_run_json", "aggregate",
     "RESULTS_FILE", "SUMMARY_FILE", "RUN_FILE", "ROWS_FILE",
@@ -88,7 +88,11 @@ SUMMARY_KEYS = ("pipeline", "scene", "sweep_param", "sweep_value")
 _DEFAULTS = {"str": "", "int64": 0, "float64": np.nan, "bool": False, "Int64": pd.NA}
 
 
-class SchemaError(ValueError):
+class ResultsError(ValueError):
+    """A results file cannot be used (the CLI reports it in one line with exit code 2)."""
+
+
+class SchemaError(ResultsError):
     """A results table does not have the schema this version of aerobench reads."""
 
 
@@ -108,7 +112,7 @@ def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
     versions = set(pd.unique(df["schema_version"]).tolist()) if len(df) else set()
     if versions - {SCHEMA_VERSION}:
         raise SchemaError(f"{source}: schema version {sorted(versions)}, this aerobench reads "
-                          f"v{SCHEMA_VERSION}; re-run the suite (or `aerobench collect`) to rebuild it")
+                          f"v{SCHEMA_VERSION}; re-run the suite into a new run folder to rebuild it")
     out = {}
     for c, dt in SCHEMA.items():
         col = df[c]
@@ -161,6 +165,11 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None:  # ENOSPC and EIO name no file: say which write failed
+            raise type(exc)(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -179,7 +188,7 @@ def read_table(path: str | os.PathLike) -> pd.DataFrame:
                           f"or another tool); this aerobench reads v{SCHEMA_VERSION}")
     if found.decode() != str(SCHEMA_VERSION):
         raise SchemaError(f"{path}: results schema v{found.decode()}, this aerobench reads v{SCHEMA_VERSION}; "
-                          "re-run the suite (or `aerobench collect`) to rebuild it")
+                          "re-run the suite into a new run folder to rebuild it")
     return check_schema(pq.read_table(path).to_pandas(), source=str(path))
 
 

@@ -47,6 +47,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None:  # ENOSPC and EIO name no file: say which write failed
+            raise type(exc)(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -64,7 +69,7 @@ def read_flo(path: str | os.PathLike) -> np.ndarray:
         raise FormatError(f"{path}: not a .flo file: {len(raw)} bytes, the header alone is 12")
     tag = np.frombuffer(raw, "<f4", 1, 0)[0]
     if tag != np.float32(FLO_TAG):
-        raise FormatError(f"{path}: not a .flo file: tag {tag!r}, expected {FLO_TAG}")
+        raise FormatError(f"{path}: not a .flo file: tag {float(tag)!r}, expected {FLO_TAG}")
     width, height = (int(x) for x in np.frombuffer(raw, "<i4", 2, 4))
     if width <= 0 or height <= 0 or width > 1_000_000 or height > 1_000_000:
         raise FormatError(f"{path}: implausible size {width}x{height} in the .flo header")
