@@ -490,9 +490,15 @@ def run_suite(
         }
         write_run_json(run_dir, run_info)
 
-        rendered, reused, failed = _execute(
-            todo, cells_dir, cache, provenance, suite, executor, workers, scheduler, progress
-        )
+        try:
+            rendered, reused, failed = _execute(
+                todo, cells_dir, cache, provenance, suite, executor, workers, scheduler, progress
+            )
+        except BaseException as exc:  # Ctrl-C, a lost scheduler: say so in run.json, keep the cells
+            run_info.update(status="aborted", error=f"{type(exc).__name__}: {exc}",
+                            finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+            write_run_json(run_dir, run_info)
+            raise
         _say(progress, f"scenes: {rendered} rendered, {reused} reused from the cache ({cache})")
 
         _remove_strays(cells_dir, cells)
@@ -535,13 +541,31 @@ def _remove_strays(cells_dir: Path, cells: list[Cell]) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
 
+# A task whose worker process died is retried: first in a fresh pool with the other lost
+# tasks (most were only queued behind the one that died), then alone in a pool of its own,
+# so that one task that kills its worker cannot take an innocent task down with it.
+RETRY_ROUNDS = ("parallel", "parallel", "isolated")
+
+
+@dataclass
+class _Work:
+    """What ``_execute`` still has to do, and what it has seen so far."""
+
+    renders: list[str]  # scene keys to render
+    cells: list[tuple[Cell, dict]]  # cells ready to run, with their render result
+    rendered: int = 0
+    reused: int = 0
+    render_failed: int = 0
+
+
 def _execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, suite: Suite,
              executor: str, workers: int | None, scheduler: str | None,
              progress: bool) -> tuple[int, int, int]:
-    """Render the scenes ``todo`` needs, then run its cells as their scene becomes ready."""
-    from tqdm import tqdm
+    """Render the scenes ``todo`` needs, then run its cells as their scene becomes ready.
 
-    from harness.executors import open_executor
+    Returns (scenes rendered, scenes reused from the cache, scenes that failed to render).
+    """
+    from tqdm import tqdm
 
     if not todo:
         return 0, 0, 0
@@ -553,34 +577,101 @@ def _execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, s
         by_scene.setdefault(key, []).append(c)
         variants[key] = c.variant
     cache.mkdir(parents=True, exist_ok=True)
-    rendered = reused = failed = 0
     bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    ctx = {"cells_dir": cells_dir, "cache": cache, "provenance": provenance, "imports": imports,
+           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress}
+    work = _Work(renders=list(variants), cells=[])
+    for mode in RETRY_ROUNDS:
+        if not work.renders and not work.cells:
+            break
+        if mode == "parallel":
+            work = _round(work, ctx, executor, workers, scheduler)
+        else:  # each remaining task alone in a fresh single-worker pool
+            left = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
+                         render_failed=work.render_failed)
+            for item in [("render", k) for k in work.renders] + [("cell", c) for c in work.cells]:
+                one = _Work(renders=[item[1]] if item[0] == "render" else [],
+                            cells=[item[1]] if item[0] == "cell" else [])
+                one = _round(one, ctx, executor, 1 if executor != "dask" else None, scheduler)
+                left.renders += one.renders
+                left.cells += one.cells
+                left.rendered += one.rendered
+                left.reused += one.reused
+                left.render_failed += one.render_failed
+            work = left
+        lost = len(work.renders) + len(work.cells)
+        if lost:
+            _say(progress, f"{lost} task(s) lost with a worker process that died; retrying them")
+    # still lost after every retry: the task itself kills its worker (a crash in native code, OOM)
+    lost_msg = f"WorkerLost: the worker process died {len(RETRY_ROUNDS)} times running this"
+    for key in work.renders:
+        work.render_failed += 1
+        for c in by_scene[key]:
+            work.cells.append((c, {"path": None, "error": f"{lost_msg} scene's rendering"}))
+    for c, render in work.cells:
+        payload = _cell_payload(c, render, ctx)
+        payload["render_error"] = render.get("error") or f"{lost_msg} cell"
+        cell_task(payload)  # records the failure (in this process: it raises before any work)
+        bar.update(1)
+    bar.close()
+    return work.rendered, work.reused, work.render_failed
+
+
+def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
+    payload = _payload(c, ctx["cells_dir"], ctx["provenance"], ctx["imports"])
+    payload["sequence"] = render["path"]
+    if render.get("error"):
+        payload["render_error"] = render["error"]
+        payload["render_traceback"] = render.get("traceback", "")
+    return payload
+
+
+def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler: str | None) -> _Work:
+    """Run ``work`` on one executor; returns what was lost with a dead worker (to retry)."""
+    from harness.executors import open_executor
+
+    lost = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
+                 render_failed=work.render_failed)
+    bar = ctx["bar"]
     with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
-        pending: dict[Future, tuple[str, str]] = {}
-        for key, v in variants.items():
-            pending[pool.submit(render_task, key, v.spec, str(cache), imports)] = ("render", key)
+        pending: dict[Future, tuple[str, Any]] = {}
+
+        def submit(kind: str, item: Any) -> None:
+            try:
+                if kind == "render":
+                    v = ctx["variants"][item]
+                    fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"])
+                else:
+                    fut = pool.submit(cell_task, _cell_payload(item[0], item[1], ctx))
+            except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor
+                (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                return
+            pending[fut] = (kind, item)
+
+        for key in work.renders:
+            submit("render", key)
+        for item in work.cells:
+            submit("cell", item)
         while pending:
             done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
             for fut in done:
-                kind, key = pending.pop(fut)
+                kind, item = pending.pop(fut)
+                try:
+                    result = fut.result()
+                except Exception:  # our tasks record their own failures: this is a lost worker
+                    (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                    continue
                 bar.update(1)
-                result = fut.result()  # our tasks catch their own failures; this is a lost worker
                 if kind == "render":
                     if result["error"]:
-                        failed += 1
+                        lost.render_failed += 1
                     elif result["reused"]:
-                        reused += 1
+                        lost.reused += 1
                     else:
-                        rendered += 1
-                    for c in by_scene[key]:
-                        payload = _payload(c, cells_dir, provenance, imports)
-                        payload["sequence"] = result["path"]
-                        if result["error"]:
-                            payload["render_error"] = result["error"]
-                            payload["render_traceback"] = result.get("traceback", "")
-                        pending[pool.submit(cell_task, payload)] = ("cell", c.cell_id)
-                elif result["status"] != "ok" and progress:
-                    bar.write(f"cell {key} failed: {result['error']}", file=sys.stderr)
-    bar.close()
-    return rendered, reused, failed
+                        lost.rendered += 1
+                    for c in ctx["by_scene"][item]:
+                        submit("cell", (c, result))
+                elif result["status"] != "ok" and ctx["progress"]:
+                    bar.write(f"cell {result['cell_id']} failed: {result['error']}", file=sys.stderr)
+    return lost
