@@ -69,7 +69,8 @@ def check_executor(kind: str, *, workers: int | None = None, scheduler: str | No
 
 @contextmanager
 def open_executor(
-    kind: str = "process", *, workers: int | None = None, scheduler: str | None = None
+    kind: str = "process", *, workers: int | None = None, scheduler: str | None = None,
+    connect_timeout_s: float = 10.0,
 ) -> Iterator[Executor]:
     """An executor of ``kind``, shut down (and its cluster closed) on exit.
 
@@ -81,6 +82,8 @@ def open_executor(
         Ignored for ``dask`` (the cluster has its own workers).
     scheduler : str, optional
         Scheduler address; required for ``dask``, refused for the others.
+    connect_timeout_s : float
+        How long to try reaching the ``dask`` scheduler before giving up.
     """
     check_executor(kind, workers=workers, scheduler=scheduler)
     n = workers or default_workers()
@@ -96,7 +99,7 @@ def open_executor(
     distributed = _import_distributed()
     if kind == "dask":
         try:
-            client = distributed.Client(scheduler, timeout="10s")
+            client = distributed.Client(scheduler, timeout=f"{connect_timeout_s}s")
         except (OSError, TimeoutError) as exc:
             raise ExecutorError(f"cannot reach the dask scheduler at {scheduler}: {exc}") from None
         try:

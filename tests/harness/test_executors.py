@@ -65,3 +65,27 @@ def test_dask_local_cluster_gives_the_process_pool_numbers(tmp_path, render_cach
     acc = accuracy_table(dask.table)
     assert len(acc) > 0
     pd.testing.assert_frame_equal(acc, accuracy_table(process))
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_an_existing_dask_scheduler_runs_the_cells(tmp_path, render_cache, reference_run):
+    distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    from harness.runner import run_suite
+    from harness.suites import parse_suite
+
+    one_cell = {**copy.deepcopy(TINY_SUITE), "pipelines": ["dis"]}
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  silence_logs=40) as cluster:
+        result = run_suite(parse_suite(one_cell), tmp_path / "run", executor="dask",
+                           scheduler=cluster.scheduler_address, cache_dir=render_cache, progress=False)
+    assert result.ok, result.failed_cells
+    process = reference_run.table[reference_run.table["cell_id"].isin(set(result.table["cell_id"]))]
+    pd.testing.assert_frame_equal(accuracy_table(result.table), accuracy_table(process))
+
+
+def test_an_unreachable_scheduler_is_a_clear_error():
+    pytest.importorskip("distributed")
+    with pytest.raises(ExecutorError, match=r"cannot reach the dask scheduler at tcp://127.0.0.1:9"):
+        with open_executor("dask", scheduler="tcp://127.0.0.1:9", connect_timeout_s=0.5):
+            pass
