@@ -209,8 +209,8 @@ def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, le
     -------
     flow : ndarray, (H, W, 2) float32
         (u, v) in px, forward t -> t+1, at the pixel centres of frame t. Where the
-        system is singular the flow is 0 at one scale (and the coarser level's
-        estimate in the coarse-to-fine form) and ``valid`` is False.
+        system is singular the flow is 0 at one scale (in the coarse-to-fine form,
+        the window mean of the estimate it started from) and ``valid`` is False.
     valid : ndarray, (H, W) bool
         Non-singular system and ``x + flow`` inside frame t+1.
     """
