@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 from harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
 
+from harness.cli import main
 from harness.results import read_results, read_run_json
 from harness.runner import RunFolderError, run_suite
 from harness.suites import parse_suite
@@ -59,7 +60,7 @@ def test_two_workers_give_the_same_numbers(reference_run, tmp_path, render_cache
 
 @pytest.mark.gl
 @pytest.mark.slow
-def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache):
+def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache, write_suite, capsys):
     # the plugin's flow method raises on 64 px wide frames only: one scene of two fails
     suite = {**copy.deepcopy(TINY_SUITE), "name": "test-failing", "imports": ["aerobench_test_plugin"],
              "scenes": [{"preset": "tiny", "overrides": {"image.n_frames": 3}},
@@ -67,10 +68,12 @@ def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache):
                          "overrides": {"image.n_frames": 3, "image.width_px": 64, "image.height_px": 48}}],
              "pipelines": [{"name": "explodes-on-narrow", "base": "thesis-lk",
                             "spec": {"flow": {"method": "raise_on_narrow", "params": {}}}}]}
-    result = run_suite(parse_suite(suite), tmp_path / "run", workers=2, cache_dir=render_cache, progress=False)
-    assert result.status == "failed"
-    assert len(result.failed_cells) == 1 and "narrow" in result.failed_cells[0]
-    assert "planned failure on a narrow frame" in result.failed_cells[0]
+    code = main(["run", str(write_suite(suite)), "--out", str(tmp_path / "run"), "--workers", "2",
+                 "--cache", str(render_cache), "--quiet", "--no-report"])
+    assert code == 1  # the run finished, and says that something failed
+    err = capsys.readouterr().err
+    assert "1 of 2 cells failed" in err
+    assert "narrow" in err and "planned failure on a narrow frame" in err
     table = read_results(tmp_path / "run")
     failed = table[table["status"] == "failed"]
     assert set(failed["scene"]) == {"narrow"}
