@@ -20,11 +20,12 @@ from algorithms.registry import FLOW_METHODS, register_flow
 GL_FAIL_WIDTH_PX = 72
 
 
-def die_once(frame0, frame1, *, marker: str = ""):
-    """Zero flow; SIGKILL of the own process while ``marker`` exists (the marker is removed first)."""
+def die_once(frame0, frame1, *, marker: str = "", always: bool = False):
+    """Zero flow; SIGKILL of the own process while ``marker`` exists (removed first unless ``always``)."""
     g0, _ = check_frame_pair(frame0, frame1)
     if marker and os.path.exists(marker):
-        os.remove(marker)
+        if not always:
+            os.remove(marker)
         os.kill(os.getpid(), signal.SIGKILL)
     return np.zeros((*g0.shape, 2), np.float32), np.ones(g0.shape, bool)
 
