@@ -265,6 +265,9 @@ def _cell_index(data: RunData) -> pd.DataFrame:
 def _variant_for(data: RunData, cells: pd.DataFrame, base: str, want) -> tuple[pd.DataFrame, Path | None]:
     """The first variant (scene label, seed) of scene ``base`` whose cells satisfy ``want(cell_dir)``."""
     sub = cells[cells["scene"].map(scene_base) == base]
+    # the easiest setting first (lowest sweep value, then lowest seed): the base case the thesis shows
+    sub = sub.assign(_x=pd.to_numeric(sub["sweep_value"], errors="coerce")).sort_values(
+        ["_x", "sweep_value", "seed", "cell_id"], kind="stable").drop(columns="_x")
     for (label, seed), g in sub.groupby(["scene", "seed"], sort=False):
         dirs = [data.run_dir / "cells" / c for c in g["cell_id"]]
         if any(want(d) for d in dirs):
