@@ -141,11 +141,11 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
     if gaussian_window:
         sigma = window / 4.0
 
-        def window_mean(a: np.ndarray) -> np.ndarray:
-            return cv2.GaussianBlur(a, (window, window), sigma, borderType=cv2.BORDER_REPLICATE)
+        def window_mean(a: np.ndarray) -> np.ndarray:  # in place: fewer fresh pages per call
+            return cv2.GaussianBlur(a, (window, window), sigma, dst=a, borderType=cv2.BORDER_REPLICATE)
     else:
         def window_mean(a: np.ndarray) -> np.ndarray:
-            return cv2.blur(a, (window, window), borderType=cv2.BORDER_REPLICATE)
+            return cv2.blur(a, (window, window), dst=a, borderType=cv2.BORDER_REPLICATE)
 
     h, w = f0.shape
     use_flow0 = flow0 is not None
