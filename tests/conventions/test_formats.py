@@ -72,3 +72,13 @@ def test_truncated_png_is_an_error_not_an_image(tmp_path):
     (tmp_path / "t.png").write_bytes(data[: len(data) // 2])
     with pytest.raises(FormatError, match="t.png: not a readable PNG"):
         read_png(tmp_path / "t.png")
+
+
+def test_written_files_get_the_ordinary_mode_not_mkstemps_0600(tmp_path):
+    import os
+    import stat
+
+    write_png(tmp_path / "m.png", np.zeros((4, 4), np.uint8))
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE((tmp_path / "m.png").stat().st_mode) == 0o666 & ~mask
