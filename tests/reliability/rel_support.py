@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pandas as pd
 
+ROOT = Path(__file__).resolve().parents[2]  # the project: where `python -m harness.cli` runs
+
 # Four cells on a three-frame tiny scene: every stage runs, the whole run takes seconds.
 SUITE = {
     "name": "reliability",

@@ -16,9 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT
 from rel_plugin import GL_FAIL_WIDTH_PX
-from rel_support import assert_all_readable, assert_bit_identical, partial_files, suite, tree_state
+from rel_support import ROOT, assert_all_readable, assert_bit_identical, partial_files, suite, tree_state
 
 from harness.results import read_results, read_run_json
 from harness.runner import run_suite
