@@ -249,7 +249,10 @@ def cmd_gate(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
     if not Path(args.baseline).is_file():
         raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
-    rules = gate.load_rules(args.rules or DEFAULT_RULES)
+    if args.rules is None and not DEFAULT_RULES.is_file():  # an install without the package data
+        print(f"aerobench: warning: {DEFAULT_RULES} is missing; gating with the built-in defaults",
+              file=sys.stderr)
+    rules = gate.load_rules(args.rules or (DEFAULT_RULES if DEFAULT_RULES.is_file() else None))
     outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)
     print(markdown)
