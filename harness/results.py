@@ -28,7 +28,7 @@ Public functions
 ----------------
 rows_to_frame(rows, **cell_columns)   metric rows (dicts) + cell columns -> typed DataFrame
 check_schema(df, *, source)           validate / coerce a DataFrame to the schema
-write_table(df, path)                 atomic parquet write (temp + fsync + rename)
+write_table(df, path)                 atomic parquet write (scenes.formats.atomic_write_bytes)
 read_table(path)                      read one parquet file, schema version checked
 read_results(run_dir)                 RUN/results.parquet, schema version checked
 summarize(df)                         per pipeline x scene x sweep x metric x region x motion
@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -157,22 +156,10 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
     meta = dict(table.schema.metadata or {})
     meta[_META_KEY] = str(SCHEMA_VERSION).encode()
     table = table.replace_schema_metadata(meta)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        pq.write_table(table, tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if exc.filename is None:  # ENOSPC and EIO name no file: say which write failed
-            raise type(exc)(exc.errno, exc.strerror or str(exc), str(path)) from exc
-        raise
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    # one home for atomic writes (temp file, fsync, rename; umask mode; ENOSPC names the file)
+    atomic_write_bytes(path, sink.getvalue().to_pybytes())
     return path
 
 

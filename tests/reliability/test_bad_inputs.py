@@ -425,24 +425,46 @@ def _enospc(*_a, **_k):
     raise OSError(errno.ENOSPC, "No space left on device")
 
 
+class FullDisk(io.BytesIO):
+    """``os.fdopen`` of a disk that fills up: writes to temp files named ``.<FULL>.*`` raise ENOSPC."""
+
+    full: tuple[str, ...] = ()
+
+    def __init__(self, fd, *a, **k):
+        self.name = os.path.basename(os.readlink(f"/proc/self/fd/{fd}"))
+        self.fd = fd
+        super().__init__()
+
+    def write(self, data):
+        if self.name.startswith(self.full):
+            _enospc()
+        return os.write(self.fd, data)
+
+    def fileno(self):
+        return self.fd
+
+    def close(self):
+        if not self.closed:
+            os.close(self.fd)
+        super().close()
+
+
+def full_disk(monkeypatch, *names: str) -> None:
+    monkeypatch.setattr(FullDisk, "full", tuple(f".{n}." for n in names))
+    monkeypatch.setattr(os, "fdopen", FullDisk)
+
+
 def test_disk_full_in_an_atomic_write_keeps_the_old_file(tmp_path, monkeypatch):
     target = tmp_path / "run.json"
     target.write_text('{"status": "ok"}\n')
-
-    class FullDisk(io.BytesIO):
-        def __init__(self, fd, *a, **k):
-            os.close(fd)
-            super().__init__()
-
-        def write(self, data):
-            _enospc()
-
-    monkeypatch.setattr(os, "fdopen", FullDisk)
+    full_disk(monkeypatch, "run.json")
     with pytest.raises(OSError, match=r"No space left on device: '.*run\.json'") as info:
         atomic_write_bytes(target, b'{"status": "running"}\n')
     assert info.value.errno == errno.ENOSPC
     assert target.read_text() == '{"status": "ok"}\n'
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.json"]
+    atomic_write_bytes(tmp_path / "other.json", b"{}")  # the fake disk only fills for run.json
+    assert (tmp_path / "other.json").read_bytes() == b"{}"
 
 
 def test_disk_full_while_collecting_loses_no_cell_and_resume_finishes(reference_run, tmp_path, rel_cache,
@@ -456,12 +478,8 @@ def test_disk_full_while_collecting_loses_no_cell_and_resume_finishes(reference_
     (run / R.SUMMARY_FILE).unlink()
     cells = tree_state(run / "cells")
 
-    def half_then_full(table, where, *a, **k):
-        Path(where).write_bytes(b"PAR1 half a parquet file")
-        _enospc()
-
     with monkeypatch.context() as m:
-        m.setattr(R.pq, "write_table", half_then_full)
+        full_disk(m, R.RESULTS_FILE)
         with pytest.raises(OSError, match=r"No space left on device: '.*results\.parquet'"):
             run_suite(parse_suite(suite()), run, resume=True, workers=1, cache_dir=rel_cache, progress=False)
     assert not (run / R.RESULTS_FILE).exists() and not partial_files(run)
@@ -470,6 +488,8 @@ def test_disk_full_while_collecting_loses_no_cell_and_resume_finishes(reference_
     again = run_suite(parse_suite(suite()), run, resume=True, workers=1, cache_dir=rel_cache, progress=False)
     assert again.ok and again.reused_cells == again.cells == 4
     assert_bit_identical(R.read_results(run), reference_run.table)
+    umask = int(re.search(r"Umask:\s*([0-7]+)", Path("/proc/self/status").read_text()).group(1), 8)
+    assert (run / R.RESULTS_FILE).stat().st_mode & 0o777 == 0o666 & ~umask  # as open() makes it, not mkstemp's 0600
 
 
 def _two_seed_table(failed_seed: int | None = None) -> pd.DataFrame:
