@@ -255,11 +255,11 @@ def cmd_gate(args: argparse.Namespace) -> int:
     rules = gate.load_rules(args.rules or (DEFAULT_RULES if DEFAULT_RULES.is_file() else None))
     outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)
-    print(markdown)
     if args.junit:
         atomic_write_bytes(args.junit, gate.to_junit_xml(outcome).encode())
     if args.summary:
         atomic_write_bytes(args.summary, markdown.encode())
+    print(markdown)
     return outcome.exit_code
 
 
@@ -329,6 +329,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("aerobench: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `aerobench list | head`: the reader left; nothing more to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + 13  # as a shell reports SIGPIPE
     except Exception as exc:
         if not isinstance(exc, _user_errors()) or os.environ.get("AEROBENCH_DEBUG"):
             raise
