@@ -202,8 +202,10 @@ def _deep_merge(base: dict, top: Mapping) -> dict:
     (its parameters belong to the old method)."""
     out = copy.deepcopy(base)
     for k, v in top.items():
-        same_method = not (isinstance(v, Mapping) and "method" in v and v["method"] != out.get(k, {}).get("method"))
-        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) and same_method:
+        old = out.get(k)
+        same_method = not (isinstance(v, Mapping) and isinstance(old, Mapping) and "method" in v
+                           and v["method"] != old.get("method"))
+        if isinstance(v, Mapping) and isinstance(old, Mapping) and same_method:
             out[k] = _deep_merge(dict(out[k]), v)
         else:
             out[k] = copy.deepcopy(v)

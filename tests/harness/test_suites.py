@@ -158,3 +158,19 @@ def test_duplicate_key_and_empty_lists_are_refused(write_suite):
 def test_missing_suite_names_the_builtins(tmp_path):
     with pytest.raises(SuiteError, match=r"no such suite file, and not a built-in suite \(.*smoke"):
         load_suite(tmp_path / "missing.yaml")
+
+
+def test_inline_pipeline_is_its_base_with_the_changes():
+    data = _suite(pipelines=[
+        {"name": "lk-9", "base": "thesis-lk", "spec": {"flow": {"params": {"window": 9}}}},
+        {"name": "lk-to-dis", "base": "thesis-lk", "spec": {"flow": {"method": "dis"}, "compensation": "none"}},
+    ])
+    specs = {c.pipeline: c.pipeline_spec for c in expand(parse_suite(data))}
+    assert specs["lk-9"]["name"] == "lk-9"
+    assert specs["lk-9"]["flow"] == {"method": "lucas_kanade", "params": {"window": 9}}
+    # another method does not inherit the base method's parameters
+    assert specs["lk-to-dis"]["flow"] == {"method": "dis"}
+    assert specs["lk-to-dis"]["compensation"] == "none"
+    with pytest.raises(SuiteError, match=r"pipelines\[0\] \(bad\): flow.params.windw: unknown parameter"):
+        expand(parse_suite(_suite(pipelines=[{"name": "bad", "base": "thesis-lk",
+                                              "spec": {"flow": {"params": {"windw": 9}}}}])))
