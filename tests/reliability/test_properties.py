@@ -238,3 +238,29 @@ def test_png_round_trip_is_exact(tmp_path_factory, img):
 
 def test_the_histogram_has_the_documented_bins():
     assert epe_histogram(np.array([0.0, 0.004, 99.999, 1e9])).sum() == 4 and HIST_NBINS > 10_000
+
+
+@settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(name=st.sampled_from(("thesis-lk", "thesis-hs", "pyramidal-lk", "dis", "farneback")),
+       n=st.integers(2, 4), h=st.integers(41, 56), w=st.integers(41, 56),
+       kind=st.sampled_from(("random", "constant", "black", "drifting")), seed=st.integers(0, 2**32 - 1))
+def test_pipelines_give_finite_estimates_on_degenerate_sequences(name, n, h, w, kind, seed):
+    from algorithms.pipeline import PIPELINES, Pipeline
+
+    rng = np.random.default_rng(seed)
+    base = (rng.random((h + 8, w + 8, 3)) * 255).astype(np.uint8)
+    frames = {"random": [(rng.random((h, w, 3)) * 255).astype(np.uint8) for _ in range(n)],
+              "constant": [np.full((h, w, 3), 120, np.uint8)] * n,
+              "black": [np.zeros((h, w, 3), np.uint8)] * n,
+              "drifting": [base[i:i + h, 2 * i:2 * i + w] for i in range(n)]}[kind]
+    spec = PIPELINES[name]
+    pipeline = spec if isinstance(spec, Pipeline) else Pipeline.from_dict(spec)
+    *pairs, seq = list(pipeline.run(frames, seeds=[(1, w / 2, h / 2)]))
+    assert [p.index for p in pairs] == list(range(n - 1))
+    for p in pairs:
+        for a in (p.flow_global, p.flow_total, p.flow_local, p.flow_filtered):
+            assert a.shape == (h, w, 2) and np.isfinite(a).all()
+        assert p.valid.dtype == bool and p.motion_mask.dtype == bool and np.isfinite(p.global_shift_px).all()
+    for a in (seq.shifts_px, seq.cumulative_px, seq.flight_line_px, seq.correction_px, seq.jitter_px):
+        assert np.isfinite(a).all()
+    assert seq.shifts_px.shape == (n - 1, 2) and seq.cumulative_px.shape == (n, 2)
