@@ -4,9 +4,10 @@ Run from the project root:
 
     python benchmarks/flow_speed.py [--repeats 15] [--cpu 1]
 
-Each method and its reference are timed in the same run, interleaved (ours,
-reference, ours, reference, ...) after one warm-up call each, and the medians
-are compared, so a machine that is busy with other work slows both alike.
+Each method and its reference are timed in the same process, interleaved
+(ours, reference, ours, reference, ...) after one warm-up call each, and the
+medians are compared, so a machine that is busy with other work slows both
+alike. Each row runs in a fresh process, so no row inherits another's heap.
 Threads are pinned to one: OMP/MKL/OpenBLAS/NUMBA env variables are set before
 the imports, ``cv2.setNumThreads(1)``, and the process is bound to one CPU
 (``--cpu``); the load average is printed before and after.
@@ -32,6 +33,8 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMB
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
@@ -92,8 +95,8 @@ def ncc_full_reference(f0: np.ndarray, f1: np.ndarray, s: int = 16) -> tuple[int
     return ix - s, iy - s
 
 
-def interleaved_ms(fns: list[Callable[[], object]], repeats: int) -> list[float]:
-    """Median wall time in ms of each function, called in turn ``repeats`` times after a warm-up."""
+def interleaved_ms(fns: list[Callable[[], object]], repeats: int) -> list[tuple[float, float]]:
+    """(median, best) wall time in ms of each function, called in turn ``repeats`` times after a warm-up."""
     for fn in fns:
         fn()
     times: list[list[float]] = [[] for _ in fns]
@@ -102,7 +105,7 @@ def interleaved_ms(fns: list[Callable[[], object]], repeats: int) -> list[float]
             t = time.perf_counter()
             fn()
             times[k].append(time.perf_counter() - t)
-    return [1000.0 * float(np.median(t)) for t in times]
+    return [(1000.0 * float(np.median(t)), 1000.0 * float(np.min(t))) for t in times]
 
 
 def load_external(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
@@ -124,21 +127,51 @@ def load_external(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     return g0, g1, gt, known
 
 
+# row name -> (reference name, target text, check(ours median ms, reference median ms) or None)
+ROWS = {
+    "horn_schunck 100 sweeps": ("pyoptflow 100", "ratio >= 50", lambda ms, ref: ref / ms >= 50),
+    "lucas_kanade single level": ("numpy+boxFilter", "<= 5 ms", lambda ms, ref: ms <= 5.0),
+    "lucas_kanade levels 4 x 3": ("skimage ilk", "ratio >= 20", lambda ms, ref: ref / ms >= 20),
+    "horn_schunck levels 4": ("cv2 DIS medium", "(information)", None),
+    "ncc_global_motion +/-16": ("whole template", "<= 5 ms", lambda ms, ref: ms <= 5.0),
+}
+
+
+def time_row(name: str, size: int, repeats: int) -> list[tuple[float, float]]:
+    """Interleaved (median, best) ms of one row's method and its reference."""
+    import pyoptflow
+
+    f0, f1 = textured_pair(np.random.default_rng(0), size, TRUTH_PX)
+    pair = {
+        "horn_schunck 100 sweeps": (lambda: horn_schunck(f0, f1, iterations=100),
+                                    lambda: pyoptflow.HornSchunck(f0, f1, alpha=15.0, Niter=100)),
+        "lucas_kanade single level": (lambda: lucas_kanade(f0, f1), lambda: lk_box_reference(f0, f1)),
+        "lucas_kanade levels 4 x 3": (lambda: lucas_kanade(f0, f1, **C2F_LK), lambda: ilk(f0, f1)),
+        "horn_schunck levels 4": (lambda: horn_schunck(f0, f1, **C2F_HS), lambda: dis(f0, f1)),
+        "ncc_global_motion +/-16": (lambda: ncc_global_motion(f0, f1, max_shift=16),
+                                    lambda: ncc_full_reference(f0, f1)),
+    }[name]
+    return interleaved_ms(list(pair), repeats)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15)
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--cpu", type=int, default=None,
                         help="CPU to bind to (default: the highest-numbered one available)")
+    parser.add_argument("--row", choices=sorted(ROWS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     cv2.setNumThreads(1)
     import numba
     numba.set_num_threads(1)
-    import pyoptflow
 
     cpus = sorted(os.sched_getaffinity(0))
     cpu = args.cpu if args.cpu is not None else cpus[-1]
     os.sched_setaffinity(0, {cpu})
+    if args.row:
+        print(json.dumps(time_row(args.row, args.size, args.repeats)))
+        return
     load_before = os.getloadavg()
 
     f0, f1 = textured_pair(np.random.default_rng(0), args.size, TRUTH_PX)
@@ -152,25 +185,15 @@ def main() -> None:
     lucas_kanade(f0[:16, :16], f1[:16, :16], **C2F_LK)
     compile_ms = 1000.0 * (time.perf_counter() - t)
 
-    rows = []  # (name, ms, reference name, reference ms, target text, met)
-    n = args.repeats
-
-    hs_ms, po_ms = interleaved_ms([lambda: horn_schunck(f0, f1, iterations=100),
-                                   lambda: pyoptflow.HornSchunck(f0, f1, alpha=15.0, Niter=100)], n)
-    rows.append(("horn_schunck 100 sweeps", hs_ms, "pyoptflow 100", po_ms, "ratio >= 50", po_ms / hs_ms >= 50))
-
-    lk_ms, box_ms = interleaved_ms([lambda: lucas_kanade(f0, f1), lambda: lk_box_reference(f0, f1)], n)
-    rows.append(("lucas_kanade single level", lk_ms, "numpy+boxFilter", box_ms, "<= 5 ms", lk_ms <= 5.0))
-
-    lk2_ms, ilk_ms = interleaved_ms([lambda: lucas_kanade(f0, f1, **C2F_LK), lambda: ilk(f0, f1)], n)
-    rows.append(("lucas_kanade levels 4 x 3", lk2_ms, "skimage ilk", ilk_ms, "ratio >= 20", ilk_ms / lk2_ms >= 20))
-
-    hs2_ms, dis_ms = interleaved_ms([lambda: horn_schunck(f0, f1, **C2F_HS), lambda: dis(f0, f1)], n)
-    rows.append(("horn_schunck levels 4", hs2_ms, "cv2 DIS medium", dis_ms, "(information)", None))
-
-    ncc_ms, full_ms = interleaved_ms([lambda: ncc_global_motion(f0, f1, max_shift=16),
-                                      lambda: ncc_full_reference(f0, f1)], n)
-    rows.append(("ncc_global_motion +/-16", ncc_ms, "whole template", full_ms, "<= 5 ms", ncc_ms <= 5.0))
+    rows = []  # (name, (ms, best ms), reference name, (ref ms, ref best ms), target text, met)
+    for name, (ref, target, check) in ROWS.items():
+        # a fresh process per row: the previous rows' heap (pyoptflow's, above all) would make
+        # glibc return pages to the system and later calls page-fault, skewing whichever row follows
+        out = subprocess.run([sys.executable, __file__, "--row", name, "--repeats", str(args.repeats),
+                              "--size", str(args.size), "--cpu", str(cpu)],
+                             capture_output=True, text=True, check=True)
+        ours_ms, ref_ms = json.loads(out.stdout.strip().splitlines()[-1])
+        rows.append((name, ours_ms, ref, ref_ms, target, None if check is None else check(ours_ms[0], ref_ms[0])))
 
     # endpoint errors: ours beside the reference on the same pairs
     pairs = {"synthetic": (f0, f1, None, None)}
@@ -195,14 +218,17 @@ def main() -> None:
     errors = {m: {p: epe(fn, pair) for p, pair in pairs.items()} for m, fn in methods.items()}
     lk_no_worse = all(errors["lucas_kanade levels 4 x 3"][p] <= errors["skimage ilk"][p] for p in pairs)
 
-    print(f"{args.size}x{args.size}, 1 thread on CPU {cpu}, median of {n} interleaved runs; "
+    print(f"{args.size}x{args.size}, 1 thread on CPU {cpu}, median of {args.repeats} interleaved runs, "
+          f"one process per row; "
           f"numba compile (first calls, cache may hit) {compile_ms:.0f} ms")
     print(f"load average before {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f}, "
           f"after {os.getloadavg()[0]:.2f} (2 cores: above ~1 the timings are inflated)")
-    print(f"{'method':28s} {'ms':>8s}  {'reference':16s} {'ref ms':>8s} {'ratio':>7s}  {'target':12s} met")
-    for name, ms, ref, ref_ms, target, met in rows:
+    print("median ms (best of the runs in brackets); ratio = reference / ours, of the medians")
+    print(f"{'method':28s} {'ms':>16s}  {'reference':16s} {'ref ms':>18s} {'ratio':>7s}  {'target':12s} met")
+    for name, (ms, best), ref, (ref_ms, ref_best), target, met in rows:
         met_s = "" if met is None else ("yes" if met else "NO")
-        print(f"{name:28s} {ms:8.1f}  {ref:16s} {ref_ms:8.1f} {ref_ms / ms:7.1f}  {target:12s} {met_s}")
+        print(f"{name:28s} {ms:7.1f} ({best:6.1f})  {ref:16s} {ref_ms:8.1f} ({ref_best:7.1f}) {ref_ms / ms:7.1f}  "
+              f"{target:12s} {met_s}")
     print()
     print(f"mean endpoint error, px (synthetic: exact shift {TRUTH_PX} px)")
     print(f"{'method':28s}" + "".join(f" {p:>12s}" for p in pairs))
