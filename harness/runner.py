@@ -424,7 +424,8 @@ def run_suite(
     workers : int, optional
         Worker processes (``process``, ``dask-local``); default one per core.
     resume : bool
-        Keep the complete cells already in ``out_dir`` and run the rest.
+        Keep the cells already in ``out_dir`` that succeeded with the same config hash,
+        and run the rest (failed cells are tried again).
     executor : {"process", "dask", "dask-local"}
     scheduler : str, optional
         Dask scheduler address for ``executor="dask"``.
