@@ -69,6 +69,9 @@ _DIS_PRESETS = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.D
                 "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
 
 
+_DIS_MIN_SIDE_PX = 32
+
+
 @register_flow
 def dis(frame0: np.ndarray, frame1: np.ndarray, *, preset: str = "medium") -> tuple[np.ndarray, np.ndarray]:
     """Dense Inverse Search flow (``cv2.DISOpticalFlow``, Kroeger et al. 2016).
@@ -80,6 +83,10 @@ def dis(frame0: np.ndarray, frame1: np.ndarray, *, preset: str = "medium") -> tu
     if preset not in _DIS_PRESETS:
         raise ValueError(f"preset: expected one of {sorted(_DIS_PRESETS)}, got {preset!r}")
     g0, g1 = check_frame_pair(frame0, frame1)
+    if min(g0.shape) < _DIS_MIN_SIDE_PX:
+        # OpenCV 5.0's DIS segfaults (15x48, 8x48) or raises cv2.error (20x7) below its patch scale
+        raise ValueError(f"dis: expected frames of at least {_DIS_MIN_SIDE_PX}x{_DIS_MIN_SIDE_PX} px, "
+                         f"got {g0.shape[1]}x{g0.shape[0]}")
     if np.asarray(frame0).dtype == np.uint8 and np.asarray(frame1).dtype == np.uint8:
         b0, b1 = np.round(g0).astype(np.uint8), np.round(g1).astype(np.uint8)
     else:

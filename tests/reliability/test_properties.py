@@ -85,10 +85,8 @@ def test_identical_constant_frames_give_no_motion(method, h, w, v):
 
 
 @pytest.mark.parametrize("shape", [(15, 48), (8, 48), (20, 7), (2, 2)])
-@pytest.mark.xfail(strict=True, reason="algorithms/reference.py dis: no size check; cv2 DIS segfaults on 15x48 "
-                                       "and 8x48 frames (kills the worker) and raises cv2.error on 20x7 and 2x2 "
-                                       "(reported; a ValueError below 16 px would do)")
 def test_dis_on_small_frames_is_refused_not_a_crash(shape):
+    # OpenCV 5.0's DIS segfaults on 15x48 and 8x48 frames: run it in a child so a crash fails the test
     import subprocess
     import sys
 
@@ -99,6 +97,7 @@ def test_dis_on_small_frames_is_refused_not_a_crash(shape):
             f"try:\n    dis(f0, np.roll(f0, 1, 1))\nexcept ValueError as exc:\n    print('refused:', exc)\n")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, f"exit {done.returncode}: {done.stderr[-300:]}"
+    assert "refused: dis: expected frames of at least" in done.stdout
 
 
 finite_flows = st.integers(1, 24).flatmap(lambda h: st.integers(1, 24).flatmap(lambda w: arrays(
