@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -165,3 +166,23 @@ def test_cache_keeps_the_entry_another_process_finished_first(tmp_path, monkeypa
     result = cached_sequence_result(spec, tmp_path / "cache")
     assert not result.rendered and result.path == target
     assert [p.name for p in (tmp_path / "cache").iterdir()] == [theirs.key]
+
+
+def test_a_killed_renders_partial_folder_is_removed_but_a_live_ones_is_kept(tmp_path):
+    import subprocess
+    import sys
+
+    import scenes.cache as cache
+
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 2})
+    key = cache.cache_key(spec)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True)
+    orphan = tmp_path / f".{key}.partial-{cache._HOST}-{int(dead.stdout)}-abc"
+    alive = tmp_path / f".{key}.partial-{cache._HOST}-{os.getpid()}-def"
+    other_host = tmp_path / f".{key}.partial-elsewhere-{int(dead.stdout)}-ghi"
+    for p in (orphan, alive, other_host):
+        (p / "frames").mkdir(parents=True)
+    cached_sequence_result(spec, tmp_path)
+    assert not orphan.exists()
+    assert alive.exists() and other_host.exists()  # still rendering, or another machine's: not ours to judge
