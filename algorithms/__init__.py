@@ -8,10 +8,10 @@ scikit-image or the pipeline:
   ``flow_to_color``, ``color_wheel_image`` (``algorithms.flow``)
 * registries: ``FLOW_METHODS``, ``STAGES``, ``register_flow``, ``register_stage``,
   ``get_flow_method``, ``get_stage`` (``algorithms.registry``)
-* flow methods ``flow, valid = f(frame0, frame1, **params)``: ``farneback``, ``dis``,
-  ``tvl1``, ``ilk``; ``lucas_kanade`` and ``horn_schunck`` share their modules' names (the
-  package attribute becomes the module once it is imported), so take them from
-  ``FLOW_METHODS[name]`` or ``from algorithms.lucas_kanade import lucas_kanade``
+* flow methods ``flow, valid = f(frame0, frame1, **params)``: ``lucas_kanade``,
+  ``horn_schunck`` (in ``lucas_kanade_flow`` / ``horn_schunck_flow``: a module named like
+  its function would shadow the function on the package), ``farneback``, ``dis``,
+  ``tvl1``, ``ilk``
 * global motion: ``ncc_global_motion``, ``affine_global_motion``, ``global_flow``
 * jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``spatial_filter``,
   ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
@@ -31,6 +31,8 @@ for _module, _names in {
                         "flow_to_color", "color_wheel_image"),
     "algorithms.registry": ("FLOW_METHODS", "STAGES", "register_flow", "register_stage", "get_flow_method",
                             "get_stage", "describe"),
+    "algorithms.lucas_kanade_flow": ("lucas_kanade",),
+    "algorithms.horn_schunck_flow": ("horn_schunck",),
     "algorithms.reference": ("farneback", "dis", "tvl1", "ilk"),
     "algorithms.global_motion": ("GlobalMotion", "GlobalModel", "ncc_global_motion", "affine_global_motion",
                                  "global_flow"),

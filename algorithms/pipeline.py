@@ -40,8 +40,8 @@ import cv2
 import numpy as np
 import pandas as pd
 
-import algorithms.horn_schunck  # noqa: F401  (fills FLOW_METHODS)
-import algorithms.lucas_kanade  # noqa: F401
+import algorithms.horn_schunck_flow  # noqa: F401  (fills FLOW_METHODS)
+import algorithms.lucas_kanade_flow  # noqa: F401
 import algorithms.reference  # noqa: F401
 from algorithms.filters import spatial_filter, temporal_filter, threshold_flow
 from algorithms.flow import FLOW_DTYPE, as_gray

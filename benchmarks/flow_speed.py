@@ -46,8 +46,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from algorithms.global_motion import ncc_global_motion  # noqa: E402
-from algorithms.horn_schunck import horn_schunck  # noqa: E402
-from algorithms.lucas_kanade import lucas_kanade  # noqa: E402
+from algorithms.horn_schunck_flow import horn_schunck  # noqa: E402
+from algorithms.lucas_kanade_flow import lucas_kanade  # noqa: E402
 from algorithms.reference import dis, ilk  # noqa: E402
 from scenes.formats import read_flo  # noqa: E402
 

@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 import pytest
 
-from algorithms.horn_schunck import horn_schunck
-from algorithms.lucas_kanade import lucas_kanade
+from algorithms.horn_schunck_flow import horn_schunck
+from algorithms.lucas_kanade_flow import lucas_kanade
 from scenes.formats import read_flo
 
 EXTERNAL = Path(__file__).resolve().parents[3] / "shared" / "external"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import affine_field, rotation_about, translation
 
-from algorithms.lucas_kanade import lucas_kanade
+from algorithms.lucas_kanade_flow import lucas_kanade
 from algorithms.registry import get_flow_method
 
 M = 16  # px left out at each border: the window and the warp see past the edge there
