@@ -43,8 +43,8 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     from harness.runner import RunFolderError
     from harness.suites import SuiteError
 
-    errors: list[type[BaseException]] = [UsageError, SuiteError, RunFolderError, ExecutorError,
-                                         FileNotFoundError, NotADirectoryError, IsADirectoryError]
+    # OSError: disk full, permission denied, a file vanished; its message names the file
+    errors: list[type[BaseException]] = [UsageError, SuiteError, RunFolderError, ExecutorError, OSError]
     for module, name in (("scenes.formats", "FormatError"), ("harness.gate", "GateError"),
                          ("harness.results", "ResultsError"), ("scenes", "SceneSpecError")):
         try:
@@ -58,6 +58,15 @@ def _one_line(text: str, width: int = 100) -> str:
     """``text`` on one line (lines joined by "; "), shortened to ``width`` characters."""
     lines = [line.strip() for line in (text or "").strip().splitlines() if line.strip()]
     return textwrap.shorten("; ".join(lines), width, placeholder=" ...") if lines else ""
+
+
+def _error_text(exc: BaseException) -> str:
+    """One line for a user error; an OS error says what failed and on which file."""
+    if isinstance(exc, OSError) and not isinstance(exc, FileNotFoundError | NotADirectoryError | IsADirectoryError):
+        what = exc.strerror or str(exc)
+        where = exc.filename if exc.filename is not None else "(no file named by the system)"
+        return _one_line(f"{what}: {where}", 2000)
+    return _one_line(str(exc), 2000)
 
 
 # --------------------------------------------------------------------------- list
@@ -335,7 +344,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         if not isinstance(exc, _user_errors()) or os.environ.get("AEROBENCH_DEBUG"):
             raise
-        print(f"aerobench: error: {_one_line(str(exc), 2000)}", file=sys.stderr)
+        print(f"aerobench: error: {_error_text(exc)}", file=sys.stderr)
         return EXIT_USAGE
 
 

@@ -23,6 +23,8 @@ so a run killed at any moment (SIGKILL included) finishes with the same results.
 from __future__ import annotations
 
 import fcntl
+import heapq
+import itertools
 import json
 import math
 import os
@@ -213,6 +215,8 @@ def _score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
         rows += _as_rows(score_pair(est, truth, frame=est.index))
         if est.index in pictures:
             write_flo(tmp / f"flow_{est.index:06d}.flo", est.flow_total)
+            # the total flow is dominated by the global motion: the local part shows the vehicles
+            write_flo(tmp / f"local_flow_{est.index:06d}.flo", est.flow_total - est.flow_global)
         del est, truth  # the arrays of a pair live no longer than its scoring
     if seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
@@ -370,8 +374,16 @@ def _cell_complete(cells_dir: Path, cell: Cell) -> bool:
     )
 
 
-def _clean_partial(cells_dir: Path) -> None:
-    """Temporary folders of cells that were running when a run was killed."""
+def _clean_partial(run_dir: Path) -> None:
+    """What a killed run left half-written: temp folders of running cells, and the temp files
+    of atomic writes (``.run.json.*.tmp``, ``.results.parquet.*.tmp``, ...) in the run folder.
+
+    Called with the run folder's lock held, so no other writer owns these.
+    """
+    for p in run_dir.glob(".*.tmp"):
+        if p.is_file():
+            p.unlink(missing_ok=True)
+    cells_dir = run_dir / "cells"
     for p in cells_dir.glob(".tmp-*"):
         shutil.rmtree(p, ignore_errors=True)
     for p in cells_dir.glob(".old-*"):
@@ -468,7 +480,7 @@ def run_suite(
     try:
         cells_dir = run_dir / "cells"
         cells_dir.mkdir(exist_ok=True)
-        _clean_partial(cells_dir)
+        _clean_partial(run_dir)
         old = _read_json(run_dir / "run.json")
         if resume and old is not None and old.get("config_hash") not in (None, suite_hash):
             raise RunFolderError(
@@ -485,7 +497,7 @@ def run_suite(
         run_info = {
             "suite": suite.name, "suite_source": source, "resolved_suite": suite_dict,
             "config_hash": suite_hash, "provenance": prov, "cache_dir": str(cache),
-            "cells": [_cell_entry(c) for c in cells], "status": "running",
+            "cells": [_cell_entry(c, cache) for c in cells], "status": "running",
             "started": started, "finished": None, "executor": executor,
             "workers": workers,
         }
@@ -519,9 +531,18 @@ def run_suite(
                      scenes_reused=reused, elapsed_s=time.perf_counter() - t_start)
 
 
-def _cell_entry(c: Cell) -> dict:
+def _sequence_dir(v: SceneVariant, cache: Path) -> Path:
+    """Where the render cache keeps (or will keep) the sequence of ``v``: its absolute path."""
+    from scenes.cache import cache_key
+
+    return (cache / cache_key(v.spec)).resolve()
+
+
+def _cell_entry(c: Cell, cache: Path) -> dict:
+    """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache."""
     return {"cell_id": c.cell_id, "scene": c.variant.label, "seed": c.variant.seed,
-            "pipeline": c.pipeline, "config_hash": c.config_hash}
+            "pipeline": c.pipeline, "config_hash": c.config_hash,
+            "sequence": str(_sequence_dir(c.variant, cache))}
 
 
 def _failures(cells_dir: Path, cells: list[Cell]) -> list[str]:
@@ -628,15 +649,75 @@ def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
     return payload
 
 
+# Rough cost of a pair of frames per pixel, relative to Lucas-Kanade, by flow method: only the
+# order of cells depends on it (longest first), never a result. Unknown methods count as 2.
+FLOW_COST = {"lucas_kanade": 1.0, "farneback": 1.0, "dis": 0.5, "ilk": 2.0, "horn_schunck": 4.0, "tvl1": 8.0}
+
+
+def _scene_cost(v: SceneVariant) -> float:
+    """Frames x pixels of a scene variant (the work of rendering it, and of each of its cells)."""
+    img = getattr(v.spec, "image", None)
+    if img is None:
+        return 1.0
+    return float(img.n_frames) * float(img.width_px) * float(img.height_px)
+
+
+def cell_cost(cell: Cell) -> float:
+    """Estimated work of a cell: frames x pixels x the flow method's :data:`FLOW_COST`."""
+    flow = cell.pipeline_spec.get("flow") if isinstance(cell.pipeline_spec, Mapping) else None
+    method = flow.get("method") if isinstance(flow, Mapping) else None
+    return _scene_cost(cell.variant) * FLOW_COST.get(str(method), 2.0)
+
+
+def _in_flight_limit(executor: str, workers: int | None) -> int | None:
+    """Tasks handed to the executor at once: one per worker and one queued behind them.
+
+    Holding the rest back lets the runner pick the next task when a worker frees up
+    (renders first, then the longest ready cell), instead of the pool's first-in-first-out
+    queue. A remote dask cluster has its own workers and scheduler: no limit there.
+    """
+    from harness.executors import default_workers
+
+    if executor == "dask":
+        return None
+    return (workers or default_workers()) + 1
+
+
 def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler: str | None) -> _Work:
-    """Run ``work`` on one executor; returns what was lost with a dead worker (to retry)."""
+    """Run ``work`` on one executor; returns what was lost with a dead worker (to retry).
+
+    Scheduling: renders go first, largest scene first (they unblock cells); a scene's
+    cells become ready when its render returns; whenever a worker frees up, the longest
+    ready cell (:func:`cell_cost`) is handed out, so the run does not end on a long cell
+    started last while the other workers idle.
+    """
     from harness.executors import open_executor
 
     lost = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
                  render_failed=work.render_failed)
     bar = ctx["bar"]
+    limit = _in_flight_limit(executor, workers)
+    renders = sorted(work.renders, key=lambda k: -_scene_cost(ctx["variants"][k]))
+    ready: list[tuple[float, int, tuple[Cell, dict]]] = []  # a heap: the longest cell on top
+    order = itertools.count()  # ties keep the suite's order
+
+    def make_ready(item: tuple[Cell, dict]) -> None:
+        heapq.heappush(ready, (-cell_cost(item[0]), next(order), item))
+
+    for item in work.cells:
+        make_ready(item)
     with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
         pending: dict[Future, tuple[str, Any]] = {}
+
+        def fill() -> None:
+            """Hand out tasks until the in-flight limit: renders first, then the longest cell."""
+            while renders or ready:
+                if limit is not None and len(pending) >= limit:
+                    return
+                if renders:
+                    submit("render", renders.pop(0))
+                else:
+                    submit("cell", heapq.heappop(ready)[2])
 
         def submit(kind: str, item: Any) -> None:
             try:
@@ -650,10 +731,7 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                 return
             pending[fut] = (kind, item)
 
-        for key in work.renders:
-            submit("render", key)
-        for item in work.cells:
-            submit("cell", item)
+        fill()
         while pending:
             done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
             for fut in done:
@@ -672,7 +750,8 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                     else:
                         lost.rendered += 1
                     for c in ctx["by_scene"][item]:
-                        submit("cell", (c, result))
+                        make_ready((c, result))
                 elif result["status"] != "ok" and ctx["progress"]:
                     bar.write(f"cell {result['cell_id']} failed: {result['error']}", file=sys.stderr)
+            fill()  # after a broken pool, every submit lands in ``lost`` and ``pending`` empties
     return lost

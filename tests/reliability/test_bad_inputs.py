@@ -535,9 +535,6 @@ def test_an_edit_inside_a_large_cached_file_is_detected(tmp_path):
         verify_manifest(seq)
 
 
-@pytest.mark.xfail(strict=True, reason="harness/runner.py _clean_partial removes cells/.tmp-* and .old-* only: "
-                                       "temp files of run.json / results.parquet / summary.csv that a SIGKILL left "
-                                       "in the run folder survive --resume (reported)")
 def test_resume_removes_temp_files_a_kill_left_in_the_run_folder(reference_run, tmp_path, rel_cache):
     from harness.runner import run_suite
     from harness.suites import parse_suite
