@@ -1,0 +1,343 @@
+"""How aerobench scales: smoke end to end, worker speed-up, peak memory per worker, suite wall time.
+
+Every figure is measured in this run (no stored reference); each subcommand prints a
+table and the command lines it ran. Run from the project root:
+
+    cd /work/main && /work/venv/bin/python benchmarks/scale.py smoke [--workers 2]
+    /work/venv/bin/python benchmarks/scale.py speedup [--repeats 3] [--cells 8]
+    /work/venv/bin/python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
+                                              [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
+    /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
+
+- ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
+  render cache, then again into a fresh run folder with the cache warm; wall times, and
+  the CLI's own "scenes: R rendered, U reused" line of each run.
+- ``speedup``: a suite of ``--cells`` cells of similar cost (one scene, one pipeline, one
+  seed per cell), cache warmed first; 1 and 2 workers run alternately ``--repeats``
+  times each; the ratio of the median wall times.
+- ``memory``: renders the scene at ``--size`` for each frame count (one child process per
+  render, its peak RSS and wall time reported), then runs each pipeline as one cell in a
+  fresh child process exactly as a pool worker runs it (``harness.runner.cell_task``); the
+  child reports its peak RSS (``ru_maxrss``) and its RSS after the imports. The cache is
+  deleted afterwards unless ``--keep`` (1920x1080 x 300 frames is ~10 GB of ``.flo``).
+- ``standard``: the ``standard`` suite, or with ``--cells N`` a subset of N of its cells
+  taken evenly over its scenes and pipelines (seed 1), timed and extrapolated to the whole
+  suite by cell count; says which.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+PY = sys.executable
+MIB = 1024 * 1024
+
+
+def _env(cache: Path | None = None) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env["PYOPENGL_PLATFORM"] = "egl"
+    if cache is not None:
+        env["AEROBENCH_CACHE"] = str(cache)
+    return env
+
+
+def _cli(args: list[str], cache: Path, shown: list[str]) -> tuple[float, subprocess.CompletedProcess]:
+    """Run ``aerobench ARGS`` in a subprocess; (wall seconds, the completed process)."""
+    cmd = [PY, "-m", "harness.cli", *args]
+    shown.append(f"AEROBENCH_CACHE={cache} " + " ".join(cmd))
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=ROOT, env=_env(cache), capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stdout + proc.stderr)
+        raise SystemExit(f"failed ({proc.returncode}): {' '.join(cmd)}")
+    return wall, proc
+
+
+def _scenes_line(proc: subprocess.CompletedProcess) -> str:
+    for line in (proc.stderr + proc.stdout).splitlines():
+        if line.startswith("scenes:"):
+            return line.strip()
+    return "(no scenes line)"
+
+
+def _table(rows: list[tuple], header: tuple) -> str:
+    cols = list(zip(header, *rows))
+    widths = [max(len(str(v)) for v in c) for c in cols]
+    lines = ["  ".join(str(v).ljust(w) for v, w in zip(r, widths)) for r in [header, *rows]]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _print_commands(shown: list[str]) -> None:
+    print("\ncommands:")
+    for c in dict.fromkeys(shown):
+        print(f"  {c}")
+
+
+# --------------------------------------------------------------------------- smoke
+
+
+def cmd_smoke(args: argparse.Namespace) -> None:
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-smoke-"))
+    cache, shown, rows = work / "cache", [], []
+    try:
+        for label, out in (("cold cache", work / "run-cold"), ("warm cache", work / "run-warm")):
+            wall, proc = _cli(["run", "smoke", "--out", str(out), "--workers", str(args.workers), "--quiet"],
+                              cache, shown)
+            report = "yes" if (out / "report.html").is_file() else "NO"
+            rows.append((label, f"{wall:.1f}", report, _scenes_line(proc)))
+        print(f"smoke suite end to end, {args.workers} workers (budget 60 s each)\n")
+        print(_table(rows, ("run", "wall_s", "report", "the run's own cache line")))
+        _print_commands(shown)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- speed-up
+
+
+def _speedup_suite(n_cells: int, frames: int, size: tuple[int, int]) -> dict:
+    return {"name": "scale-speedup", "description": "cells of similar cost for the worker speed-up",
+            "scenes": [{"preset": "nominal", "overrides": {"image.n_frames": frames, "image.width_px": size[0],
+                                                           "image.height_px": size[1]}}],
+            "seeds": list(range(1, n_cells + 1)), "pipelines": ["thesis-lk"], "picture_pairs": [0]}
+
+
+def cmd_speedup(args: argparse.Namespace) -> None:
+    import yaml
+
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-speedup-"))
+    cache, shown = work / "cache", []
+    size = tuple(int(v) for v in args.size.split("x"))
+    suite = work / "suite.yaml"
+    suite.write_text(yaml.safe_dump(_speedup_suite(args.cells, args.frames, size), sort_keys=False))
+    try:
+        _cli(["run", str(suite), "--out", str(work / "warmup"), "--workers", "2", "--quiet", "--no-report"],
+             cache, shown)
+        times: dict[int, list[float]] = {1: [], 2: []}
+        for r in range(args.repeats):
+            for w in (1, 2):  # alternately, so a slow spell of the machine hits both
+                wall, proc = _cli(["run", str(suite), "--out", str(work / f"run-{w}-{r}"), "--workers", str(w),
+                                   "--quiet", "--no-report"], cache, shown)
+                if "0 rendered" not in _scenes_line(proc):
+                    raise SystemExit(f"the cache was not warm: {_scenes_line(proc)}")
+                times[w].append(wall)
+        m1, m2 = statistics.median(times[1]), statistics.median(times[2])
+        print(f"speed-up: {args.cells} cells (nominal {args.size} x {args.frames} frames, thesis-lk, one seed each), "
+              f"warm cache, no report, median of {args.repeats} alternate runs\n")
+        rows = [(w, " ".join(f"{t:.1f}" for t in times[w]), f"{statistics.median(times[w]):.1f}") for w in (1, 2)]
+        print(_table(rows, ("workers", "runs_s", "median_s")))
+        print(f"\nspeed-up 2 workers over 1: {m1 / m2:.2f}x (target >= 1.7x)")
+        _print_commands(shown)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- memory
+
+
+def _rss_now_mib() -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def child_render(spec_json: str, cache: str) -> None:
+    """Child: render one scene into the cache; print wall time and peak RSS as JSON."""
+    from scenes import cached_sequence_result, load_scene_spec
+
+    req = json.loads(spec_json)
+    spec = load_scene_spec(req["preset"], overrides=req["overrides"])
+    rss0 = _rss_now_mib()
+    t0 = time.perf_counter()
+    res = cached_sequence_result(spec, cache)
+    print(json.dumps({"path": str(res.path), "rendered": res.rendered, "wall_s": time.perf_counter() - t0,
+                      "rss_after_imports_mib": rss0,
+                      "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def child_cell(payload_file: str) -> None:
+    """Child: run one cell as a pool worker does; print wall time and peak RSS as JSON."""
+    import harness.metrics  # noqa: F401  (what a worker has imported before its first cell)
+    import algorithms.pipeline  # noqa: F401
+    from harness.runner import cell_task
+
+    payload = json.loads(Path(payload_file).read_text())
+    rss0 = _rss_now_mib()
+    t0 = time.perf_counter()
+    out = cell_task(payload)
+    print(json.dumps({**out, "wall_s": time.perf_counter() - t0, "rss_after_imports_mib": rss0,
+                      "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def _child(args: list[str], shown: list[str]) -> dict:
+    cmd = [PY, str(Path(__file__).resolve()), *args]
+    shown.append(" ".join(cmd))
+    proc = subprocess.run(cmd, cwd=ROOT, env=_env(), capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stdout + proc.stderr)
+        raise SystemExit(f"child failed ({proc.returncode}): {' '.join(cmd)}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def cmd_memory(args: argparse.Namespace) -> None:
+    from harness.provenance import collect as collect_provenance
+    from harness.runner import _payload
+    from harness.suites import expand, parse_suite
+
+    width, height = (int(v) for v in args.size.split("x"))
+    frame_counts = [int(v) for v in args.frames.split(",")]
+    pipelines = args.pipelines.split(",")
+    cache = Path(args.cache) if args.cache else Path(tempfile.mkdtemp(prefix="aerobench-scale-mem-"))
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-mem-run-"))
+    shown: list[str] = []
+    du = shutil.disk_usage(cache if cache.exists() else cache.parent)
+    print(f"cache {cache}: {du.free / 1e9:.0f} GB free")
+    prov = collect_provenance()
+    provenance = {k: prov[k] for k in ("git_commit", "git_dirty", "machine")}
+    render_rows, cell_rows = [], []
+    try:
+        for n in frame_counts:
+            overrides = {"image.width_px": width, "image.height_px": height, "image.n_frames": n}
+            r = _child(["_render", json.dumps({"preset": args.preset, "overrides": overrides}), str(cache)], shown)
+            size_gb = sum(p.stat().st_size for p in Path(r["path"]).rglob("*") if p.is_file()) / 1e9
+            render_rows.append((f"{args.size} x {n}", "rendered" if r["rendered"] else "reused", f"{r['wall_s']:.0f}",
+                                f"{r['rss_after_imports_mib']:.0f}", f"{r['peak_rss_mib']:.0f}", f"{size_gb:.1f}"))
+            print(f"render {n} frames: {r}", flush=True)
+            suite = parse_suite({"name": "scale-memory", "description": "one scene, one seed",
+                                 "scenes": [{"preset": args.preset, "overrides": overrides}],
+                                 "seeds": [1], "pipelines": pipelines, "picture_pairs": [0]})
+            for cell in expand(suite):
+                payload = _payload(cell, work / f"cells-{n}", provenance, [])
+                payload["sequence"] = r["path"]
+                pfile = work / f"payload-{cell.cell_id}.json"
+                pfile.write_text(json.dumps(payload))
+                c = _child(["_cell", str(pfile)], shown)
+                print(f"cell {n} frames {cell.pipeline}: {c}", flush=True)
+                if c["status"] != "ok":
+                    raise SystemExit(f"cell failed: {c['error']}")
+                cell_rows.append((cell.pipeline, n, f"{c['wall_s']:.0f}", f"{c['rss_after_imports_mib']:.0f}",
+                                  f"{c['peak_rss_mib']:.0f}"))
+        print(f"\nrendering, {args.preset} preset, one child process each\n")
+        print(_table(render_rows, ("sequence", "render", "wall_s", "rss_after_imports_MiB", "peak_rss_MiB",
+                                   "on_disk_GB")))
+        print(f"\none cell per child process (harness.runner.cell_task), {args.size}\n")
+        print(_table(cell_rows, ("pipeline", "frames", "wall_s", "rss_after_imports_MiB", "peak_rss_MiB")))
+        by = {}
+        for p, n, _, _, peak in cell_rows:
+            by.setdefault(p, {})[n] = float(peak)
+        print()
+        for p, d in by.items():
+            lo, hi = min(frame_counts), max(frame_counts)
+            if lo in d and hi in d:
+                print(f"{p}: peak RSS {hi} frames / {lo} frames = {d[hi] / d[lo]:.3f} (target within 1.2); "
+                      f"{hi} frames {d[hi] / 1024:.2f} GiB (target < 1.5 GiB)")
+        _print_commands(shown)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        if not args.keep:
+            shutil.rmtree(cache, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- standard
+
+
+def cmd_standard(args: argparse.Namespace) -> None:
+    import yaml
+
+    from harness.suites import expand, load_suite
+
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-standard-"))
+    cache = Path(args.cache) if args.cache else work / "cache"
+    shown: list[str] = []
+    full = load_suite("standard")
+    n_full = len(expand(full))
+    try:
+        if args.cells:
+            data = full.model_dump(mode="json")
+            # a subset spread over scenes and pipelines: scene i with pipeline i (mod), seed 1
+            scenes, pipes = data["scenes"], data["pipelines"]
+            picks = [(scenes[i % len(scenes)], pipes[i % len(pipes)]) for i in range(args.cells)]
+            names = []
+            for k, (sc, pp) in enumerate(picks):
+                sub = {**data, "name": f"standard-part{k}", "scenes": [sc], "pipelines": [pp], "seeds": [1]}
+                path = work / f"part{k}.yaml"
+                path.write_text(yaml.safe_dump(sub, sort_keys=False))
+                names.append(path)
+            # one suite holding the picked (scene, pipeline) pairs: run them as one run
+            merged_cells = []
+            t0 = time.perf_counter()
+            for k, path in enumerate(names):
+                _cli(["run", str(path), "--out", str(work / f"run{k}"), "--workers", str(args.workers),
+                      "--quiet", "--no-report"], cache, shown)
+                merged_cells.append(path)
+            wall = time.perf_counter() - t0
+            est = wall / args.cells * n_full
+            print(f"standard subset: {args.cells} of {n_full} cells (seed 1, scene i x pipeline i), "
+                  f"{args.workers} workers, cold cache, run one after another\n")
+            print(_table([(args.cells, f"{wall:.0f}", f"{est / 60:.0f}")],
+                         ("cells", "wall_s", "extrapolated_full_min")))
+            print("(extrapolated by cell count; each subset run also renders its scene, which the full suite "
+                  "shares between 21 cells: an upper estimate)")
+        else:
+            wall, proc = _cli(["run", "standard", "--out", str(work / "run"), "--workers", str(args.workers),
+                               "--quiet"], cache, shown)
+            print(_table([(n_full, f"{wall:.0f}", _scenes_line(proc))], ("cells", "wall_s", "cache line")))
+        _print_commands(shown)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "_render":
+        return child_render(sys.argv[2], sys.argv[3])
+    if len(sys.argv) > 1 and sys.argv[1] == "_cell":
+        return child_cell(sys.argv[2])
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("smoke")
+    s.add_argument("--workers", type=int, default=2)
+    s.set_defaults(fn=cmd_smoke)
+    s = sub.add_parser("speedup")
+    s.add_argument("--repeats", type=int, default=3)
+    s.add_argument("--cells", type=int, default=8)
+    s.add_argument("--frames", type=int, default=30)
+    s.add_argument("--size", default="640x480")
+    s.set_defaults(fn=cmd_speedup)
+    s = sub.add_parser("memory")
+    s.add_argument("--frames", default="60,300")
+    s.add_argument("--size", default="1920x1080")
+    s.add_argument("--preset", default="nominal")
+    s.add_argument("--pipelines", default="thesis-lk,pyramidal-hs")
+    s.add_argument("--cache", default=None, help="render cache (default: a temp folder, deleted afterwards)")
+    s.add_argument("--keep", action="store_true", help="keep the render cache")
+    s.set_defaults(fn=cmd_memory)
+    s = sub.add_parser("standard")
+    s.add_argument("--cells", type=int, default=0, help="run a subset of this many cells and extrapolate")
+    s.add_argument("--workers", type=int, default=2)
+    s.add_argument("--cache", default=None)
+    s.set_defaults(fn=cmd_standard)
+    args = p.parse_args()
+    args.fn(args)
+
+
+if __name__ == "__main__":
+    main()
