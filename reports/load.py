@@ -33,6 +33,8 @@ __all__ = [
     "read_tracks",
     "picture_frames",
     "read_frame_truth",
+    "read_camera_flow",
+    "read_cell_flow",
 ]
 
 # The results-table columns of docs/architecture.md (harness.results adds kind, hist, schema_version).
@@ -300,6 +302,20 @@ def picture_frames(cell_dir: Path) -> list[int]:
         if tail.isdigit():
             frames.append(int(tail))
     return sorted(frames)
+
+
+def read_cell_flow(cell_dir: Path, frame: int, *, local: bool = False) -> np.ndarray | None:
+    """The flow a cell saved for pair ``frame``: ``flow_NNNNNN.flo`` (total) or, with ``local``,
+    ``local_flow_NNNNNN.flo`` (total minus the global model); None when the cell has no such file
+    (run folders written before local flow was saved have none)."""
+    p = cell_dir / f"{'local_' if local else ''}flow_{frame:06d}.flo"
+    return read_flo(p) if p.is_file() else None
+
+
+def read_camera_flow(seq_dir: Path, frame: int) -> np.ndarray | None:
+    """``flow_camera/NNNNNN.flo`` of the sequence (the camera-induced part of the true flow), or None."""
+    p = seq_dir / "flow_camera" / f"{frame:06d}.flo"
+    return read_flo(p) if p.is_file() else None
 
 
 def read_frame_truth(seq_dir: Path, frame: int) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:

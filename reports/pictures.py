@@ -14,7 +14,8 @@ from matplotlib import colormaps
 
 from algorithms.flow import color_wheel_image, flow_to_color
 
-__all__ = ["png_data_uri", "flow_row", "epe_map", "epe_colorbar", "wheel_legend"]
+__all__ = ["png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
+           "display_scale", "upscale_nearest", "mask_image"]
 
 _EPE_CMAP = "magma"
 
@@ -32,10 +33,34 @@ def png_data_uri(rgb: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
 
 
-def row_max_magnitude(truth: np.ndarray | None, estimates: list[np.ndarray], valid: np.ndarray | None) -> float:
+def display_scale(width_px: int, *, min_width_px: int = 320) -> int:
+    """The integer factor that brings a picture ``width_px`` wide to at least ``min_width_px``."""
+    if width_px <= 0:
+        raise ValueError(f"display_scale: expected a positive width, got {width_px}")
+    return max(1, -(-min_width_px // width_px))
+
+
+def upscale_nearest(rgb: np.ndarray, factor: int) -> np.ndarray:
+    """Every pixel repeated ``factor`` x ``factor`` times (nearest neighbour: no invented detail)."""
+    if factor < 1:
+        raise ValueError(f"upscale_nearest: expected a factor >= 1, got {factor}")
+    if factor == 1:
+        return rgb
+    return np.repeat(np.repeat(rgb, factor, axis=0), factor, axis=1)
+
+
+def mask_image(mask: np.ndarray) -> np.ndarray:
+    """A boolean mask as uint8 RGB: True white, False black."""
+    return np.repeat((np.asarray(mask, bool) * np.uint8(255))[..., None], 3, axis=2)
+
+
+def row_max_magnitude(truth: np.ndarray | None, estimates: list[np.ndarray], valid: np.ndarray | None,
+                      *, floor_px: float = 1e-6) -> float:
     """The magnitude [px] that saturates colours across a row: the largest true magnitude.
 
-    Without ground truth, the largest estimated magnitude. At least 1e-6.
+    Without ground truth, the largest estimated magnitude. At least ``floor_px``
+    (a local-motion row of a scene without moving vehicles has a true maximum
+    near 0, which would make every estimation error saturate).
     """
     fields = [truth] if truth is not None else estimates
     best = 0.0
@@ -46,7 +71,7 @@ def row_max_magnitude(truth: np.ndarray | None, estimates: list[np.ndarray], val
         mag = mag[np.isfinite(mag)]
         if mag.size:
             best = max(best, float(mag.max()))
-    return max(best, 1e-6)
+    return max(best, floor_px, 1e-6)
 
 
 def flow_row(flow: np.ndarray, *, max_magnitude: float, valid: np.ndarray | None = None) -> np.ndarray:

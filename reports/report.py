@@ -18,15 +18,17 @@ import numpy as np
 import pandas as pd
 
 from reports import pictures, plots
-from reports.load import (RunData, find_sequence_dir, load_run, picture_frames, read_frame_truth,
-                          read_stabilisation, read_tracks, scene_base)
+from reports.load import (RunData, find_sequence_dir, load_run, picture_frames, read_camera_flow, read_cell_flow,
+                          read_frame_truth, read_stabilisation, read_tracks, scene_base)
 from reports.tables import (Column, MetricTable, baseline_diffs, format_value, gate_view, headline_columns,
                             metric_table, per_scene_rows, region_table, sweep_curves)
-from scenes.formats import atomic_write_bytes, read_flo
+from scenes.formats import atomic_write_bytes
 
 __all__ = ["write_report", "build_report"]
 
 _MAX_PICTURE_FRAMES = 2
+_PICTURE_MIN_WIDTH_PX = 320  # tiny suites render 160 x 120: enlarge pictures to at least this width
+_LOCAL_FLOOR_PX = 1.0  # colour scale floor of the local-motion row (a scene may have no moving vehicle)
 
 _CSS = """
 :root { --fg:#1b1f24; --muted:#57606a; --line:#d0d7de; --bg-alt:#f6f8fa; --best:#dafbe1; --bad:#ffebe9; }
@@ -61,6 +63,10 @@ figcaption { color: var(--muted); font-size: 0.88em; margin-top: 4px; }
 .gallery { display: grid; grid-template-columns: repeat(auto-fill, minmax(170px, 1fr)); gap: 10px; }
 .gallery figure { margin: 0; }
 .gallery img { width: 100%; height: auto; display: block; border: 1px solid var(--line); }
+.gallery.flow { grid-template-columns: repeat(auto-fill, minmax(260px, 1fr)); margin-bottom: 10px; }
+.gallery figure.empty { border: 1px dashed var(--line); display: flex; align-items: center; justify-content: center;
+                        min-height: 80px; padding: 6px; }
+h4 { font-size: 0.95em; margin: 0.9em 0 0.2em; }
 img.pix { image-rendering: pixelated; }
 img.legend { max-width: 120px; border: none !important; }
 img.bar { width: 100%; height: 14px; }
@@ -280,6 +286,62 @@ def _img(uri: str, *, cls: str = "", alt: str) -> str:
     return f'<img class="{cls}" src="{uri}" alt="{_e(alt)}">'
 
 
+def _tile(rgb: np.ndarray, *, scale: int, alt: str, caption: str) -> str:
+    """A picture tile: ``rgb`` enlarged ``scale`` x by nearest neighbour, with its caption."""
+    uri = pictures.png_data_uri(pictures.upscale_nearest(rgb, scale))
+    return f"<figure>{_img(uri, cls='pix' if scale > 1 else '', alt=alt)}<figcaption>{_e(caption)}</figcaption></figure>"
+
+
+def _empty_tile(text: str) -> str:
+    """A placeholder that keeps the columns of the flow row and the error row aligned."""
+    return f'<figure class="empty"><p class="missing">{_e(text)}</p></figure>'
+
+
+def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], valid: np.ndarray | None, *,
+               scale: int, first_error_tile: str, what: str, floor_px: float) -> str:
+    """Two aligned galleries: [truth, each method's flow, colour wheel] and
+    [``first_error_tile``, each method's endpoint-error map, colour bar].
+
+    Colours saturate at one magnitude for the whole row (the largest true
+    magnitude, at least ``floor_px``); the error maps share one scale (the
+    largest 99th percentile of the methods' errors).
+    """
+    present = [f for f in ests.values() if f is not None]
+    max_mag = pictures.row_max_magnitude(truth, present, valid, floor_px=floor_px)
+    tiles = [_tile(pictures.flow_row(truth, max_magnitude=max_mag, valid=valid), scale=scale,
+                   alt=f"true {what} flow", caption=f"true {what} flow")
+             if truth is not None else _empty_tile(f"no true {what} flow")]
+    for pipe, flow in ests.items():
+        tiles.append(_tile(pictures.flow_row(flow, max_magnitude=max_mag), scale=scale, alt=f"{pipe} {what} flow",
+                           caption=pipe) if flow is not None else _empty_tile(f"{pipe}: no {what} flow saved"))
+    tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.wheel_legend()), cls='legend', alt='colour wheel')}"
+                 f"<figcaption>hue = direction (+x right, +y down), full saturation = {max_mag:.2f} px"
+                 "</figcaption></figure>")
+    out = [f"<div class=\"gallery flow\">{''.join(tiles)}</div>"]
+    if truth is None or not present:
+        return "".join(out)
+    errs = []
+    for flow in present:
+        d = np.hypot(*(flow.astype(np.float64) - truth.astype(np.float64)).transpose(2, 0, 1))
+        known = np.isfinite(d) & (valid if valid is not None else True)
+        if known.any():
+            errs.append(float(np.percentile(d[known], 99)))
+    err_max = max(errs + [1e-3])
+    etiles = [first_error_tile]
+    for pipe, flow in ests.items():
+        if flow is None:
+            etiles.append(_empty_tile(f"{pipe}: no {what} flow saved"))
+            continue
+        rgb, mean = pictures.epe_map(flow, truth, max_epe_px=err_max, valid=valid)
+        etiles.append(_tile(rgb, scale=scale, alt=f"{pipe} {what} endpoint error",
+                            caption=f"{pipe}: mean EPE {format_value(mean)} px"))
+    bar = _img(pictures.png_data_uri(pictures.epe_colorbar()), cls="bar", alt="EPE colour scale")
+    etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {err_max:.2f} px (largest 99th percentile "
+                  "of the row; brighter is worse; black = no ground truth)</figcaption></figure>")
+    out.append(f"<div class=\"gallery flow\">{''.join(etiles)}</div>")
+    return "".join(out)
+
+
 def _pictures_html(data: RunData, cells: pd.DataFrame) -> str:
     out = []
     for base in dict.fromkeys(cells["scene"].map(scene_base)):
@@ -290,55 +352,52 @@ def _pictures_html(data: RunData, cells: pd.DataFrame) -> str:
         label = str(g["scene"].iloc[0])
         order = {p: i for i, p in enumerate(data.pipelines)}
         g = g.sort_values("pipeline", key=lambda s: s.map(order))
-        frames = sorted(set().union(*(picture_frames(data.run_dir / "cells" / c) for c in g["cell_id"])))
+        cell_dirs = {r.pipeline: data.run_dir / "cells" / r.cell_id for r in g.itertuples(index=False)}
+        frames = sorted(set().union(*(picture_frames(d) for d in cell_dirs.values())))
         for f in frames[:_MAX_PICTURE_FRAMES]:
             img, truth, valid = read_frame_truth(seq, f) if seq is not None else (None, None, None)
-            ests = {}
-            for r in g.itertuples(index=False):
-                p = data.run_dir / "cells" / r.cell_id / f"flow_{f:06d}.flo"
-                if p.is_file():
-                    ests[r.pipeline] = read_flo(p)
+            camera = read_camera_flow(seq, f) if seq is not None else None
+            totals = {p: read_cell_flow(d, f) for p, d in cell_dirs.items()}
+            totals = {p: v for p, v in totals.items() if v is not None}
+            locals_ = {p: read_cell_flow(d, f, local=True) for p, d in cell_dirs.items() if p in totals}
             if truth is not None and valid is not None and valid.shape != truth.shape[:2]:
                 valid = None
-            max_mag = pictures.row_max_magnitude(truth, list(ests.values()), valid)
-            small = (img.shape[1] if img is not None else next(iter(ests.values())).shape[1]) < 200
-            pix = "pix" if small else ""
-            tiles = []
-            if img is not None:
-                tiles.append(f"<figure>{_img(pictures.png_data_uri(img), cls=pix, alt='frame')}"
-                             f"<figcaption>frame {f}</figcaption></figure>")
-            if truth is not None:
-                tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.flow_row(truth, max_magnitude=max_mag, valid=valid)), cls=pix, alt='ground-truth flow')}"
-                             "<figcaption>ground truth</figcaption></figure>")
-            for pipe, flow in ests.items():
-                tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.flow_row(flow, max_magnitude=max_mag)), cls=pix, alt=pipe + ' flow')}"
-                             f"<figcaption>{_e(pipe)}</figcaption></figure>")
-            tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.wheel_legend()), cls='legend', alt='colour wheel')}"
-                         f"<figcaption>colour wheel: hue = direction (+x right, +y down), full saturation = "
-                         f"{max_mag:.2f} px</figcaption></figure>")
+            width = img.shape[1] if img is not None else next(iter(totals.values())).shape[1]
+            scale = pictures.display_scale(width, min_width_px=_PICTURE_MIN_WIDTH_PX)
             where = f"{label}, seed {g['seed'].iloc[0]}, pair {f} \u2192 {f + 1}"
-            out.append(f"<h3>{_e(where)}</h3><div class=\"gallery\">{''.join(tiles)}</div>")
+            out.append(f"<h3>{_e(where)}</h3>")
             if seq is None:
                 out.append(_missing("Sequence folder not found in the cache dir: no frame or ground truth."))
-            if truth is not None and ests:
-                epes = {}
-                for pipe, flow in ests.items():
-                    d = np.hypot(*(flow.astype(np.float64) - truth.astype(np.float64)).transpose(2, 0, 1))
-                    known = np.isfinite(d) & (valid if valid is not None else True)
-                    epes[pipe] = d[known]
-                scale = max([float(np.percentile(v, 99)) for v in epes.values() if v.size] + [1e-3])
-                etiles = []
-                for pipe, flow in ests.items():
-                    rgb, mean = pictures.epe_map(flow, truth, max_epe_px=scale, valid=valid)
-                    etiles.append(f"<figure>{_img(pictures.png_data_uri(rgb), cls=pix, alt=pipe + ' endpoint error')}"
-                                  f"<figcaption>{_e(pipe)}: mean EPE {format_value(mean)} px</figcaption></figure>")
-                bar = _img(pictures.png_data_uri(pictures.epe_colorbar()), cls="bar", alt="EPE colour scale")
-                etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {scale:.2f} px (99th "
-                              "percentile of the row; brighter is worse; black = no ground truth)"
-                              "</figcaption></figure>")
-                out.append(f"<div class=\"gallery\">{''.join(etiles)}</div>")
-        out.append('<p class="note">Flow in the Middlebury colour coding, the same maximum magnitude across '
-                   "the row (the largest true magnitude); estimates beyond it saturate.</p>")
+            frame_tile = (_tile(img, scale=scale, alt="frame", caption=f"frame {f}") if img is not None
+                          else _empty_tile("frame not found"))
+            out.append("<h4>Total motion (camera and vehicles)</h4>"
+                       '<p class="note">What the pipeline estimates before the global motion is taken out. The '
+                       "camera's motion dominates it, so the field is nearly one colour; moving vehicles show "
+                       "as small deviations.</p>")
+            out.append(_flow_rows(truth, totals, valid, scale=scale, first_error_tile=frame_tile, what="total",
+                                  floor_px=1e-6))
+            true_local = truth - camera if truth is not None and camera is not None else None
+            out.append("<h4>Local motion (global motion taken out)</h4>"
+                       '<p class="note">Estimated: total flow minus the pipeline\'s global-motion field '
+                       "(local_flow files of the cells). True: ground-truth flow minus the camera-induced flow "
+                       "(flow/ minus flow_camera/), zero on the static world. A uniform tint on the background "
+                       "is the global model's error; colour saturates at the largest true local motion, at "
+                       f"least {_LOCAL_FLOOR_PX:g} px.</p>")
+            if not any(v is not None for v in locals_.values()):
+                out.append(_missing(f"The cells saved no local flow (local_flow_{f:06d}.flo; run folders written "
+                                    "before it existed have none): only the true local motion is shown."))
+                locals_ = {}
+            if true_local is None and seq is not None:
+                out.append(_missing("The sequence has no flow_camera/ file for this pair: no true local motion."))
+            if true_local is not None or locals_:
+                valid_tile = (_tile(pictures.mask_image(valid), scale=scale, alt="valid mask",
+                                    caption="ground truth known (white)") if valid is not None
+                              else _empty_tile("no valid mask"))
+                out.append(_flow_rows(true_local, locals_, valid, scale=scale, first_error_tile=valid_tile,
+                                      what="local", floor_px=_LOCAL_FLOOR_PX))
+        out.append('<p class="note">Flow in the Middlebury colour coding, one maximum magnitude per row (the '
+                   "largest true magnitude); estimates beyond it saturate. Small frames are enlarged by "
+                   "pixel repetition, never interpolated.</p>")
     return "".join(out) or _missing("No pictures.")
 
 

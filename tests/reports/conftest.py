@@ -2,7 +2,7 @@
 
 2 scenes x 3 sweep values x 5 pipelines, one seed, one failed cell, two tiny
 sequence folders (written with scenes.formats) in the cache dir named in
-run.json, and the cell artifacts (flow_000002.flo, stabilisation.csv,
+run.json, and the cell artifacts (flow_000002.flo, local_flow_000002.flo, stabilisation.csv,
 tracks.csv, error.txt). The numbers are synthetic but self-consistent: every
 row's value is sum / count, and counts differ between frames so a pooled
 aggregate differs from an average of per-frame averages.
@@ -28,6 +28,7 @@ FAILED_ERROR = "FloatingPointError: Horn-Schunck iteration diverged at pair 2 (<
 N_FRAMES = 5
 H, W = 24, 32
 PICTURE_FRAME = 2
+VEHICLE_LOCAL_PX = (3.0, 1.0)  # the moving vehicle's own image motion per pair (flow - flow_camera)
 # metric -> (unit, higher_is_better, kind), as harness.metrics registers them
 METRICS = {
     "epe_mean": ("px", False, "accuracy"),
@@ -58,9 +59,9 @@ def _write_sequence(seq: Path, rng: np.random.Generator) -> None:
     for i in range(N_FRAMES - 1):
         flow = np.stack([np.full((H, W), 2.0, np.float32) + 0.1 * xs / W,
                          np.full((H, W), -1.0, np.float32) + 0.1 * ys / H], axis=-1)
-        flow[8:14, 10:18] += np.array([3.0, 1.0], np.float32)  # a vehicle
+        write_flo(seq / "flow_camera" / f"{i:06d}.flo", flow)  # the ground's motion
+        flow[8:14, 10:18] += np.array(VEHICLE_LOCAL_PX, np.float32)  # a vehicle's own motion on top
         write_flo(seq / "flow" / f"{i:06d}.flo", flow)
-        write_flo(seq / "flow_camera" / f"{i:06d}.flo", flow)
         valid = np.full((H, W), 255, np.uint8)
         valid[:, -3:] = 0
         write_png(seq / "valid" / f"{i:06d}.png", valid)
@@ -142,8 +143,12 @@ def _cell_artifacts(cell: Path, seq: Path | None, rng: np.random.Generator, q: f
     if seq is not None:
         from scenes.formats import read_flo
         gt = read_flo(seq / "flow" / f"{PICTURE_FRAME:06d}.flo")
+        cam = read_flo(seq / "flow_camera" / f"{PICTURE_FRAME:06d}.flo")
         write_flo(cell / f"flow_{PICTURE_FRAME:06d}.flo",
                   gt + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32))
+        # local = total - global: the true local motion plus noise and the global model's error
+        write_flo(cell / f"local_flow_{PICTURE_FRAME:06d}.flo",
+                  gt - cam + np.float32(0.1 * q) + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32))
 
 
 def build_run(root: Path) -> Path:

@@ -43,8 +43,9 @@ def test_every_section_present(report, html_text):
     md = report["md"].read_text(encoding="utf-8")
     for heading in ("## Headline", "## Per scene", "## Difficulty", "## Failed cells"):
         assert heading in md
-    # pictures: frame, ground truth, five methods, wheel, five EPE maps and a colour bar per row
-    assert section(html_text, "pictures").count("<img") == 2 * (1 + 1 + 5 + 1 + 5 + 1)
+    # pictures per scene, for total and local motion: truth, five methods, wheel; then
+    # frame (total) or valid mask (local), five EPE maps and a colour bar
+    assert section(html_text, "pictures").count("<img") == 2 * 2 * ((1 + 5 + 1) + (1 + 5 + 1))
     # difficulty curves for both swept parameters, stabilisation and tracking figures drawn
     assert "Against jitter_px" in html_text and "Against noise_sigma" in html_text
     assert section(html_text, "stabilisation").count("<svg") == 4
