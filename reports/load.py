@@ -31,6 +31,7 @@ __all__ = [
     "find_sequence_dir",
     "read_stabilisation",
     "read_tracks",
+    "read_true_tracks",
     "picture_frames",
     "read_frame_truth",
     "read_camera_flow",
@@ -274,9 +275,16 @@ def read_stabilisation(cell_dir: Path, seq_dir: Path | None) -> pd.DataFrame | N
 
 
 def read_tracks(cell_dir: Path) -> pd.DataFrame | None:
-    """``cells/<id>/tracks.csv`` (the runner's columns ``x_px, y_px, x_filt_px, y_filt_px,
-    true_x_px, true_y_px``) renamed to ``frame, track_id, x, y, x_filt, y_filt, x_true, y_true``
-    (px; NaN where the file has no such column)."""
+    """``cells/<id>/tracks.csv`` in a fixed shape, one row per frame x estimated track.
+
+    The runner's columns ``source, seed_vehicle_id, x_px, y_px, x_filt_px, y_filt_px,
+    true_x_px, true_y_px`` are renamed to ``source, seed_vehicle_id, x, y, x_filt, y_filt,
+    x_true, y_true`` (px; NaN where the file has no such column or value). ``track_id``
+    is unique only within a ``source`` (the point tracker's and the multi-target
+    tracker's ids both start at 0): a track is the pair ``(source, track_id)``.
+    Files without ``source`` are taken as the point tracker's. The truth columns are
+    filled for point tracks only (the vehicle the track was seeded on).
+    """
     df = _read_csv(cell_dir / "tracks.csv")
     if df is None or "frame" not in df.columns:
         return None
@@ -284,14 +292,35 @@ def read_tracks(cell_dir: Path) -> pd.DataFrame | None:
         "x": ("x_px",), "y": ("y_px",), "x_filt": ("x_filt_px",), "y_filt": ("y_filt_px",),
         "x_true": ("true_x_px",), "y_true": ("true_y_px",),
     }
-    out = pd.DataFrame({"frame": df["frame"].astype(int),
-                        "track_id": df["track_id"] if "track_id" in df.columns else 0})
+    out = pd.DataFrame({
+        "frame": df["frame"].astype(int),
+        "source": df["source"].fillna("point").astype(str) if "source" in df.columns else "point",
+        "track_id": df["track_id"] if "track_id" in df.columns else 0,
+        "seed_vehicle_id": (pd.to_numeric(df["seed_vehicle_id"], errors="coerce")
+                            if "seed_vehicle_id" in df.columns else np.nan),
+    })
     for k, cands in names.items():
         c = _first_col(df, *cands)
-        out[k] = df[c].to_numpy(float) if c else np.nan
+        out[k] = pd.to_numeric(df[c], errors="coerce").to_numpy(float) if c else np.nan
     if out[["x", "y"]].isna().all().all():
         return None
-    return out.sort_values(["track_id", "frame"], kind="stable").reset_index(drop=True)
+    return out.sort_values(["source", "track_id", "frame"], kind="stable").reset_index(drop=True)
+
+
+def read_true_tracks(seq_dir: Path | None) -> pd.DataFrame | None:
+    """The sequence's ``tracks.csv`` (every vehicle's projected centre) as ``frame, vehicle_id,
+    x, y, parked`` for the frames where the vehicle is visible; None when absent."""
+    if seq_dir is None:
+        return None
+    df = _read_csv(seq_dir / "tracks.csv")
+    if df is None or not {"frame", "vehicle_id", "x_px", "y_px"} <= set(df.columns):
+        return None
+    if "visible" in df.columns:
+        df = df[df["visible"].astype(float) > 0]
+    return pd.DataFrame({"frame": df["frame"].astype(int), "vehicle_id": df["vehicle_id"].astype(int),
+                         "x": df["x_px"].astype(float), "y": df["y_px"].astype(float),
+                         "parked": df["parked"].astype(int) if "parked" in df.columns else 0}
+                        ).sort_values(["vehicle_id", "frame"], kind="stable").reset_index(drop=True)
 
 
 def picture_frames(cell_dir: Path) -> list[int]:

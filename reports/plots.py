@@ -15,12 +15,14 @@ import matplotlib
 matplotlib.use("Agg")  # headless, set before pyplot is imported
 
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 __all__ = ["pipeline_colors", "fig_to_svg", "difficulty_curves", "stabilisation_figure",
-           "jitter_figure", "tracking_figure", "tracking_error_figure"]
+           "jitter_figure", "tracking_figure", "tracking_error_figure", "TRACKER_STYLE",
+           "track_polylines"]
 
 _RC = {
     "svg.hashsalt": "aerobench-report",
@@ -179,51 +181,152 @@ def jitter_figure(jitters: dict[str, pd.DataFrame], *, colors: dict[str, str], t
     return fig_to_svg(fig)
 
 
-def _zoom_box(tracks: list[pd.DataFrame], frame: np.ndarray | None) -> tuple[float, float, float, float]:
-    """The part of the frame the tracks cover, with a margin, at the frame's aspect (px)."""
-    xs = np.concatenate([t[c].to_numpy(float) for t in tracks for c in ("x", "x_filt", "x_true")])
-    ys = np.concatenate([t[c].to_numpy(float) for t in tracks for c in ("y", "y_filt", "y_true")])
-    xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
-    h, w = frame.shape[:2] if frame is not None else (float(np.ptp(ys)) + 1, float(np.ptp(xs)) + 1)
-    if frame is None or not xs.size:
-        return (float(xs.min()) - 1, float(xs.max()) + 1, float(ys.min()) - 1, float(ys.max()) + 1) \
-            if xs.size else (0.0, 1.0, 0.0, 1.0)
-    span = max(np.ptp(xs) + 40.0, (np.ptp(ys) + 40.0) * w / h, 0.25 * w)
-    span_x = min(span, w)
-    span_y = min(span_x * h / w, h)
-    cx = float(np.clip((xs.min() + xs.max()) / 2, span_x / 2 - 0.5, w - 0.5 - span_x / 2))
-    cy = float(np.clip((ys.min() + ys.max()) / 2, span_y / 2 - 0.5, h - 0.5 - span_y / 2))
-    return cx - span_x / 2, cx + span_x / 2, cy - span_y / 2, cy + span_y / 2
+# Trackers by colour, measurement by line style: raw dashed with hollow markers, Kalman solid and filled.
+TRACKER_STYLE = {
+    "point": {"color": "#0072B2", "name": "point tracker (thesis 4.1)"},
+    "multi": {"color": "#D55E00", "name": "multi-target tracker"},
+}
+_OTHER_TRACKER = {"color": "#CC79A7", "name": "tracker"}
+# labels on a white box rather than a stroked halo: stroked text is saved as paths, not text
+_LABEL_BOX = {"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8}
 
 
-def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *, title: str) -> str:
-    """Trajectories over a frame, one panel per pipeline: truth, raw flow track, Kalman track."""
+def _zoom_box(xy: list[np.ndarray], frame: np.ndarray | None, *, margin_px: float = 12.0,
+              min_span_px: float = 40.0) -> tuple[float, float, float, float]:
+    """The part of the frame the points ``xy`` (arrays of shape (n, 2), px) cover, with a margin:
+    ``x0, x1, y0, y1`` (px), at least ``min_span_px`` each way, inside the frame.
+
+    The box does not keep the frame's aspect: vehicles on one road give a wide, low
+    strip, which the figure draws at its own aspect and so enlarges.
+    """
+    pts = np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in xy] or [np.zeros((0, 2))])
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if frame is None and not len(pts):
+        return 0.0, 1.0, 0.0, 1.0
+    if frame is not None:
+        h, w = frame.shape[:2]
+        if not len(pts):
+            return -0.5, w - 0.5, -0.5, h - 0.5
+    else:
+        w = h = np.inf
+
+    def side(v: np.ndarray, size: float) -> tuple[float, float]:
+        lo, hi = float(v.min()) - margin_px, float(v.max()) + margin_px
+        if hi - lo < min_span_px:
+            mid = (lo + hi) / 2
+            lo, hi = mid - min_span_px / 2, mid + min_span_px / 2
+        if np.isfinite(size):
+            span = min(hi - lo, size)
+            lo = float(np.clip(lo, -0.5, size - 0.5 - span))
+            hi = lo + span
+        return lo, hi
+
+    x0, x1 = side(pts[:, 0], w)
+    y0, y1 = side(pts[:, 1], h)
+    return x0, x1, y0, y1
+
+
+def _truth_by_vehicle(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None) -> dict[int, pd.DataFrame]:
+    """Vehicle id -> its true centre per frame (``frame, x, y``): the sequence's tracks.csv,
+    else the truth columns the point tracks carry."""
+    if truth is not None and len(truth):
+        return {int(v): g[["frame", "x", "y"]] for v, g in truth.groupby("vehicle_id", sort=True)}
+    out: dict[int, pd.DataFrame] = {}
+    for tr in tracks.values():
+        pts = tr[(tr["source"] == "point") & tr["seed_vehicle_id"].notna() & tr["x_true"].notna()]
+        for v, g in pts.groupby("seed_vehicle_id", sort=True):
+            out.setdefault(int(v), g[["frame", "x_true", "y_true"]].set_axis(["frame", "x", "y"], axis=1))
+    return out
+
+
+def track_polylines(tr: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:
+    """One polyline per track, ``(source, track_id) -> rows sorted by frame``.
+
+    ``track_id`` alone is not a track: the point tracker and the multi-target
+    tracker number their tracks from 0 each, and joining them draws lines
+    across the frame.
+    """
+    return {(str(src), int(tid)): g.sort_values("frame", kind="stable")
+            for (src, tid), g in tr.groupby(["source", "track_id"], sort=True)}
+
+
+def _start_labels(vehicles: dict[int, pd.DataFrame], *, near_px: float = 6.0) -> list[tuple[str, tuple[float, float]]]:
+    """``v<id>`` labels at each vehicle's first position; vehicles starting within ``near_px`` of
+    each other share one label (``v1,3``) instead of printing over each other."""
+    groups: list[tuple[list[int], tuple[float, float]]] = []
+    for vid, g in vehicles.items():
+        x, y = float(g["x"].iloc[0]), float(g["y"].iloc[0])
+        for ids, (gx, gy) in groups:
+            if np.hypot(x - gx, y - gy) < near_px:
+                ids.append(vid)
+                break
+        else:
+            groups.append(([vid], (x, y)))
+    return [("v" + ",".join(str(v) for v in ids), xy) for ids, xy in groups]
+
+
+def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *, title: str,
+                    truth: pd.DataFrame | None = None) -> str:
+    """Trajectories over a frame, one panel per pipeline, each track drawn on its own.
+
+    Parameters
+    ----------
+    frame : (H, W, 3) uint8 or None
+        The picture under the trajectories.
+    tracks : pipeline -> DataFrame
+        :func:`reports.load.read_tracks` tables; a track is ``(source, track_id)``.
+    truth : DataFrame, optional
+        :func:`reports.load.read_true_tracks` (every vehicle's true centre, px).
+
+    Ground truth is black on a white halo, labelled ``v<vehicle id>`` at its first
+    frame; each tracker has a colour (:data:`TRACKER_STYLE`), the raw measurement a
+    dashed line with hollow markers, the Kalman estimate a solid line with filled
+    markers. Multi-target tracks are labelled ``m<track id>`` at their last frame.
+    """
     n = len(tracks)
     ncols = min(3, n)
     nrows = int(np.ceil(n / ncols))
-    aspect = frame.shape[0] / frame.shape[1] if frame is not None else 0.75
+    vehicles = _truth_by_vehicle(tracks, truth)
+    every = [g[["x", "y"]].to_numpy(float) for g in vehicles.values()]
+    for tr in tracks.values():
+        every += [tr[["x", "y"]].to_numpy(float), tr[["x_filt", "y_filt"]].to_numpy(float)]
+    x0, x1, y0, y1 = _zoom_box(every, frame)
+    aspect = (y1 - y0) / (x1 - x0)
+    halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
     with matplotlib.rc_context(_RC):
-        # rows tall enough for the image at its aspect plus a title, so panels never overlap
-        fig, axes = _figure(nrows, ncols, width_in=3.3 * ncols, height_in=(3.0 * aspect + 0.6) * nrows + 0.7)
+        # rows tall enough for the zoomed image at its aspect plus a title, so panels never overlap
+        fig, axes = _figure(nrows, ncols, width_in=3.8 * ncols, height_in=(3.3 * aspect + 0.55) * nrows + 0.9)
+        legend: dict[str, object] = {}
         for k, (pipe, tr) in enumerate(tracks.items()):
             ax = axes[k // ncols][k % ncols]
             ax.grid(False)
             if frame is not None:
                 ax.imshow(frame, interpolation="nearest")
-            for _, g in tr.groupby("track_id", sort=True):
-                ax.plot(g["x_true"], g["y_true"], "-", color="#FFFFFF", lw=2.5, label="ground truth")
-                ax.plot(g["x_true"], g["y_true"], "-", color="#000000", lw=1.0)
-                ax.plot(g["x"], g["y"], "o--", color="#E69F00", lw=1.2, ms=3, label="flow track (raw)")
-                ax.plot(g["x_filt"], g["y_filt"], "s-", color="#0072B2", lw=1.2, ms=3, label="Kalman track")
-            x0, x1, y0, y1 = _zoom_box(list(tracks.values()), frame)
+            for vid, g in vehicles.items():
+                (h,) = ax.plot(g["x"], g["y"], "-", color="#000000", lw=1.2, path_effects=halo)
+                legend.setdefault("ground truth (true vehicle centre)", h)
+                ax.plot(g["x"].iloc[:1], g["y"].iloc[:1], "o", color="#000000", ms=3, path_effects=halo)
+            for text, (x, y) in _start_labels(vehicles):
+                ax.annotate(text, (x, y), xytext=(-3, 3), textcoords="offset points", ha="right", fontsize=7,
+                            bbox=_LABEL_BOX)
+            sources = []
+            for (source, tid), g in track_polylines(tr).items():
+                st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
+                sources.append(source)
+                (hr,) = ax.plot(g["x"], g["y"], "--o", color=st["color"], lw=1.0, ms=3.5, mfc="none", mew=0.9)
+                (hk,) = ax.plot(g["x_filt"], g["y_filt"], "-s", color=st["color"], lw=1.4, ms=2.5)
+                legend.setdefault(f"{st['name']}: raw", hr)
+                legend.setdefault(f"{st['name']}: Kalman", hk)
+                if source != "point":
+                    ax.annotate(f"m{tid}", (float(g["x_filt"].iloc[-1]), float(g["y_filt"].iloc[-1])),
+                                xytext=(3, -3), textcoords="offset points", va="top", fontsize=7,
+                                color=st["color"], bbox=_LABEL_BOX)
             ax.set_xlim(x0, x1)
             ax.set_ylim(y1, y0)  # image rows grow downwards
-            ax.set_title(pipe)
+            ax.set_title(f"{pipe} ({' + '.join(dict.fromkeys(sources))})")
         for k in range(n, nrows * ncols):
             axes[k // ncols][k % ncols].set_visible(False)
-        h, lab = axes[0][0].get_legend_handles_labels()
-        keep = dict(zip(lab, h))
-        fig.legend(list(keep.values()), list(keep.keys()), loc="outside lower center", ncols=3, frameon=False)
+        fig.legend(list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=3, frameon=False)
         fig.suptitle(title)
     return fig_to_svg(fig)
 

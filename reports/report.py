@@ -19,7 +19,8 @@ import pandas as pd
 
 from reports import pictures, plots
 from reports.load import (RunData, find_sequence_dir, load_run, picture_frames, read_camera_flow, read_cell_flow,
-                          read_frame_truth, read_stabilisation, read_tracks, scene_base)
+                          read_frame_truth, read_stabilisation, read_tracks, read_true_tracks,
+                          scene_base)
 from reports.tables import (Column, MetricTable, baseline_diffs, format_value, gate_view, headline_columns,
                             metric_table, per_scene_rows, region_table, sweep_curves)
 from scenes.formats import atomic_write_bytes
@@ -446,7 +447,7 @@ def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, st
     return "".join(out) or _missing("No stabilisation data.")
 
 
-def _table41_html(tr: pd.DataFrame, pipe: str) -> str:
+def _table41_html(tr: pd.DataFrame, *, pipe: str, vehicle: int) -> str:
     """Table 4.1 of the thesis for one track: vertical motion per frame, flow vs Kalman, and errors."""
     tr = tr.sort_values("frame")
     dy_raw, dy_k, dy_t = tr["y"].diff(), tr["y_filt"].diff(), tr["y_true"].diff()
@@ -466,6 +467,24 @@ def _table41_html(tr: pd.DataFrame, pipe: str) -> str:
             f"</tr></thead><tbody>{''.join(rows)}</tbody></table></div>")
 
 
+def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None
+                   ) -> tuple[str, int, pd.DataFrame] | None:
+    """The track Table 4.1 shows: the thesis pipeline's point track of the first seed vehicle that
+    moves (not parked in the sequence's tracks.csv), else of the first seed vehicle."""
+    pipe = next((p for p in tracks if "thesis" in p), next(iter(tracks)))
+    t = tracks[pipe]
+    pts = t[(t["source"] == "point") & t["seed_vehicle_id"].notna() & t[["x_true", "y_true"]].notna().all(axis=1)]
+    if pts.empty:
+        return None
+    seeds = sorted(int(v) for v in pts["seed_vehicle_id"].unique())
+    parked = set()
+    if truth is not None and len(truth):
+        parked = {int(v) for v, g in truth.groupby("vehicle_id") if (g["parked"] > 0).all()}
+    vehicle = next((v for v in seeds if v not in parked), seeds[0])
+    g = pts[pts["seed_vehicle_id"] == vehicle]
+    return pipe, vehicle, g[g["track_id"] == g["track_id"].iloc[0]]
+
+
 def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
     out = []
     for base in dict.fromkeys(cells["scene"].map(scene_base)):
@@ -483,27 +502,38 @@ def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -
                     tracks[pipe] = t
         first = int(min(t["frame"].min() for t in tracks.values()))
         frame = read_frame_truth(seq, first)[0] if seq is not None else None
+        truth = read_true_tracks(seq)
         out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
-        svg = plots.tracking_figure(frame, tracks, title=f"trajectories over frame {first}")
-        out.append(f'<figure class="plot">{svg}<figcaption>Ground truth (black on white), the raw optical-flow '
-                   "track (orange, dashed) and the Kalman track (blue) per pipeline."
+        svg = plots.tracking_figure(frame, tracks, truth=truth, title=f"trajectories over frame {first}")
+        multi = any((t["source"] != "point").any() for t in tracks.values())
+        out.append(f'<figure class="plot">{svg}<figcaption>Ground truth: every vehicle\'s true centre (black on '
+                   "white, v&lt;id&gt; at its first frame). Point tracker (blue; thesis 4.1): one track per seed "
+                   "vehicle, started at its true centre in the first frame. "
+                   + ("Multi-target tracker (orange-red, m&lt;id&gt; at the last frame): tracks born from "
+                      "detections, not tied to a vehicle. " if multi else "")
+                   + "Dashed, hollow: raw measurement (flow-followed point or detection centroid); solid, "
+                   "filled: Kalman estimate. Positions are in each frame's own image coordinates (the camera "
+                   f"moves), drawn over frame {first} for orientation."
                    + ("" if frame is not None else " Sequence frame not found: drawn without the image.")
+                   + ("" if truth is not None else " Sequence tracks.csv not found: truth only for seed vehicles.")
                    + "</figcaption></figure>")
-        have_truth = all(t[["x_true", "y_true"]].notna().any().all() for t in tracks.values())
+        have_truth = all(t[["x_true", "y_true"]].notna().all(axis=1).any() for t in tracks.values())
         if have_truth:
             errs = {}
             for pipe, t in tracks.items():
+                t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
                 e = pd.DataFrame({"frame": t["frame"],
                                   "err_raw": np.hypot(t["x"] - t["x_true"], t["y"] - t["y_true"]),
                                   "err_kalman": np.hypot(t["x_filt"] - t["x_true"], t["y_filt"] - t["y_true"])})
                 errs[pipe] = e.groupby("frame", as_index=False).mean()
-            esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error")
-            out.append(f'<figure class="plot">{esvg}<figcaption>Position error per frame, mean over the '
-                       "pipeline's tracks.</figcaption></figure>")
-            thesis = next((p for p in tracks if "thesis" in p), next(iter(tracks)))
-            t = tracks[thesis]
-            tid = sorted(t["track_id"].unique())[0]
-            out.append(_table41_html(t[t["track_id"] == tid], thesis))
+            esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
+            out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '
+                       "its seed vehicle's true centre per frame [px], mean over the seed vehicles. The "
+                       "multi-target tracker is scored in the track metrics (region 'multi').</figcaption></figure>")
+            chosen = _table41_track(tracks, truth)
+            if chosen is not None:
+                pipe, vehicle, t = chosen
+                out.append(_table41_html(t, pipe=pipe, vehicle=vehicle))
         else:
             out.append(_missing("tracks.csv has no ground-truth columns: no position errors."))
     return "".join(out) or _missing("No tracks.")

@@ -135,11 +135,17 @@ def _cell_artifacts(cell: Path, seq: Path | None, rng: np.random.Generator, q: f
     gt_x, gt_y = 14.0 + 5.0 * t, 11.0 + 0.5 * t
     meas_x = gt_x + q * rng.standard_normal(N_FRAMES)
     meas_y = gt_y + q * rng.standard_normal(N_FRAMES)
-    pd.DataFrame({"frame": t.astype(int), "track_id": 0, "x_px": meas_x, "y_px": meas_y,
-                  "x_filt_px": (meas_x + gt_x) / 2, "y_filt_px": (meas_y + gt_y) / 2,
-                  "x_pred_px": meas_x, "y_pred_px": meas_y, "source": "point", "seed_vehicle_id": 1,
-                  "true_x_px": gt_x, "true_y_px": gt_y, "true_visible": True}).to_csv(cell / "tracks.csv",
-                                                                                     index=False)
+    point = pd.DataFrame({"frame": t.astype(int), "track_id": 0, "x_px": meas_x, "y_px": meas_y,
+                          "x_filt_px": (meas_x + gt_x) / 2, "y_filt_px": (meas_y + gt_y) / 2,
+                          "x_pred_px": meas_x, "y_pred_px": meas_y, "source": "point", "seed_vehicle_id": 1,
+                          "true_x_px": gt_x, "true_y_px": gt_y, "true_visible": 1})
+    # the multi-target tracker numbers its tracks from 0 too, far from the point track, without truth
+    mx, my = 2.0 + 0.2 * t[:-1], 21.0 - 0.1 * t[:-1]
+    multi = pd.DataFrame({"frame": t[:-1].astype(int), "track_id": 0, "x_px": mx, "y_px": my, "x_filt_px": mx,
+                          "y_filt_px": my, "x_pred_px": mx, "y_pred_px": my, "source": "multi",
+                          "seed_vehicle_id": np.nan, "true_x_px": np.nan, "true_y_px": np.nan,
+                          "true_visible": np.nan})
+    pd.concat([point, multi], ignore_index=True).to_csv(cell / "tracks.csv", index=False)
     if seq is not None:
         from scenes.formats import read_flo
         gt = read_flo(seq / "flow" / f"{PICTURE_FRAME:06d}.flo")

@@ -1,0 +1,50 @@
+"""Tracking section: one polyline per (tracker, track), truth per vehicle."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from reports import write_report
+from reports.load import read_tracks
+from reports.plots import track_polylines
+
+
+def section(html_text: str, sid: str) -> str:
+    start = html_text.index(f'<section id="{sid}">')
+    return html_text[start:html_text.index("</section>", start)]
+
+
+@pytest.fixture(scope="module")
+def tracking(run_dir, tmp_path_factory) -> str:
+    out = write_report(run_dir, out_dir=tmp_path_factory.mktemp("tracking"))
+    return section(out["html"].read_text(), "tracking")
+
+
+def test_point_and_multi_tracks_with_the_same_id_are_separate_lines(run_dir):
+    cell = next(p for p in sorted((run_dir / "cells").iterdir()) if (p / "tracks.csv").is_file())
+    tr = read_tracks(cell)
+    assert set(tr["track_id"]) == {0}, "fixture: both trackers use track id 0"
+    lines = track_polylines(tr)
+    assert set(lines) == {("point", 0), ("multi", 0)}
+    # joined by track_id alone, one line would run from the multi track (x < 3) to the point track (x > 12)
+    assert np.ptp(tr["x"]) > 10
+    for key, g in lines.items():
+        assert np.ptp(g["x"]) < 3 if key[0] == "multi" else g["x"].min() > 5
+        assert g["frame"].is_monotonic_increasing
+
+
+def test_tracks_without_source_column_are_point_tracks(tmp_path):
+    pd.DataFrame({"frame": [1, 0], "track_id": [0, 0], "x_px": [2.0, 1.0], "y_px": [1.0, 1.0]}).to_csv(
+        tmp_path / "tracks.csv", index=False)
+    tr = read_tracks(tmp_path)
+    assert list(tr["source"]) == ["point", "point"] and list(tr["frame"]) == [0, 1]
+    assert tr["seed_vehicle_id"].isna().all() and tr["x_true"].isna().all()
+
+
+def test_figure_names_truth_raw_kalman_per_tracker(tracking):
+    for text in ("ground truth (true vehicle centre)", "point tracker (thesis 4.1): raw",
+                 "point tracker (thesis 4.1): Kalman", "multi-target tracker: raw", "multi-target tracker: Kalman",
+                 ">v1<", ">m0<"):
+        assert text in tracking, text
