@@ -448,23 +448,30 @@ def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, st
 
 
 def _table41_html(tr: pd.DataFrame, *, pipe: str, vehicle: int) -> str:
-    """Table 4.1 of the thesis for one track: vertical motion per frame, flow vs Kalman, and errors."""
+    """Table 4.1 of the thesis for one point track: motion per frame in x and y, raw flow vs Kalman vs
+    truth, and the position errors of both."""
     tr = tr.sort_values("frame")
-    dy_raw, dy_k, dy_t = tr["y"].diff(), tr["y_filt"].diff(), tr["y_true"].diff()
-    e_raw = np.hypot(tr["x"] - tr["x_true"], tr["y"] - tr["y_true"])
-    e_k = np.hypot(tr["x_filt"] - tr["x_true"], tr["y_filt"] - tr["y_true"])
+    cols = [tr["x"].diff(), tr["x_filt"].diff(), tr["x_true"].diff(),
+            tr["y"].diff(), tr["y_filt"].diff(), tr["y_true"].diff(),
+            np.hypot(tr["x"] - tr["x_true"], tr["y"] - tr["y_true"]),
+            np.hypot(tr["x_filt"] - tr["x_true"], tr["y_filt"] - tr["y_true"])]
     rows = []
     for i in range(len(tr)):
         rows.append(f'<tr><th scope="row">Frame {int(tr["frame"].iloc[i])}</th>'
-                    + "".join(f'<td class="num">{format_value(float(v))}</td>'
-                              for v in (dy_raw.iloc[i], dy_k.iloc[i], dy_t.iloc[i], e_raw.iloc[i], e_k.iloc[i]))
-                    + "</tr>")
-    return ('<div class="scroll"><table><caption class="note">In the style of thesis Table 4.1: '
-            f"{_e(pipe)}, track {_e(tr['track_id'].iloc[0])}; vertical motion per frame [px] from the optical-flow "
-            "track and the Kalman estimate, the true motion, and each position error [px] (lower is better)."
-            "</caption><thead><tr><th>Frame</th><th>Optical flow \u0394y [px]</th><th>Kalman filter \u0394y [px]</th>"
-            "<th>True \u0394y [px]</th><th>Flow position error [px]</th><th>Kalman position error [px]</th>"
-            f"</tr></thead><tbody>{''.join(rows)}</tbody></table></div>")
+                    + "".join(f'<td class="num">{format_value(float(c.iloc[i]))}</td>' for c in cols) + "</tr>")
+    first = int(tr["frame"].iloc[0])
+    caption = (f"In the style of thesis Table 4.1: {pipe}, point tracker seeded on vehicle {vehicle} "
+               f"(track {tr['track_id'].iloc[0]}). \u0394x, \u0394y: image displacement since the previous "
+               "frame [px] (camera and vehicle motion) of the raw optical-flow track, the Kalman track and the "
+               "vehicle's true centre. Position error: distance [px] from the track to the vehicle's true "
+               f"projected centre in the same frame (lower is better); frame {first} is the seed, taken from "
+               "the truth, so its error is 0 by construction.")
+    head = ("<tr><th rowspan=\"2\">Frame</th><th colspan=\"3\">\u0394x [px]</th><th colspan=\"3\">\u0394y [px]</th>"
+            "<th colspan=\"2\">Position error [px] \u2193</th></tr><tr>"
+            + "".join(f"<th>{h}</th>" for h in ("Optical flow", "Kalman filter", "True") * 2)
+            + "<th>Optical flow</th><th>Kalman filter</th></tr>")
+    return (f'<div class="scroll"><table class="t41"><caption class="note">{_e(caption)}</caption>'
+            f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table></div>")
 
 
 def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None

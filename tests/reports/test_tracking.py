@@ -1,6 +1,8 @@
-"""Tracking section: one polyline per (tracker, track), truth per vehicle."""
+"""Tracking section: one polyline per (tracker, track), truth per vehicle, Table 4.1 with both axes."""
 
 from __future__ import annotations
+
+import re
 
 import numpy as np
 import pandas as pd
@@ -48,3 +50,16 @@ def test_figure_names_truth_raw_kalman_per_tracker(tracking):
                  "point tracker (thesis 4.1): Kalman", "multi-target tracker: raw", "multi-target tracker: Kalman",
                  ">v1<", ">m0<"):
         assert text in tracking, text
+
+
+def test_table41_says_which_track_and_shows_both_axes(tracking):
+    table = tracking[tracking.index('<table class="t41">'):]
+    table = table[:table.index("</table>")]
+    assert "point tracker seeded on vehicle 1 (track 0)" in table
+    assert "distance [px] from the track to the vehicle&#x27;s true projected centre in the same frame" in table
+    assert "\u0394x [px]" in table and "\u0394y [px]" in table
+    # fixture truth: the vehicle moves 5 px right and 0.5 px down per frame
+    row = re.search(r"<th scope=\"row\">Frame 1</th>(.*?)</tr>", table).group(1)
+    cells = re.findall(r'<td class="num">([^<]*)</td>', row)
+    assert len(cells) == 8
+    assert cells[2] == "5.000" and cells[5] == "0.5000"
