@@ -119,7 +119,7 @@ def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
     """The thesis's figs. 3.1 and 3.2 for one cell, for the x and y shift.
 
     Top row (fig. 3.1): estimated cumulative shift (blue), its least-squares
-    flight line (red) and the correction (green). Bottom row (fig. 3.2): the
+    flight line (orange) and the correction (green). Bottom row (fig. 3.2): the
     same after stabilisation: the true cumulative shift plus the applied
     correction, its refitted line and the remaining difference.
 
@@ -133,9 +133,13 @@ def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
         fig, axes = _figure(nrows, 2, width_in=7.5, height_in=2.4 * nrows + 0.4)
         for j, a in enumerate("xy"):
             ax = axes[0][j]
-            ax.plot(t, stab[f"cum_{a}"], color="#0072B2", lw=1.5, label="cumulative shift (estimated)")
-            ax.plot(t, stab[f"line_{a}"], color="#D55E00", lw=1.5, label="fitted flight line")
-            ax.plot(t, stab[f"corr_{a}"], color="#009E73", lw=1.5, label="correction")
+            # one legend serves both rows: each colour names its quantity in the top and the bottom row
+            ax.plot(t, stab[f"cum_{a}"], color="#0072B2", lw=1.5,
+                    label="estimated cumulative shift" + (" | after: true cumulative + correction" if have_truth else ""))
+            ax.plot(t, stab[f"line_{a}"], color="#D55E00", lw=1.5,
+                    label="fitted flight line" + (" | after: its refitted line" if have_truth else ""))
+            ax.plot(t, stab[f"corr_{a}"], color="#009E73", lw=1.5,
+                    label="correction" + (" | after: refitted line \u2212 after" if have_truth else ""))
             ax.set_title(f"before (fig. 3.1), {a} [px]")
             ax.set_xlabel("frame")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -150,7 +154,7 @@ def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
                 ax.set_xlabel("frame")
                 ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         h, lab = axes[0][0].get_legend_handles_labels()
-        fig.legend(h, lab, loc="outside lower center", ncols=3, frameon=False)
+        fig.legend(h, lab, loc="outside lower center", ncols=1 if have_truth else 3, frameon=False)
         fig.suptitle(title)
     return fig_to_svg(fig), have_truth
 

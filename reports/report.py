@@ -422,10 +422,12 @@ def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, st
             continue
         thesis = next((p for p in stabs if "thesis" in p), next(iter(stabs)))
         svg, after = plots.stabilisation_figure(stabs[thesis], title=f"{label}, seed {seed}: {thesis}")
-        cap = ("Top (thesis fig. 3.1): estimated cumulative shift (blue), least-squares flight line (red), "
-               "correction (green). ")
+        cap = ("Top (thesis fig. 3.1): estimated cumulative shift, the sum of the pair-wise global shifts "
+               "(blue), its least-squares flight line (orange) and the correction that moves each frame onto "
+               "the line (green). ")
         cap += ("Bottom (fig. 3.2): after stabilisation, i.e. the true cumulative shift plus the applied "
-                "correction, its refitted line and the difference left." if after else
+                "correction (blue; a straight line when the jitter is removed exactly), its refitted line "
+                "(orange) and the jitter left (green)." if after else
                 "No true cumulative shift known: the after-stabilisation row is left out.")
         out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3><figure class=\"plot\">{svg}"
                    f"<figcaption>{_e(cap)}</figcaption></figure>")

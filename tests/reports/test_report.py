@@ -186,3 +186,10 @@ def test_missing_parts_are_stated_not_fatal(run_dir, tmp_path):
     assert "No stabilisation data" in text
     assert "No tracks" in text
     assert 'class="num best"' in section(text, "headline")  # the table itself still stands
+
+
+def test_stabilisation_legend_names_the_after_row(html_text):
+    """The bottom row (fig. 3.2) plots other quantities in the same colours: the legend says so."""
+    stab = section(html_text, "stabilisation")
+    assert "after: true cumulative + correction" in stab and "after: its refitted line" in stab
+    assert "(red)" not in stab  # the flight line is drawn in vermillion/orange
