@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "1.0.0"
+GENERATOR_VERSION = "1.1.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 

@@ -298,6 +298,21 @@ def _snap_to_road(lines: np.ndarray, value: float) -> float:
     return float(lines[np.argmin(np.abs(lines - value))])
 
 
+MAX_PLACEMENT_TRIES = 25
+
+
+def _keeps_clear(vp: VehiclePath, others: list[VehiclePath], times_s: np.ndarray, clearance_m: float) -> bool:
+    """Whether ``vp``'s centre stays ``clearance_m`` from every other vehicle's at every frame time."""
+    if not others:
+        return True
+    mine = np.array([vp.pose(float(t))[:2] for t in times_s])
+    for q in others:
+        theirs = np.array([q.pose(float(t))[:2] for t in times_s])
+        if np.min(np.hypot(*(mine - theirs).T)) < clearance_m:
+            return False
+    return True
+
+
 def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generator) -> list[VehiclePath]:
     """Put ``spec.vehicles.count`` vehicles on roads (or parking stalls) where the camera will see them.
 
@@ -329,71 +344,83 @@ def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generato
     radius_m = max(6.0, 0.75 * world.road_width_m)
     lo, hi = vs.speed_range_mps
     free_stalls = list(world.stalls)
+
+    def _candidate(i: int, kind: str) -> VehiclePath:
+            k = int(rng.integers(0, img.n_frames))
+            t_k = k / img.fps
+            target = view_centre[k] + rng.uniform(-1, 1, 2) * np.array([half_w_m, half_h_m])
+            colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
+            body = np.asarray(colour, float)
+            cabin = body * 0.5 if body.mean() > 90 else body + 90
+            common = dict(vehicle_id=i + 1, size_m=(vs.length_m, vs.width_m, vs.height_m),
+                          body_rgb=tuple(int(c) for c in body), cabin_rgb=tuple(int(min(255, c)) for c in cabin))
+            along_x = bool(rng.integers(0, 2))
+            sign = 1.0 if rng.integers(0, 2) else -1.0
+            if kind == "parked":
+                if free_stalls:
+                    d2 = [(sx - target[0]) ** 2 + (sy - target[1]) ** 2 for sx, sy, _ in free_stalls]
+                    j = int(np.argmin(d2))
+                    sx, sy, th = free_stalls.pop(j)
+                    if math.hypot(sx - target[0], sy - target[1]) < 2 * max(half_w_m, half_h_m):
+                        th = th if rng.integers(0, 2) else th + math.pi
+                        return VehiclePath(kind="parked", p0=np.array([sx, sy]),
+                                           d0=np.array([math.cos(th), math.sin(th)]), v0_mps=0.0, **common)
+                # roadside parking on the shoulder
+                shoulder = world.road_width_m / 2 - vs.width_m / 2 - 0.6
+                if along_x:
+                    ry = _snap_to_road(world.road_y_m, target[1])
+                    d0 = np.array([sign, 0.0])
+                    p = np.array([target[0], ry - sign * shoulder])
+                else:
+                    rx = _snap_to_road(world.road_x_m, target[0])
+                    d0 = np.array([0.0, sign])
+                    p = np.array([rx + sign * shoulder, target[1]])
+                return VehiclePath(kind="parked", p0=p, d0=d0, v0_mps=0.0, **common)
+            if along_x:
+                d0 = np.array([sign, 0.0])
+                ry = _snap_to_road(world.road_y_m, target[1])
+                on_lane = np.array([target[0], ry - sign * lane_m])  # right of +x is -y
+            else:
+                d0 = np.array([0.0, sign])
+                rx = _snap_to_road(world.road_x_m, target[0])
+                on_lane = np.array([rx + sign * lane_m, target[1]])  # right of +y is +x
+            speed_kind = kind if kind in ("accelerating", "stopping") else "constant"
+            if speed_kind == "accelerating":
+                v0 = rng.uniform(lo, 0.5 * (lo + hi))
+            else:
+                v0 = rng.uniform(lo, hi)
+            vp = VehiclePath(kind=speed_kind, p0=on_lane, d0=d0, v0_mps=float(v0), v_max_mps=float(hi),
+                             accel_mps2=vs.acceleration_mps2,
+                             # stopping vehicles brake early enough to stand still before the end
+                             t_stop_start_s=float(min(rng.uniform(0.1, 0.5) * duration_s,
+                                                      max(0.0, duration_s - v0 / vs.acceleration_mps2 - 0.5))),
+                             radius_m=radius_m, **common)
+            if kind == "turning":
+                turn = 1 if rng.integers(0, 2) else -1
+                cross = world.road_x_m if along_x else world.road_y_m
+                long_target = float(on_lane @ d0)
+                cross_long = np.sort(cross * sign)  # road centre coordinates along d0
+                ahead = cross_long[cross_long > long_target + radius_m + lane_m]
+                if ahead.size:
+                    start_long = float(ahead[0]) + turn * lane_m - radius_m
+                    on_lane = on_lane + (start_long - long_target) * d0
+                    vp.turn = turn
+            s_k = vp.distance(t_k)
+            vp.p0 = on_lane - s_k * d0
+            vp.s_turn_m = s_k
+            return vp
+
+    times_s = np.arange(img.n_frames) / img.fps
+    clearance_m = vs.length_m + 1.0
     out: list[VehiclePath] = []
     for i, kind in enumerate(kinds):
-        k = int(rng.integers(0, img.n_frames))
-        t_k = k / img.fps
-        target = view_centre[k] + rng.uniform(-1, 1, 2) * np.array([half_w_m, half_h_m])
-        colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
-        body = np.asarray(colour, float)
-        cabin = body * 0.5 if body.mean() > 90 else body + 90
-        common = dict(vehicle_id=i + 1, size_m=(vs.length_m, vs.width_m, vs.height_m),
-                      body_rgb=tuple(int(c) for c in body), cabin_rgb=tuple(int(min(255, c)) for c in cabin))
-        along_x = bool(rng.integers(0, 2))
-        sign = 1.0 if rng.integers(0, 2) else -1.0
-        if kind == "parked":
-            if free_stalls:
-                d2 = [(sx - target[0]) ** 2 + (sy - target[1]) ** 2 for sx, sy, _ in free_stalls]
-                j = int(np.argmin(d2))
-                sx, sy, th = free_stalls.pop(j)
-                if math.hypot(sx - target[0], sy - target[1]) < 2 * max(half_w_m, half_h_m):
-                    th = th if rng.integers(0, 2) else th + math.pi
-                    out.append(VehiclePath(kind="parked", p0=np.array([sx, sy]),
-                                           d0=np.array([math.cos(th), math.sin(th)]), v0_mps=0.0, **common))
-                    continue
-            # roadside parking on the shoulder
-            shoulder = world.road_width_m / 2 - vs.width_m / 2 - 0.6
-            if along_x:
-                ry = _snap_to_road(world.road_y_m, target[1])
-                d0 = np.array([sign, 0.0])
-                p = np.array([target[0], ry - sign * shoulder])
-            else:
-                rx = _snap_to_road(world.road_x_m, target[0])
-                d0 = np.array([0.0, sign])
-                p = np.array([rx + sign * shoulder, target[1]])
-            out.append(VehiclePath(kind="parked", p0=p, d0=d0, v0_mps=0.0, **common))
-            continue
-        if along_x:
-            d0 = np.array([sign, 0.0])
-            ry = _snap_to_road(world.road_y_m, target[1])
-            on_lane = np.array([target[0], ry - sign * lane_m])  # right of +x is -y
-        else:
-            d0 = np.array([0.0, sign])
-            rx = _snap_to_road(world.road_x_m, target[0])
-            on_lane = np.array([rx + sign * lane_m, target[1]])  # right of +y is +x
-        speed_kind = kind if kind in ("accelerating", "stopping") else "constant"
-        if speed_kind == "accelerating":
-            v0 = rng.uniform(lo, 0.5 * (lo + hi))
-        else:
-            v0 = rng.uniform(lo, hi)
-        vp = VehiclePath(kind=speed_kind, p0=on_lane, d0=d0, v0_mps=float(v0), v_max_mps=float(hi),
-                         accel_mps2=vs.acceleration_mps2,
-                         # stopping vehicles brake early enough to stand still before the end
-                         t_stop_start_s=float(min(rng.uniform(0.1, 0.5) * duration_s,
-                                                  max(0.0, duration_s - v0 / vs.acceleration_mps2 - 0.5))),
-                         radius_m=radius_m, **common)
-        if kind == "turning":
-            turn = 1 if rng.integers(0, 2) else -1
-            cross = world.road_x_m if along_x else world.road_y_m
-            long_target = float(on_lane @ d0)
-            cross_long = np.sort(cross * sign)  # road centre coordinates along d0
-            ahead = cross_long[cross_long > long_target + radius_m + lane_m]
-            if ahead.size:
-                start_long = float(ahead[0]) + turn * lane_m - radius_m
-                on_lane = on_lane + (start_long - long_target) * d0
-                vp.turn = turn
-        s_k = vp.distance(t_k)
-        vp.p0 = on_lane - s_k * d0
-        vp.s_turn_m = s_k
+        # Vehicles do not steer around each other, so a vehicle is placed only where its
+        # whole path keeps clear of those placed before it: overlapping boxes would pass
+        # through each other. Retries draw from the same Generator, so placement stays
+        # deterministic; after MAX_PLACEMENT_TRIES the last candidate is kept.
+        for _ in range(MAX_PLACEMENT_TRIES):
+            vp = _candidate(i, kind)
+            if _keeps_clear(vp, out, times_s, clearance_m):
+                break
         out.append(vp)
     return out

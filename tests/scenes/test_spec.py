@@ -106,3 +106,19 @@ def test_missing_gl_backend_names_the_system_packages(monkeypatch):
     with pytest.raises(RendererUnavailableError, match=GL_SYSTEM_PACKAGES):
         render.get_renderer(17, 19)
     assert (17, 19) not in render._RENDERERS
+
+
+@pytest.mark.parametrize("preset", ["tiny", "nominal", "fast-vehicles", "urban-parallax"])
+@pytest.mark.parametrize("seed", [1, 2, 7])
+def test_vehicles_never_drive_through_each_other(preset, seed):
+    import numpy as np
+
+    from scenes.generate import SceneGenerator
+
+    spec = load_scene_spec(preset, overrides={"seed": seed})
+    vehicles = SceneGenerator(spec).vehicles
+    times_s = np.arange(spec.image.n_frames) / spec.image.fps
+    paths = [np.array([v.pose(float(t))[:2] for t in times_s]) for v in vehicles]
+    closest_m = min((np.hypot(*(a - b).T).min() for i, a in enumerate(paths) for b in paths[i + 1:]),
+                    default=np.inf)
+    assert closest_m >= spec.vehicles.length_m + 1.0 - 1e-9
