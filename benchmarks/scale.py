@@ -70,10 +70,11 @@ def _cli(args: list[str], cache: Path, shown: list[str]) -> tuple[float, subproc
 
 
 def _scenes_line(proc: subprocess.CompletedProcess) -> str:
-    for line in (proc.stderr + proc.stdout).splitlines():
-        if line.startswith("scenes:"):
-            return line.strip()
-    return "(no scenes line)"
+    """The run's own summary line (stdout): "N cells (R reused), scenes R rendered / U reused, ..."."""
+    for line in proc.stdout.splitlines():
+        if " rendered / " in line:
+            return line.split(" -> ")[0].strip()
+    return "(no summary line)"
 
 
 def _table(rows: list[tuple], header: tuple) -> str:
