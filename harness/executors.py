@@ -40,6 +40,38 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+# thread pools of the native libraries a worker uses (OpenMP, BLAS, numba, llvmpipe's renderer)
+THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS", "LP_NUM_THREADS")
+WORKER_THREADS_ENV = "AEROBENCH_WORKER_THREADS"
+
+
+def worker_threads(workers: int) -> int:
+    """Threads each of ``workers`` worker processes may use: the cores shared out, at least one.
+
+    OpenCV and llvmpipe start a thread per core in every process; with one process per core
+    that oversubscribes the machine (2 workers on 2 cores ran slower than 1). ``$AEROBENCH_WORKER_THREADS``
+    overrides the count.
+    """
+    env = os.environ.get(WORKER_THREADS_ENV)
+    if env:
+        return max(1, int(env))
+    return max(1, default_workers() // max(1, workers))
+
+
+def limit_threads(threads: int) -> None:
+    """Pool initializer: cap the native thread pools of this worker process at ``threads``.
+
+    Runs before the first task imports numpy, OpenCV or OpenGL, so the environment variables
+    take effect; OpenCV is also told directly.
+    """
+    for var in THREAD_ENV:
+        os.environ[var] = str(threads)
+    os.environ[WORKER_THREADS_ENV] = str(threads)
+    import cv2
+
+    cv2.setNumThreads(threads)
+
+
 def _import_distributed():
     try:
         import distributed
@@ -89,7 +121,8 @@ def open_executor(
     n = workers or default_workers()
 
     if kind == "process":
-        pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=limit_threads, initargs=(worker_threads(n),))
         try:
             yield pool
         finally:
