@@ -46,16 +46,17 @@ WORKER_THREADS_ENV = "AEROBENCH_WORKER_THREADS"
 
 
 def worker_threads(workers: int) -> int:
-    """Threads each of ``workers`` worker processes may use: the cores shared out, at least one.
+    """Threads of OpenCV, OpenMP/BLAS, numba and llvmpipe in each worker process: one.
 
-    OpenCV and llvmpipe start a thread per core in every process; with one process per core
-    that oversubscribes the machine (2 workers on 2 cores ran slower than 1). ``$AEROBENCH_WORKER_THREADS``
-    overrides the count.
+    OpenCV starts a thread per core in every process; with one process per core that
+    oversubscribes the machine (2 workers on 2 cores ran slower than 1), and one worker
+    with two threads was no faster than with one (8.7 s both, 60 % more CPU). One thread
+    whatever the worker count also keeps results bit-identical across worker counts
+    (OpenCV's parallel splits differ with its thread count). ``$AEROBENCH_WORKER_THREADS``
+    overrides it.
     """
     env = os.environ.get(WORKER_THREADS_ENV)
-    if env:
-        return max(1, int(env))
-    return max(1, default_workers() // max(1, workers))
+    return max(1, int(env)) if env else 1
 
 
 def limit_threads(threads: int) -> None:
