@@ -74,7 +74,7 @@ def test_flow_methods_return_finite_flow_or_a_documented_error(method, pair):
 
 
 @FAST
-@given(method=st.sampled_from(BUILT_IN_FLOW), h=st.integers(16, 40), w=st.integers(16, 40),
+@given(method=st.sampled_from(BUILT_IN_FLOW), h=st.integers(32, 48), w=st.integers(32, 48),
        v=st.sampled_from((0, 1, 128, 255)))
 def test_identical_constant_frames_give_no_motion(method, h, w, v):
     f = np.full((h, w), v, np.uint8)
