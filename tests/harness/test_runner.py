@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
+import numpy as np
 import pytest
 from harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
 
@@ -135,3 +136,21 @@ def test_two_runs_into_one_folder_are_refused(tmp_path):
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         with pytest.raises(RunFolderError, match=r"another aerobench run is writing into this folder"):
             run_suite(parse_suite(copy.deepcopy(TINY_SUITE)), out, resume=True, progress=False)
+
+
+def test_each_pipeline_is_warmed_up_once_per_process_before_timing(monkeypatch):
+    from harness import runner
+
+    runs = []
+
+    class Recording:
+        hash = "pipeline-under-test"
+
+        def run(self, frames, *, seeds):
+            runs.append((len(frames), frames[0].shape, frames[0].dtype, seeds))
+            yield from ()
+
+    monkeypatch.setattr(runner, "_WARMED", set())
+    runner._warm_up(Recording())
+    runner._warm_up(Recording())  # the same pipeline again: no second warm-up
+    assert runs == [(3, (64, 64), np.dtype(np.uint8), [(1, 32.0, 32.0)])]
