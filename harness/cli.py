@@ -10,7 +10,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE]
-    aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME
+    aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
     aerobench baseline RUN_DIR --out FILE
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE]
 """
@@ -18,6 +18,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 import sys
 import textwrap
@@ -127,14 +128,15 @@ def cmd_list(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- render
 
 
-def _parse_set(items: Sequence[str]) -> dict[str, Any]:
+def _parse_set(items: Sequence[str], *, option: str = "--set",
+               example: str = "camera.jitter.roll_std_deg=0.5") -> dict[str, Any]:
     import yaml
 
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise UsageError(f"--set: expected key=value (e.g. camera.jitter_std_px=2.0), got {item!r}")
+            raise UsageError(f"{option}: expected key=value (e.g. {example}), got {item!r}")
         try:
             out[key.strip()] = yaml.safe_load(value) if value.strip() else ""
         except yaml.YAMLError:
@@ -225,16 +227,30 @@ def cmd_eval_flow(args: argparse.Namespace) -> int:
     from algorithms.registry import get_flow_method
 
     try:
-        get_flow_method(args.method)
+        method = get_flow_method(args.method)
     except KeyError as exc:
         raise UsageError(f"--method: {exc.args[0]}") from None
-    table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method)
+    params = _parse_set(args.param, option="--param", example="levels=4")
+    knobs = [p.name for p in inspect.signature(method).parameters.values() if p.kind is p.KEYWORD_ONLY]
+    unknown = sorted(set(params) - set(knobs))
+    if unknown:
+        raise UsageError(f"--param: {args.method} has no parameter {', '.join(unknown)}; "
+                         f"valid: {', '.join(knobs)}")
+    try:
+        table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method, params=params)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--param: {args.method} rejected {params}: {exc}") from None
     pairs = table["scene"].nunique()
+    float_format = lambda v: f"{v:.4f}"  # noqa: E731
+    setting = ", ".join(f"{k}={v}" for k, v in params.items()) or "default parameters"
+    print(f"{args.method} ({setting}) on {pairs} {args.format} pair(s) in {args.dir}:")
+    per_pair = aggregate(table[table["metric"] == "epe_mean"], by=["scene"])
+    print(per_pair[["scene", "metric", "value", "unit", "count"]].astype({"count": "int64"})
+          .to_string(index=False, float_format=float_format))
+    print("\npooled over every pair (per ground-truth-valid pixel):")
     summary = aggregate(table, by=["pipeline"])
     summary["count"] = summary["count"].astype("int64")
-    cols = ["pipeline", "metric", "value", "unit", "count"]
-    print(f"{args.method} on {pairs} {args.format} pair(s) in {args.dir}:")
-    print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print(summary[["pipeline", "metric", "value", "unit", "count"]].to_string(index=False, float_format=float_format))
     return EXIT_OK
 
 
@@ -312,6 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("dir")
     s.add_argument("--format", required=True, choices=("middlebury", "sintel", "kitti"))
     s.add_argument("--method", required=True, help="flow method name (see aerobench list)")
+    s.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")
     s.set_defaults(fn=cmd_eval_flow)
 
     s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")

@@ -117,3 +117,44 @@ def test_the_committed_baseline_is_of_the_smoke_suite():
     pipelines = {m["pipeline"] for m in baseline["metrics"]}
     assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis"} <= pipelines
     assert Path(GATE_RULES).is_file()
+
+
+def _middlebury_pair(root: Path) -> Path:
+    """A one-pair Middlebury folder: a smooth texture moved 1 px right, with its exact flow."""
+    import cv2
+    import numpy as np
+
+    from scenes.formats import write_flo, write_png
+
+    rng = np.random.default_rng(5)
+    big = cv2.GaussianBlur((rng.random((70, 90)) * 255).astype(np.float32), (0, 0), 2.0)
+    pair = root / "pair"
+    write_png(pair / "frame10.png", big[3:67, 4:84].round().astype(np.uint8))
+    write_png(pair / "frame11.png", big[3:67, 3:83].round().astype(np.uint8))
+    flow = np.zeros((64, 80, 2), np.float32)
+    flow[..., 0] = 1.0
+    write_flo(pair / "flow10.flo", flow)
+    return root
+
+
+def test_eval_flow_takes_method_parameters_and_reports_each_pair(tmp_path, capsys):
+    root = _middlebury_pair(tmp_path)
+    assert main(["eval-flow", str(root), "--format", "middlebury", "--method", "lucas_kanade",
+                 "--param", "levels=2", "--param", "iterations=2"]) == 0
+    out = capsys.readouterr().out
+    assert "lucas_kanade (levels=2, iterations=2) on 1 middlebury pair(s)" in out
+    assert "middlebury:pair epe_mean" in out
+
+
+@pytest.mark.parametrize("param, match", [
+    ("level=4", r"--param: horn_schunck has no parameter level; valid: alpha, iterations"),
+    ("levels", r"--param: expected key=value \(e.g. levels=4\)"),
+    ("levels=0", r"--param: horn_schunck rejected \{'levels': 0\}"),
+])
+def test_eval_flow_rejects_bad_parameters_with_exit_2(tmp_path, capsys, param, match):
+    import re
+
+    root = _middlebury_pair(tmp_path)
+    assert main(["eval-flow", str(root), "--format", "middlebury", "--method", "horn_schunck",
+                 "--param", param]) == 2
+    assert re.search(match, capsys.readouterr().err)
