@@ -92,10 +92,40 @@ def gl_info() -> dict[str, str]:
     return info
 
 
+_SHARED_TEXTURE: list[type] = []
+
+
+def _shared_texture_class(pyrender) -> type:
+    """A pyrender.Texture that keeps a uint8 RGB source as given (a view, not a copy).
+
+    pyrender's own copies every source twice over (``astype``, then a channel pick):
+    for a ground of 60 M texels that was 180 MB held for the life of the scene on top of
+    the world's texture. The bytes uploaded to GL are the same (pyrender flips and
+    flattens the source into a contiguous buffer at upload either way).
+    """
+    if not _SHARED_TEXTURE:
+        class SharedTexture(pyrender.Texture):
+            @property
+            def source(self):
+                return self._source
+
+            @source.setter
+            def source(self, value):
+                if (isinstance(value, np.ndarray) and value.dtype == np.uint8 and value.ndim == 3
+                        and value.shape[2] == 3 and self.source_channels == "RGB"):
+                    self._source = value
+                    self._is_transparent = False
+                else:
+                    pyrender.Texture.source.fset(self, value)
+
+        _SHARED_TEXTURE.append(SharedTexture)
+    return _SHARED_TEXTURE[0]
+
+
 def _textured_material(pyrender, image: np.ndarray, *, repeat: bool):
     wrap = 10497 if repeat else 33071  # GL_REPEAT, GL_CLAMP_TO_EDGE
     sampler = pyrender.Sampler(magFilter=9729, minFilter=9987, wrapS=wrap, wrapT=wrap)  # LINEAR, LINEAR_MIPMAP_LINEAR
-    tex = pyrender.Texture(source=image, source_channels="RGB", sampler=sampler)
+    tex = _shared_texture_class(pyrender)(source=image, source_channels="RGB", sampler=sampler)
     return pyrender.MetallicRoughnessMaterial(baseColorTexture=tex, metallicFactor=0.0, roughnessFactor=1.0)
 
 
@@ -122,7 +152,7 @@ def _ground_tiles(pyrender, world: World) -> list:
     uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
     for r0 in range(0, ht, step):
         for c0 in range(0, wt, step):
-            tile = np.ascontiguousarray(tex[r0:r0 + step, c0:c0 + step])
+            tile = tex[r0:r0 + step, c0:c0 + step]  # a view: the texture keeps it, uploads a copy
             xa, xb = x0 + c0 * texel, x0 + (c0 + tile.shape[1]) * texel
             ya, yb = y0 + r0 * texel, y0 + (r0 + tile.shape[0]) * texel
             pos = np.array([[xa, ya, 0], [xb, ya, 0], [xb, yb, 0], [xa, yb, 0]], np.float32)

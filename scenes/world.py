@@ -71,25 +71,51 @@ def ground_footprint(path: CameraPath, width_px: int, height_px: int) -> tuple[f
             float(pts[..., 0].max()), float(pts[..., 1].max()))
 
 
-def _noise(rng: np.random.Generator, shape: tuple[int, int], cell_px: float) -> np.ndarray:
-    """Smooth value noise in [-1, 1] with features about ``cell_px`` texels wide, float32."""
+STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
+_BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
+_DRAW_ROWS = 1024  # noise lattices are drawn this many rows at a time (no float64 copy of a big one)
+
+
+def _noise_lattice(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    """Uniform [-1, 1) values, float32: the same draws as ``rng.uniform(-1, 1, shape)``, in row chunks."""
+    g = np.empty(shape, np.float32)
+    for r0 in range(0, shape[0], _DRAW_ROWS):
+        g[r0:r0 + _DRAW_ROWS] = rng.uniform(-1.0, 1.0, (min(_DRAW_ROWS, shape[0] - r0), shape[1]))
+    return g
+
+
+def _noise_upsampled(rng: np.random.Generator, shape: tuple[int, int], cell_px: float) -> np.ndarray:
+    """Smooth value noise, unclipped, features about ``cell_px`` texels wide, float32.
+
+    At least ``shape``: the caller crops to ``[:h, :w]``. One resize of the whole
+    lattice: strips of it would interpolate at other phases and change the values.
+    """
     h, w = shape
     gh, gw = max(2, int(math.ceil(h / cell_px)) + 2), max(2, int(math.ceil(w / cell_px)) + 2)
-    g = rng.uniform(-1.0, 1.0, (gh, gw)).astype(np.float32)
-    big = cv2.resize(g, (int(round(gw * cell_px)), int(round(gh * cell_px))), interpolation=cv2.INTER_CUBIC)
-    return np.clip(big[:h, :w], -1.0, 1.0)
+    g = _noise_lattice(rng, (gh, gw))
+    return cv2.resize(g, (int(round(gw * cell_px)), int(round(gh * cell_px))), interpolation=cv2.INTER_CUBIC)
 
 
 def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m: float) -> np.ndarray:
-    """Sum of octaves from 40 m down to one texel; fine octaves keep detail at the GSD."""
+    """Sum of octaves from 40 m down to one texel; fine octaves keep detail at the GSD.
+
+    Each octave, value noise clipped to [-1, 1] and weighted, is added strip by strip
+    in place, so only the sum and one octave are ever whole in memory.
+    """
+    h, w = shape
     total = np.zeros(shape, np.float32)
-    for cell_m, amp in ((40.0, 0.35), (10.0, 0.25), (3.0, 0.2), (1.0, 0.15)):
-        cell_px = cell_m / texel_m
-        if cell_px >= 2:
-            total += amp * _noise(rng, shape, cell_px)
     # grain at about one image pixel (TEXELS_PER_PIXEL texels): detail at the GSD, yet smooth
     # enough inside a pixel that resampling at another sub-pixel phase changes it little
-    total += 0.12 * _noise(rng, shape, TEXELS_PER_PIXEL)
+    octaves = [(cell_m / texel_m, amp) for cell_m, amp in ((40.0, 0.35), (10.0, 0.25), (3.0, 0.2), (1.0, 0.15))
+               if cell_m / texel_m >= 2] + [(TEXELS_PER_PIXEL, 0.12)]
+    for cell_px, amp in octaves:
+        big = _noise_upsampled(rng, shape, cell_px)
+        for r0 in range(0, h, STRIP_ROWS):
+            octave = big[r0:min(h, r0 + STRIP_ROWS), :w]
+            np.clip(octave, -1.0, 1.0, out=octave)
+            octave *= amp
+            total[r0:r0 + STRIP_ROWS] += octave
+        del big, octave  # the last strip's view would keep this octave alive through the next
     return total
 
 
@@ -98,6 +124,64 @@ def _road_lines(rng: np.random.Generator, lo: float, hi: float, spacing: float) 
     first = math.floor((lo - offset) / spacing)
     last = math.ceil((hi - offset) / spacing)
     return np.array([offset + k * spacing for k in range(first, last + 1)], float)
+
+
+@dataclass(frozen=True)
+class _Stripes:
+    """A field's ploughed stripes: ``base + 28 sin(2 pi (x cos(ang) + y sin(ang)) / period)``."""
+
+    base: np.ndarray  # (3,) RGB
+    period: float  # metres
+    ang: float  # radians
+
+
+@dataclass(frozen=True)
+class _Paint:
+    """Paint ``value`` on the texels ``[rows, cols]`` (a slice or a boolean mask each, never both masks)."""
+
+    rows: slice | np.ndarray
+    cols: slice | np.ndarray
+    value: object  # an RGB triple, a grey level, or _Stripes
+
+    def apply(self, buf: np.ndarray, r0: int, xs: np.ndarray, ys: np.ndarray) -> None:
+        """Paint onto ``buf``, the texture's rows ``r0 .. r0 + len(buf)`` (float32, (n, Wt, 3))."""
+        r1 = r0 + buf.shape[0]
+        if isinstance(self.rows, slice):
+            a, b = max(self.rows.start, r0), min(self.rows.stop, r1)
+            if b <= a:
+                return
+            local, rows_g = slice(a - r0, b - r0), slice(a, b)
+        else:
+            local = rows_g = self.rows[r0:r1]
+        if isinstance(self.value, _Stripes):
+            st = self.value
+            X, Y = np.meshgrid(xs[self.cols], ys[rows_g])
+            stripes = np.sin(2 * math.pi * (X * math.cos(st.ang) + Y * math.sin(st.ang)) / st.period)
+            buf[local, self.cols] = st.base + 28.0 * stripes[..., None]
+        else:
+            buf[local, self.cols] = self.value
+
+
+def _paint_ground(paint: list[_Paint], shade: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """The ground texture, (Ht, Wt, 3) uint8: ``paint`` in order, times ``shade`` (Ht, Wt), blurred.
+
+    Strip by strip of STRIP_ROWS rows, each with _BLUR_HALO_ROWS rows of its neighbours
+    painted too, so that the blur of a strip equals the blur of the whole texture there.
+    """
+    ht, wt = shade.shape
+    ground = np.empty((ht, wt, 3), np.uint8)
+    for s0 in range(0, ht, STRIP_ROWS):
+        s1 = min(ht, s0 + STRIP_ROWS)
+        h0, h1 = max(0, s0 - _BLUR_HALO_ROWS), min(ht, s1 + _BLUR_HALO_ROWS)
+        tex = np.zeros((h1 - h0, wt, 3), np.float32)
+        for op in paint:
+            op.apply(tex, h0, xs, ys)
+        tex *= shade[h0:h1, :, None]
+        # band-limit to about the pixel: hard texel edges would alias differently at every sub-pixel
+        # phase, which no flow (nor warping by the true flow) can reproduce
+        tex = cv2.GaussianBlur(tex, (0, 0), 0.5 * TEXELS_PER_PIXEL)[s0 - h0:s1 - h0]
+        ground[s0:s1] = np.clip(np.rint(tex), 0, 255)
+    return ground
 
 
 def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
@@ -120,13 +204,17 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
 
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
-    tex = np.empty((ht, wt, 3), np.float32)
 
     def cols(a: float, b: float) -> slice:
         return slice(max(0, int(math.floor((a - x0) / texel))), max(0, min(wt, int(math.ceil((b - x0) / texel)))))
 
     def rows(a: float, b: float) -> slice:
         return slice(max(0, int(math.floor((a - y0) / texel))), max(0, min(ht, int(math.ceil((b - y0) / texel)))))
+
+    # The layout is drawn first as a list of paint operations (every random draw in order);
+    # the texture is then painted from that list a strip of rows at a time, so no float copy
+    # of the whole ground is ever in memory.
+    paint: list[_Paint] = []
 
     # blocks between roads
     bx = np.concatenate([[x0 - sp], road_x, [x1 + sp]])
@@ -150,65 +238,60 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
             cs, rs = cols(bxa, bxb), rows(bya, byb)
             if cs.stop <= cs.start or rs.stop <= rs.start:
                 continue
-            X, Y = np.meshgrid(xs[cs], ys[rs])
             if kind == "field":
                 base = np.array([rng.uniform(70, 150), rng.uniform(100, 170), rng.uniform(30, 80)])
                 period = rng.uniform(1.2, 3.5)
                 ang = rng.choice([0.0, 0.5 * math.pi]) + rng.uniform(-0.3, 0.3)
-                stripes = np.sin(2 * math.pi * (X * math.cos(ang) + Y * math.sin(ang)) / period)
-                tex[rs, cs] = base + 28.0 * stripes[..., None]
+                paint.append(_Paint(rs, cs, _Stripes(base, period, ang)))
             elif kind == "grass":
-                tex[rs, cs] = np.array([rng.uniform(50, 90), rng.uniform(90, 130), rng.uniform(40, 70)])
+                paint.append(_Paint(rs, cs, np.array([rng.uniform(50, 90), rng.uniform(90, 130), rng.uniform(40, 70)])))
             elif kind == "roof":
                 g = rng.uniform(120, 190)
-                tex[rs, cs] = (g, g, g * rng.uniform(0.92, 1.05))
+                paint.append(_Paint(rs, cs, (g, g, g * rng.uniform(0.92, 1.05))))
                 # roof furniture: small boxes of another shade
                 for _ in range(int(rng.integers(3, 12))):
                     cx, cy = rng.uniform(bxa, bxb), rng.uniform(bya, byb)
                     hw, hh = rng.uniform(0.5, 2.5), rng.uniform(0.5, 2.5)
-                    tex[rows(cy - hh, cy + hh), cols(cx - hw, cx + hw)] = g + rng.choice([-60.0, 50.0])
+                    paint.append(_Paint(rows(cy - hh, cy + hh), cols(cx - hw, cx + hw), g + rng.choice([-60.0, 50.0])))
             else:  # parking lot: asphalt, rows of perpendicular stalls 2.7 m x 5 m, 7 m aisles
-                tex[rs, cs] = (95, 95, 100)
+                paint.append(_Paint(rs, cs, (95, 95, 100)))
                 stall_w, stall_d, aisle = 2.7, 5.0, 7.0
                 yrow = bya + 1.0
                 while yrow + stall_d <= byb - 1.0:
-                    tex[rows(yrow - 0.1, yrow + 0.1), cols(bxa + 1, bxb - 1)] = MARK_RGB
+                    paint.append(_Paint(rows(yrow - 0.1, yrow + 0.1), cols(bxa + 1, bxb - 1), MARK_RGB))
                     xl = bxa + 1.0
                     while xl + stall_w <= bxb - 1.0:
-                        tex[rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075)] = MARK_RGB
+                        paint.append(_Paint(rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075), MARK_RGB))
                         stalls.append((xl + stall_w / 2, yrow + stall_d / 2, 0.5 * math.pi))
                         xl += stall_w
-                    tex[rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075)] = MARK_RGB
+                    paint.append(_Paint(rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075), MARK_RGB))
                     yrow += stall_d + aisle
 
     # roads on top: asphalt, solid edge lines, dashed centre line (3 m dash, 6 m gap)
+    every_row, every_col = slice(0, ht), slice(0, wt)
     for rx in road_x:
-        tex[:, cols(rx - rw / 2, rx + rw / 2)] = ROAD_RGB
+        paint.append(_Paint(every_row, cols(rx - rw / 2, rx + rw / 2), ROAD_RGB))
         for e in (-1, 1):
-            tex[:, cols(rx + e * (rw / 2 - 0.45), rx + e * (rw / 2 - 0.25))] = MARK_RGB
+            paint.append(_Paint(every_row, cols(rx + e * (rw / 2 - 0.45), rx + e * (rw / 2 - 0.25)), MARK_RGB))
     for ry in road_y:
-        tex[rows(ry - rw / 2, ry + rw / 2), :] = ROAD_RGB
+        paint.append(_Paint(rows(ry - rw / 2, ry + rw / 2), every_col, ROAD_RGB))
         for e in (-1, 1):
-            tex[rows(ry + e * (rw / 2 - 0.45), ry + e * (rw / 2 - 0.25)), :] = MARK_RGB
+            paint.append(_Paint(rows(ry + e * (rw / 2 - 0.45), ry + e * (rw / 2 - 0.25)), every_col, MARK_RGB))
     dash = (np.mod(ys, 9.0) < 3.0)
     for rx in road_x:
-        c = cols(rx - 0.12, rx + 0.12)
-        tex[dash, c] = MARK_RGB
+        paint.append(_Paint(dash, cols(rx - 0.12, rx + 0.12), MARK_RGB))
     dash = (np.mod(xs, 9.0) < 3.0)
     for ry in road_y:
-        r_ = rows(ry - 0.12, ry + 0.12)
-        tex[r_, dash] = MARK_RGB
+        paint.append(_Paint(rows(ry - 0.12, ry + 0.12), dash, MARK_RGB))
     # intersections: plain asphalt
     for rx in road_x:
         for ry in road_y:
-            tex[rows(ry - rw / 2, ry + rw / 2), cols(rx - rw / 2, rx + rw / 2)] = ROAD_RGB
+            paint.append(_Paint(rows(ry - rw / 2, ry + rw / 2), cols(rx - rw / 2, rx + rw / 2), ROAD_RGB))
 
-    shade = 1.0 + _multiscale_noise(rng, (ht, wt), texel)
-    tex *= shade[..., None]
-    # band-limit to about the pixel: hard texel edges would alias differently at every sub-pixel
-    # phase, which no flow (nor warping by the true flow) can reproduce
-    tex = cv2.GaussianBlur(tex, (0, 0), 0.5 * TEXELS_PER_PIXEL)
-    ground = np.clip(np.rint(tex), 0, 255).astype(np.uint8)
+    shade = _multiscale_noise(rng, (ht, wt), texel)
+    shade += 1.0
+    ground = _paint_ground(paint, shade, xs, ys)
+    del shade
 
     buildings = _place_buildings(spec, block_kinds, (fx0, fy0, fx1, fy1), rng)
     btex = None

@@ -1,0 +1,63 @@
+"""The ground texture is built strip by strip, and a strip build equals the whole-texture build."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+import scenes.world as world_mod
+from scenes import load_scene_spec
+from scenes.motion import camera_path
+
+
+def _world(spec, *, strip_rows: int, draw_rows: int, monkeypatch):
+    """build_world of ``spec`` with the given strip heights; (world, the world rng's next draw)."""
+    monkeypatch.setattr(world_mod, "STRIP_ROWS", strip_rows)
+    monkeypatch.setattr(world_mod, "_DRAW_ROWS", draw_rows)
+    ss = np.random.SeedSequence(spec.seed)
+    rng_jitter, rng_world = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(2))
+    path = camera_path(spec, rng_jitter)
+    w = world_mod.build_world(spec, path, rng_world)
+    return w, rng_world.uniform()
+
+
+@pytest.mark.parametrize("preset", ["tiny", "urban-parallax"])
+def test_strip_build_equals_whole_build(preset, monkeypatch):
+    # one strip as tall as the texture is the whole-texture build (blur sees the true image
+    # borders); strips of 7 rows (fewer than the blur halo, not dividing the height) must
+    # give the same bytes, the same layout, and leave the random stream at the same place
+    spec = load_scene_spec(preset, overrides={"image.width_px": 160, "image.height_px": 120})
+    whole, next_whole = _world(spec, strip_rows=10**6, draw_rows=10**6, monkeypatch=monkeypatch)
+    strips, next_strips = _world(spec, strip_rows=7, draw_rows=5, monkeypatch=monkeypatch)
+    assert whole.ground_texture.shape[0] % 7 != 0
+    assert whole.ground_texture.dtype == np.uint8
+    np.testing.assert_array_equal(strips.ground_texture, whole.ground_texture)
+    assert strips.stalls == whole.stalls and strips.buildings == whole.buildings
+    if whole.building_texture is not None:
+        np.testing.assert_array_equal(strips.building_texture, whole.building_texture)
+    assert next_strips == next_whole
+    # the texture is painted: roads, marks and shaded blocks, not a constant
+    assert np.unique(whole.ground_texture.reshape(-1, 3), axis=0).shape[0] > 100
+
+
+def test_multiscale_noise_equals_one_resize_per_octave(monkeypatch):
+    # the reference: each octave one uniform draw of the whole lattice, one cubic resize,
+    # clipped and weighted, summed in order (how the texture was shaded before strips)
+    monkeypatch.setattr(world_mod, "STRIP_ROWS", 5)
+    monkeypatch.setattr(world_mod, "_DRAW_ROWS", 3)
+    shape, texel_m = (61, 47), 0.5
+    ref_rng, rng = np.random.default_rng(7), np.random.default_rng(7)
+    expected = np.zeros(shape, np.float32)
+    octaves = [(cell_m / texel_m, amp) for cell_m, amp in ((40.0, 0.35), (10.0, 0.25), (3.0, 0.2), (1.0, 0.15))
+               if cell_m / texel_m >= 2] + [(world_mod.TEXELS_PER_PIXEL, 0.12)]
+    assert len(octaves) == 5
+    for cell_px, amp in octaves:
+        gh, gw = int(np.ceil(shape[0] / cell_px)) + 2, int(np.ceil(shape[1] / cell_px)) + 2
+        g = ref_rng.uniform(-1.0, 1.0, (gh, gw)).astype(np.float32)
+        big = cv2.resize(g, (int(round(gw * cell_px)), int(round(gh * cell_px))), interpolation=cv2.INTER_CUBIC)
+        expected += amp * np.clip(big[:shape[0], :shape[1]], -1.0, 1.0)
+    got = world_mod._multiscale_noise(rng, shape, texel_m)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, expected)
+    assert rng.uniform() == ref_rng.uniform()
