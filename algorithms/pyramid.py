@@ -23,7 +23,8 @@ from algorithms.flow import FLOW_DTYPE, warp_backward
 __all__ = ["gaussian_pyramid", "resize_flow", "target_inside", "coarse_to_fine", "median_flow"]
 
 
-def gaussian_pyramid(image: np.ndarray, levels: int, *, scale: float = 0.5) -> list[np.ndarray]:
+def gaussian_pyramid(image: np.ndarray, levels: int, *, scale: float = 0.5,
+                     min_size_px: int = 8) -> list[np.ndarray]:
     """Blur-and-subsample pyramid, finest level first.
 
     Parameters
@@ -31,9 +32,11 @@ def gaussian_pyramid(image: np.ndarray, levels: int, *, scale: float = 0.5) -> l
     image : ndarray, (H, W) float32
     levels : int
         Number of levels, at least 1 (1 returns ``[image]``). Levels whose
-        shorter side would drop below 8 px are not built.
+        shorter side would drop below ``min_size_px`` are not built.
     scale : float
         Size ratio between consecutive levels, in (0, 1).
+    min_size_px : int
+        Smallest side of a level, px (at least 8).
 
     Returns
     -------
@@ -51,7 +54,7 @@ def gaussian_pyramid(image: np.ndarray, levels: int, *, scale: float = 0.5) -> l
         prev = out[-1]
         h = int(round(prev.shape[0] * scale))
         w = int(round(prev.shape[1] * scale))
-        if min(h, w) < 8:
+        if min(h, w) < max(8, min_size_px):
             break
         blurred = cv2.GaussianBlur(prev, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT_101)
         out.append(cv2.resize(blurred, (w, h), interpolation=cv2.INTER_LINEAR))
@@ -96,7 +99,7 @@ Update = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.nda
 
 
 def coarse_to_fine(g0: np.ndarray, g1: np.ndarray, update: Update, *, levels: int, warps: int,
-                   scale: float = 0.5, median_px: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   scale: float = 0.5, median_px: int = 0, min_size_px: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """Drive ``update`` from the coarsest pyramid level to the finest, warping each time.
 
     Parameters
@@ -124,8 +127,8 @@ def coarse_to_fine(g0: np.ndarray, g1: np.ndarray, update: Update, *, levels: in
     """
     if warps < 1:
         raise ValueError(f"iterations (warps per level): expected at least 1, got {warps}")
-    pyr0 = gaussian_pyramid(g0, levels, scale=scale)
-    pyr1 = gaussian_pyramid(g1, levels, scale=scale)
+    pyr0 = gaussian_pyramid(g0, levels, scale=scale, min_size_px=min_size_px)
+    pyr1 = gaussian_pyramid(g1, levels, scale=scale, min_size_px=min_size_px)
     flow = np.zeros(pyr0[-1].shape + (2,), dtype=FLOW_DTYPE)
     valid = np.ones(pyr0[-1].shape, dtype=bool)
     for f0, f1 in zip(reversed(pyr0), reversed(pyr1)):
