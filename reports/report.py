@@ -402,6 +402,18 @@ def _pictures_html(data: RunData, cells: pd.DataFrame) -> str:
     return "".join(out) or _missing("No pictures.")
 
 
+def _per_pipeline(data: RunData, cells: pd.DataFrame, read) -> dict:
+    """``read(cell_dir)`` of each pipeline's first cell in ``cells``, in the run's pipeline order; None left out."""
+    out = {}
+    for pipe in data.pipelines:
+        r = cells[cells["pipeline"] == pipe]
+        if len(r):
+            value = read(data.run_dir / "cells" / r["cell_id"].iloc[0])
+            if value is not None:
+                out[pipe] = value
+    return out
+
+
 def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
     out = []
     for base in dict.fromkeys(cells["scene"].map(scene_base)):
@@ -410,13 +422,7 @@ def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, st
             out.append(f"<h3>{_e(base)}</h3>" + _missing("No stabilisation data (no stabilisation.csv)."))
             continue
         label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
-        stabs = {}
-        for pipe in data.pipelines:
-            r = g[g["pipeline"] == pipe]
-            if len(r):
-                s = read_stabilisation(data.run_dir / "cells" / r["cell_id"].iloc[0], seq)
-                if s is not None:
-                    stabs[pipe] = s
+        stabs = _per_pipeline(data, g, lambda cell_dir: read_stabilisation(cell_dir, seq))
         if not stabs:
             out.append(f"<h3>{_e(base)}</h3>" + _missing("stabilisation.csv lacks the cumulative / line columns."))
             continue
@@ -502,13 +508,7 @@ def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -
             out.append(f"<h3>{_e(base)}</h3>" + _missing("No tracks in this scene's cells."))
             continue
         label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
-        tracks = {}
-        for pipe in data.pipelines:
-            r = g[g["pipeline"] == pipe]
-            if len(r):
-                t = read_tracks(data.run_dir / "cells" / r["cell_id"].iloc[0])
-                if t is not None:
-                    tracks[pipe] = t
+        tracks = _per_pipeline(data, g, read_tracks)
         first = int(min(t["frame"].min() for t in tracks.values()))
         frame = read_frame_truth(seq, first)[0] if seq is not None else None
         truth = read_true_tracks(seq)
