@@ -6,7 +6,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 ::
 
     aerobench list
-    aerobench render SCENE --out DIR [--set key=value ...]
+    aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE]
@@ -151,7 +151,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and any(out.iterdir()):
         raise UsageError(f"{out}: the output folder is not empty")
-    render_sequence(spec, out)
+    render_sequence(spec, out, flow_format=args.flow_format)
     print(f"wrote {out} (preview: {out / 'preview.png'})")
     return EXIT_OK
 
@@ -305,6 +305,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="the sequence folder to write")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter by dotted key (repeatable)")
+    s.add_argument("--flow-format", choices=("npz", "flo"), default="npz",
+                   help="ground-truth flow files: compact lossless flow/NNNNNN.npz (default) or Middlebury "
+                        ".flo in flow/ and flow_camera/ (about 10x larger)")
     s.set_defaults(fn=cmd_render)
 
     s = sub.add_parser("run", help="run a suite into a run folder")

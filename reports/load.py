@@ -19,6 +19,7 @@ import pandas as pd
 
 from harness.results import aggregate, read_results
 from scenes.formats import read_flo, read_png
+from scenes.sequence import read_pair_flow
 
 __all__ = [
     "RESULT_COLUMNS",
@@ -342,9 +343,8 @@ def read_cell_flow(cell_dir: Path, frame: int, *, local: bool = False) -> np.nda
 
 
 def read_camera_flow(seq_dir: Path, frame: int) -> np.ndarray | None:
-    """``flow_camera/NNNNNN.flo`` of the sequence (the camera-induced part of the true flow), or None."""
-    p = seq_dir / "flow_camera" / f"{frame:06d}.flo"
-    return read_flo(p) if p.is_file() else None
+    """The camera-induced part of the true flow of pair ``frame`` (either flow format), or None."""
+    return read_pair_flow(seq_dir, frame)[1]
 
 
 def read_frame_truth(seq_dir: Path, frame: int) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
@@ -353,7 +353,7 @@ def read_frame_truth(seq_dir: Path, frame: int) -> tuple[np.ndarray | None, np.n
     img = read_png(seq_dir / "frames" / f"{name}.png") if (seq_dir / "frames" / f"{name}.png").is_file() else None
     if img is not None and img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=2)
-    flow = read_flo(seq_dir / "flow" / f"{name}.flo") if (seq_dir / "flow" / f"{name}.flo").is_file() else None
+    flow = read_pair_flow(seq_dir, frame)[0]
     valid = None
     if (seq_dir / "valid" / f"{name}.png").is_file():
         valid = read_png(seq_dir / "valid" / f"{name}.png") > 0

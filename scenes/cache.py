@@ -1,4 +1,6 @@
-"""The render cache: one folder per (resolved spec, generator version), reused when intact.
+"""The render cache: one folder per (resolved spec, generator version, folder layout), reused when intact.
+
+Entries are written with the compact flow format (``flow/NNNNNN.npz``).
 
 An entry is named by a content hash. It is reused only if its manifest
 verifies in full (size and sha256 of every file: about 1.8 GB/s here, small
@@ -23,7 +25,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from scenes.sequence import ManifestError, Progress, _write_into, verify_manifest
+from scenes.sequence import SEQUENCE_LAYOUT, ManifestError, Progress, _write_into, verify_manifest
 from scenes.spec import GENERATOR_VERSION, SceneSpec, load_scene_spec, spec_hash
 
 __all__ = ["CacheResult", "cache_key", "cached_sequence", "cached_sequence_result"]
@@ -39,8 +41,12 @@ class CacheResult:
 
 
 def cache_key(spec: SceneSpec) -> str:
-    """Content hash of the resolved spec and the generator version, 20 hex digits."""
-    text = f"{spec_hash(spec)}|{GENERATOR_VERSION}"
+    """Content hash of the resolved spec, the generator version and the folder layout, 20 hex digits.
+
+    The layout (:data:`scenes.sequence.SEQUENCE_LAYOUT`) is in the key so that an entry
+    written in an older layout (``.flo`` flow) is never looked up, let alone misread.
+    """
+    text = f"{spec_hash(spec)}|{GENERATOR_VERSION}|layout-{SEQUENCE_LAYOUT}"
     label = re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.name).strip("._")[:40] or "scene"
     return f"{label}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
 
@@ -89,7 +95,9 @@ def cached_sequence_result(spec: SceneSpec | str | os.PathLike, cache_dir: str |
     _remove_orphaned_partials(cache_dir)
     if target.exists():
         try:
-            verify_manifest(target, full=True)
+            doc = verify_manifest(target, full=True)
+            if doc.get("layout") != SEQUENCE_LAYOUT:
+                raise ManifestError(f"{target}: layout {doc.get('layout')!r}, expected {SEQUENCE_LAYOUT}")
             return CacheResult(path=target, rendered=False, key=key)
         except ManifestError:
             _discard(target)

@@ -1,14 +1,24 @@
-"""File formats of a sequence folder: Middlebury ``.flo``, PNG images and masks.
+"""File formats of a sequence folder: Middlebury ``.flo``, compact ``.npz`` flow, PNG images and masks.
 
 One reader and one writer per format; every reader checks what it reads and
 names the file in its error. Writers write to a temporary file in the same
 folder and rename it, so a reader never sees half a file.
+
+The compact flow file (:func:`encode_flow_npz`, :func:`read_flow_npz`) is
+lossless: it gives back the float32 fields bit for bit (NaN included), at about
+a tenth of two ``.flo`` files. It is an ordinary ``.npz`` (a zip of ``.npy``
+members, deflated), so ``numpy.load`` opens it anywhere; the members hold the
+float32 bits recoded so that zlib finds their redundancy (see
+:func:`encode_flow_npz` for the three lines that undo it).
 """
 
 from __future__ import annotations
 
+import io
 import os
 import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 
 import cv2
@@ -25,6 +35,10 @@ __all__ = [
     "atomic_write_bytes",
     "encode_flo",
     "encode_png",
+    "FLOW_NPZ_CODEC",
+    "encode_flow_npz",
+    "decode_flow_npz",
+    "read_flow_npz",
 ]
 
 FLO_TAG = 202021.25
@@ -110,20 +124,31 @@ def write_flo(path: str | os.PathLike, flow: np.ndarray) -> None:
     atomic_write_bytes(path, encode_flo(flow))
 
 
-def encode_png(image: np.ndarray, *, compression: int = 3) -> bytes:
+_PNG_STRATEGIES = {"default": cv2.IMWRITE_PNG_STRATEGY_DEFAULT, "rle": cv2.IMWRITE_PNG_STRATEGY_RLE,
+                   "filtered": cv2.IMWRITE_PNG_STRATEGY_FILTERED,
+                   "huffman": cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY}
+
+
+def encode_png(image: np.ndarray, *, compression: int = 3, strategy: str = "default") -> bytes:
     """PNG bytes of uint8 gray, uint8 RGB or uint16 gray (lossless, deterministic).
 
     ``compression`` is zlib's level 0..9: 1 is several times faster than 3 on
-    textured frames for files a little larger.
+    textured frames for files a little larger. ``strategy`` is zlib's matching
+    strategy, one of ``default``, ``rle``, ``filtered``, ``huffman``: ``rle`` with
+    level 1 is faster and smaller than ``default`` on rendered frames. Both change
+    the bytes, never the pixels.
     """
     a = np.asarray(image)
     if a.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"image: expected uint8 or uint16, got {a.dtype}")
+    if strategy not in _PNG_STRATEGIES:
+        raise ValueError(f"strategy: expected one of {', '.join(_PNG_STRATEGIES)}, got {strategy!r}")
     if a.ndim == 3 and a.shape[2] == 3:
         a = cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
     elif a.ndim != 2:
         raise ValueError(f"image: expected (H, W) or (H, W, 3), got {tuple(a.shape)}")
-    ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, int(compression)])
+    ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, int(compression),
+                                       cv2.IMWRITE_PNG_STRATEGY, _PNG_STRATEGIES[strategy]])
     if not ok:
         raise OSError("PNG encoding failed")
     return buf.tobytes()
@@ -153,3 +178,119 @@ def read_png(path: str | os.PathLike, *, expect: str | None = None) -> np.ndarra
     if expect is not None and kind != expect:
         raise FormatError(f"{path}: expected a {expect} PNG, got {kind}")
     return img
+
+
+# --------------------------------------------------------------------------- compact flow (.npz)
+
+FLOW_NPZ_CODEC = "aerobench-flow-npz-1"
+# zlib level of the flow members: 1 is ~4x faster than 6 on these planes for files ~20 % larger
+FLOW_NPZ_LEVEL = 1
+# a fixed timestamp in every zip member, so that the same fields give the same bytes
+_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def _npy_bytes(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asarray(a), allow_pickle=False)
+    return buf.getvalue()
+
+
+def _byte_planes(bits: np.ndarray) -> np.ndarray:
+    """``(H, W, 2)`` uint32 -> ``(4, 2, H, W)`` uint8: byte k (little-endian) of component c."""
+    h, w = bits.shape[:2]
+    return np.ascontiguousarray(bits.astype("<u4", copy=False).view(np.uint8).reshape(h, w, 2, 4)
+                                .transpose(3, 2, 0, 1))
+
+
+def _from_byte_planes(planes: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_byte_planes`: ``(4, 2, H, W)`` uint8 -> ``(2, H, W)`` uint32 (component first).
+
+    Shifts and ors: about 3x faster than gathering the bytes back by a transpose.
+    """
+    out = planes[3].astype(np.uint32)
+    for k in (2, 1, 0):
+        out <<= 8
+        out |= planes[k]
+    return out
+
+
+def _check_field(a: np.ndarray, name: str, shape: tuple | None = None) -> np.ndarray:
+    a = np.asarray(a)
+    if a.ndim != 3 or a.shape[2] != 2 or a.dtype != np.float32:
+        raise ValueError(f"{name}: expected (H, W, 2) float32, got {tuple(a.shape)} {a.dtype}")
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape} (as flow_camera), got {tuple(a.shape)}")
+    return np.ascontiguousarray(a)
+
+
+def encode_flow_npz(flow: np.ndarray, flow_camera: np.ndarray, *, level: int = FLOW_NPZ_LEVEL) -> bytes:
+    """The bytes of a lossless compact ``.npz`` holding a pair's total and camera-induced flow.
+
+    Members (all ``uint8`` byte planes, shape ``(4, 2, H, W)``: byte k, little-endian, of
+    component c = u, v):
+
+    - ``codec``: the string :data:`FLOW_NPZ_CODEC`.
+    - ``flow_camera_rowdelta``: the float32 bits of ``flow_camera`` as uint32, each minus its
+      left neighbour in the row (modulo 2**32; the first column kept). The camera-induced flow
+      is smooth, so neighbouring bit patterns differ in their low bits only.
+    - ``flow_xor_camera``: the bits of ``flow`` XOR those of ``flow_camera``: zero wherever
+      the total flow is the camera's (the static world), so nearly all of it.
+
+    Decoding (what :func:`decode_flow_npz` does)::
+
+        bits_c = cumsum(planes_to_uint32(flow_camera_rowdelta), axis=1) mod 2**32
+        flow_camera = bits_c.view(float32);  flow = (bits_c ^ planes_to_uint32(flow_xor_camera)).view(float32)
+
+    Parameters
+    ----------
+    flow, flow_camera : (H, W, 2) float32 px; NaN and infinities are kept bit for bit.
+    level : zlib level 0..9 of the deflated members.
+    """
+    fc = _check_field(flow_camera, "flow_camera")
+    f = _check_field(flow, "flow", fc.shape)
+    bits_c = fc.view(np.uint32)
+    delta = bits_c.copy()
+    np.subtract(bits_c[:, 1:], bits_c[:, :-1], out=delta[:, 1:])  # wraps modulo 2**32
+    members = {
+        "codec": np.array(FLOW_NPZ_CODEC),
+        "flow_camera_rowdelta": _byte_planes(delta),
+        "flow_xor_camera": _byte_planes(f.view(np.uint32) ^ bits_c),
+    }
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for name, a in members.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, _npy_bytes(a), compresslevel=int(level))
+    return buf.getvalue()
+
+
+def decode_flow_npz(data: bytes, *, name: str = "<bytes>") -> tuple[np.ndarray, np.ndarray]:
+    """``(flow, flow_camera)``, each ``(H, W, 2)`` float32 px, from the bytes of :func:`encode_flow_npz`.
+
+    ``name`` (the file) is named in the :class:`FormatError` of a damaged or foreign file.
+    """
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            codec = str(z["codec"].item()) if "codec" in z.files else None
+            if codec != FLOW_NPZ_CODEC:
+                raise FormatError(f"{name}: not a compact flow file: codec {codec!r}, expected {FLOW_NPZ_CODEC!r}")
+            delta, xor = z["flow_camera_rowdelta"], z["flow_xor_camera"]
+    except FormatError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise FormatError(f"{name}: not a readable compact flow file ({type(err).__name__}: {err})") from None
+    if delta.dtype != np.uint8 or delta.ndim != 4 or delta.shape[:2] != (4, 2) or xor.shape != delta.shape:
+        raise FormatError(f"{name}: flow members of shape {delta.shape} and {xor.shape}, "
+                          f"expected (4, 2, H, W) uint8 both")
+    bits_c = np.cumsum(_from_byte_planes(delta), axis=2, dtype=np.uint32)  # (2, H, W); wraps modulo 2**32
+    bits = bits_c ^ _from_byte_planes(xor)
+    return (np.ascontiguousarray(bits.transpose(1, 2, 0)).view(np.float32),
+            np.ascontiguousarray(bits_c.transpose(1, 2, 0)).view(np.float32))
+
+
+def read_flow_npz(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a compact flow file: ``(flow, flow_camera)``, each ``(H, W, 2)`` float32 px, bit for bit."""
+    path = Path(path)
+    return decode_flow_npz(path.read_bytes(), name=str(path))

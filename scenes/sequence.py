@@ -4,6 +4,18 @@ Layout and columns are the contract of ``docs/architecture.md``. A folder is
 complete when its ``MANIFEST.json`` exists: it is written last, and the whole
 folder is built under a temporary name next to its destination and renamed
 into place, so a crash never leaves a partial folder under the real name.
+
+Ground-truth flow is stored in one of two formats (``meta.json`` says which):
+``"npz"`` (the default: one lossless compact file per pair, ``flow/NNNNNN.npz``
+with the total and the camera-induced flow, see :func:`scenes.formats.encode_flow_npz`)
+or ``"flo"`` (Middlebury files ``flow/NNNNNN.flo`` and ``flow_camera/NNNNNN.flo``,
+for tools that read them; folders written before the compact format have these).
+The reader reads both, bit for bit the same arrays.
+
+Files are encoded (PNG, zlib) and written by a few writer threads while the
+next frame renders: cv2 and zlib release the GIL. A writer's error is raised
+in the rendering thread at its next frame; the manifest is written only after
+every file has been written.
 """
 
 from __future__ import annotations
@@ -14,15 +26,27 @@ import json
 import os
 import shutil
 import tempfile
+import threading
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import yaml
 
-from scenes.formats import FormatError, atomic_write_bytes, encode_flo, encode_png, read_flo, read_png
+from scenes.formats import (
+    FormatError,
+    atomic_write_bytes,
+    encode_flo,
+    encode_flow_npz,
+    encode_png,
+    read_flo,
+    read_flow_npz,
+    read_png,
+)
 from scenes.ground_truth import PairTruth
 from scenes.spec import GENERATOR_VERSION, SceneSpec, load_scene_spec, spec_hash, spec_to_yaml
 
@@ -35,14 +59,27 @@ __all__ = [
     "verify_manifest",
     "ManifestError",
     "MANIFEST_NAME",
+    "FLOW_FORMATS",
+    "SEQUENCE_LAYOUT",
+    "read_pair_flow",
 ]
 
 MANIFEST_NAME = "MANIFEST.json"
 # files up to this size are hashed whole by the quick check; larger ones by size + sampled blocks
 QUICK_FULL_HASH_BYTES = 256 * 1024
 _SAMPLE_BYTES = 64 * 1024
-# zlib level of the per-frame PNGs: level 1 encodes textured 640x480 frames ~3x faster than 3
+# zlib level and strategy of the per-frame PNGs: level 1 with run-length matching encodes a
+# textured 640x480 frame faster than level 1's default matching, and smaller (459 vs 480 KB
+# nominal, 550 vs 613 KB noisy; benchmarks/io_speed.py)
 PNG_COMPRESSION = 1
+PNG_STRATEGY = "rle"
+# how ground-truth flow is stored: "npz" (compact, lossless, the default) or "flo" (Middlebury)
+FLOW_FORMATS = ("npz", "flo")
+# version of the folder layout; part of the render cache key, so a cache entry written in
+# another layout is never read as this one (2: compact flow, PNG strategy RLE)
+SEQUENCE_LAYOUT = 2
+# threads that encode and write files while the next frame renders
+WRITER_THREADS = 2
 
 Progress = Callable[[int, int], None]
 
@@ -83,20 +120,61 @@ class _FolderWriter:
     No per-file rename or fsync: the whole folder is renamed into place once
     complete, and the manifest (recorded from the bytes written) catches any
     file that did not reach the disk intact.
+
+    With ``threads > 0``, :meth:`submit` encodes and writes on a pool of that many
+    threads, at most ``max_pending`` jobs queued (the arrays they hold bound memory);
+    the first error of a job is raised by the next :meth:`submit` or by :meth:`finish`.
+    :meth:`close` (always call it) cancels what has not started and waits for the rest,
+    so no thread writes into a folder that is being removed.
     """
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, *, threads: int = 0, max_pending: int | None = None):
         self.folder = folder
         self.records: dict[str, dict] = {}
+        self._lock = threading.Lock()
+        self._pool = ThreadPoolExecutor(threads, thread_name_prefix="seq-writer") if threads > 0 else None
+        self._pending: deque[Future] = deque()
+        self._max_pending = max_pending if max_pending is not None else 8 * max(threads, 1)
 
     def write(self, rel: str, data: bytes) -> None:
         path = self.folder / rel
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "wb") as fh:
             fh.write(data)
-        self.records[rel] = _file_record(data)
+        record = _file_record(data)
+        with self._lock:
+            self.records[rel] = record
+
+    def _encode_write(self, rel: str, encode: Callable[..., bytes], args: tuple, kwargs: dict) -> None:
+        self.write(rel, encode(*args, **kwargs))
+
+    def submit(self, rel: str, encode: Callable[..., bytes], *args, **kwargs) -> None:
+        """Write ``encode(*args, **kwargs)`` to ``rel``: on a writer thread, or now without threads.
+
+        The arrays in ``args`` must not change afterwards (the job reads them later).
+        """
+        if self._pool is None:
+            self._encode_write(rel, encode, args, kwargs)
+            return
+        while self._pending and (self._pending[0].done() or len(self._pending) >= self._max_pending):
+            self._pending.popleft().result()  # raises the job's error here, in the caller's thread
+        self._pending.append(self._pool.submit(self._encode_write, rel, encode, args, kwargs))
+
+    def finish(self) -> None:
+        """Wait for every submitted job; raise the first error."""
+        while self._pending:
+            self._pending.popleft().result()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            for fut in self._pending:
+                fut.cancel()
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+            self._pending.clear()
 
     def write_manifest(self, extra: dict | None = None) -> None:
+        self.finish()
         doc = {"generator_version": GENERATOR_VERSION, **(extra or {}), "files": dict(sorted(self.records.items()))}
         atomic_write_bytes(self.folder / MANIFEST_NAME, json.dumps(doc, indent=1, sort_keys=True).encode())
 
@@ -170,7 +248,8 @@ def _prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
 
 def render_sequence(spec: SceneSpec | str | os.PathLike, out_dir: str | os.PathLike, *,
                     progress: Progress | None = None, overwrite: bool = False,
-                    timings: dict | None = None) -> Path:
+                    timings: dict | None = None, flow_format: str = "npz",
+                    writer_threads: int = WRITER_THREADS) -> Path:
     """Render ``spec`` into the sequence folder ``out_dir`` (see docs/architecture.md).
 
     Parameters
@@ -179,7 +258,14 @@ def render_sequence(spec: SceneSpec | str | os.PathLike, out_dir: str | os.PathL
     out_dir : path; built under a temporary name next to it, then renamed into place
     progress : callable ``(frames_done, n_frames)``, optional
     overwrite : replace an existing non-empty ``out_dir`` (refused otherwise)
-    timings : dict, optional; filled with seconds spent rendering+truth and writing
+    timings : dict, optional; filled with seconds spent rendering+truth and writing (in the
+        rendering thread: what the writer threads do in parallel is not counted)
+    flow_format : {"npz", "flo"}
+        ``"npz"`` (default) one lossless compact file per pair; ``"flo"`` Middlebury
+        ``flow/*.flo`` and ``flow_camera/*.flo`` (about 10x the bytes), for other tools.
+    writer_threads : int
+        Threads encoding and writing files while the next frame renders; 0 writes in the
+        rendering thread. The bytes written do not depend on it.
 
     Returns
     -------
@@ -194,12 +280,13 @@ def render_sequence(spec: SceneSpec | str | os.PathLike, out_dir: str | os.PathL
     """
     if not isinstance(spec, SceneSpec):
         spec = load_scene_spec(spec)
+    _check_flow_format(flow_format)
     out_dir = Path(out_dir)
     _prepare_out_dir(out_dir, overwrite)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
-        _write_into(spec, tmp, progress, timings)
+        _write_into(spec, tmp, progress, timings, flow_format=flow_format, writer_threads=writer_threads)
         _move_into_place(tmp, out_dir, overwrite)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -221,56 +308,90 @@ def _move_into_place(tmp: Path, out_dir: Path, overwrite: bool) -> None:
         os.rename(tmp, out_dir)
 
 
-def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timings: dict | None) -> None:
+def _check_flow_format(flow_format: str) -> None:
+    if flow_format not in FLOW_FORMATS:
+        raise ValueError(f"flow_format: expected one of {', '.join(FLOW_FORMATS)}, got {flow_format!r}")
+
+
+def _valid_png(valid: np.ndarray) -> bytes:
+    return encode_png(valid.view(np.uint8) * np.uint8(255), compression=PNG_COMPRESSION, strategy=PNG_STRATEGY)
+
+
+def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timings: dict | None, *,
+                flow_format: str = "npz", writer_threads: int = WRITER_THREADS) -> None:
     from scenes.generate import CAMERA_COLUMNS, TRACK_COLUMNS, SceneGenerator
     from scenes.preview import PreviewCollector
     from scenes.render import gl_info
 
+    _check_flow_format(flow_format)
     n = spec.image.n_frames
-    out = _FolderWriter(folder)
-    t_gen = t_write = 0.0
-    t0 = time.perf_counter()
-    gen = SceneGenerator(spec)
-    preview = PreviewCollector(n)
-    t_gen += time.perf_counter() - t0
-    frames = gen.frames()
-    for i in range(n):
+    png = {"compression": PNG_COMPRESSION, "strategy": PNG_STRATEGY}
+    out = _FolderWriter(folder, threads=writer_threads)
+    try:
+        t_gen = t_write = 0.0
         t0 = time.perf_counter()
-        fo = next(frames)
-        t1 = time.perf_counter()
-        name = f"{fo.index:06d}"
-        out.write(f"frames/{name}.png", encode_png(fo.rgb, compression=PNG_COMPRESSION))
-        out.write(f"instances/{name}.png", encode_png(fo.instances, compression=PNG_COMPRESSION))
-        if fo.pair is not None:
-            pname = f"{fo.pair_index:06d}"
-            out.write(f"flow/{pname}.flo", encode_flo(fo.pair.flow))
-            out.write(f"flow_camera/{pname}.flo", encode_flo(fo.pair.flow_camera))
-            out.write(f"valid/{pname}.png", encode_png(fo.pair.valid.view(np.uint8) * np.uint8(255),
-                                                           compression=PNG_COMPRESSION))
-        preview.add(fo)
-        t_gen += t1 - t0
-        t_write += time.perf_counter() - t1
-        if progress is not None:
-            progress(i + 1, n)
-    t0 = time.perf_counter()
-    out.write("camera.csv", _csv_bytes(CAMERA_COLUMNS, gen.camera_rows()))
-    tracks = gen.track_table()
-    out.write("tracks.csv", _csv_bytes(TRACK_COLUMNS, tracks))
-    out.write("scene.yaml", spec_to_yaml(spec).encode())
-    K = gen.path.K
-    meta = {"width": spec.image.width_px, "height": spec.image.height_px, "n_frames": n,
-            "fps": spec.image.fps, "K": K.tolist(), "generator_version": GENERATOR_VERSION,
-            "spec_hash": spec_hash(spec), "seed": spec.seed, "name": spec.name,
-            "gsd_m": spec.gsd_m(), "texel_m": gen.world.texel_m, "n_vehicles": len(gen.vehicles),
-            "n_buildings": len(gen.world.buildings), **gl_info()}
-    out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
-    sheet = preview.sheet(tracks)
-    if sheet is not None:
-        out.write("preview.png", encode_png(sheet))
-    out.write_manifest({"spec_hash": spec_hash(spec)})
-    t_write += time.perf_counter() - t0
+        gen = SceneGenerator(spec)
+        preview = PreviewCollector(n)
+        t_gen += time.perf_counter() - t0
+        frames = gen.frames()
+        for i in range(n):
+            t0 = time.perf_counter()
+            fo = next(frames)
+            t1 = time.perf_counter()
+            name = f"{fo.index:06d}"
+            out.submit(f"frames/{name}.png", encode_png, fo.rgb, **png)
+            out.submit(f"instances/{name}.png", encode_png, fo.instances, **png)
+            if fo.pair is not None:
+                pname = f"{fo.pair_index:06d}"
+                if flow_format == "npz":
+                    out.submit(f"flow/{pname}.npz", encode_flow_npz, fo.pair.flow, fo.pair.flow_camera)
+                else:
+                    out.submit(f"flow/{pname}.flo", encode_flo, fo.pair.flow)
+                    out.submit(f"flow_camera/{pname}.flo", encode_flo, fo.pair.flow_camera)
+                out.submit(f"valid/{pname}.png", _valid_png, fo.pair.valid)
+            preview.add(fo)
+            t_gen += t1 - t0
+            t_write += time.perf_counter() - t1
+            if progress is not None:
+                progress(i + 1, n)
+        t0 = time.perf_counter()
+        out.write("camera.csv", _csv_bytes(CAMERA_COLUMNS, gen.camera_rows()))
+        tracks = gen.track_table()
+        out.write("tracks.csv", _csv_bytes(TRACK_COLUMNS, tracks))
+        out.write("scene.yaml", spec_to_yaml(spec).encode())
+        K = gen.path.K
+        meta = {"width": spec.image.width_px, "height": spec.image.height_px, "n_frames": n,
+                "fps": spec.image.fps, "K": K.tolist(), "generator_version": GENERATOR_VERSION,
+                "spec_hash": spec_hash(spec), "seed": spec.seed, "name": spec.name,
+                "gsd_m": spec.gsd_m(), "texel_m": gen.world.texel_m, "n_vehicles": len(gen.vehicles),
+                "n_buildings": len(gen.world.buildings), "flow_format": flow_format,
+                "layout": SEQUENCE_LAYOUT, **gl_info()}
+        out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
+        sheet = preview.sheet(tracks)
+        if sheet is not None:
+            out.write("preview.png", encode_png(sheet))
+        out.write_manifest({"spec_hash": spec_hash(spec), "layout": SEQUENCE_LAYOUT, "flow_format": flow_format})
+        t_write += time.perf_counter() - t0
+    finally:
+        out.close()
     if timings is not None:
         timings.update({"render_truth_s": t_gen, "write_s": t_write, "n_frames": n})
+
+
+def read_pair_flow(folder: str | os.PathLike, i: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(flow, flow_camera)`` of pair i -> i+1 of a sequence folder, in either flow format.
+
+    Each is ``(H, W, 2)`` float32 px, or None when the folder has no such file
+    (for readers such as the report that show what there is). Raises
+    :class:`FormatError` for a damaged file.
+    """
+    folder = Path(folder)
+    name = f"{int(i):06d}"
+    npz = folder / "flow" / f"{name}.npz"
+    if npz.is_file():
+        return read_flow_npz(npz)
+    flo, cam = folder / "flow" / f"{name}.flo", folder / "flow_camera" / f"{name}.flo"
+    return (read_flo(flo) if flo.is_file() else None, read_flo(cam) if cam.is_file() else None)
 
 
 class Sequence:
@@ -289,6 +410,11 @@ class Sequence:
         self.manifest = verify_manifest(self.path, full=True) if verify else self._manifest_exists()
         self.meta = json.loads((self.path / "meta.json").read_text())
         self._n = int(self.meta["n_frames"])
+        # folders written before the compact format have no "flow_format": theirs is .flo
+        self.flow_format = str(self.meta.get("flow_format", "flo"))
+        if self.flow_format not in FLOW_FORMATS:
+            raise FormatError(f"{self.path / 'meta.json'}: flow_format {self.flow_format!r}, "
+                              f"expected one of {', '.join(FLOW_FORMATS)}")
         self._camera = None
         self._tracks = None
         self._spec = None
@@ -328,9 +454,12 @@ class Sequence:
         i = self._index(i, self._n - 1, "pair")
         name = f"{i:06d}"
         valid = read_png(self.path / "valid" / f"{name}.png", expect="gray8") > 127
-        return PairTruth(flow=read_flo(self.path / "flow" / f"{name}.flo"),
-                         flow_camera=read_flo(self.path / "flow_camera" / f"{name}.flo"),
-                         valid=valid, instances=self.instances(i))
+        if self.flow_format == "npz":
+            flow, flow_camera = read_flow_npz(self.path / "flow" / f"{name}.npz")
+        else:
+            flow = read_flo(self.path / "flow" / f"{name}.flo")
+            flow_camera = read_flo(self.path / "flow_camera" / f"{name}.flo")
+        return PairTruth(flow=flow, flow_camera=flow_camera, valid=valid, instances=self.instances(i))
 
     @property
     def camera(self) -> pd.DataFrame:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -82,3 +83,82 @@ def test_written_files_get_the_ordinary_mode_not_mkstemps_0600(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert stat.S_IMODE((tmp_path / "m.png").stat().st_mode) == 0o666 & ~mask
+
+
+def _bits(a):
+    return np.ascontiguousarray(a, np.float32).view(np.uint32)
+
+
+def _smooth_pair(h=48, w=64):
+    """A homography-like camera flow and a total flow with one moving box on top, float32."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    den = 1.0 + 1e-4 * xs - 2e-4 * ys
+    cam = np.stack([(3.25 + 0.01 * xs + 0.002 * ys) / den - xs * (1 - 1 / den),
+                    (-1.5 + 0.004 * xs - 0.01 * ys) / den - ys * (1 - 1 / den)], -1).astype(np.float32)
+    flow = cam.copy()
+    flow[10:20, 30:44] += np.float32([2.5, -0.75])
+    return flow, cam
+
+
+def test_compact_flow_round_trip_is_bit_exact_with_nan_inf_and_negative_zero():
+    from scenes.formats import decode_flow_npz, encode_flow_npz
+
+    rng = np.random.default_rng(1)
+    flow = rng.normal(scale=20, size=(9, 11, 2)).astype(np.float32)  # no smoothness to exploit
+    cam = rng.normal(size=(9, 11, 2)).astype(np.float32)
+    flow[2, 3] = np.nan
+    cam[4, 5, 1] = np.inf
+    cam[0, 0] = -0.0
+    flow[8, 10] = cam[8, 10]
+    back_flow, back_cam = decode_flow_npz(encode_flow_npz(flow, cam))
+    assert back_flow.shape == (9, 11, 2) and back_flow.dtype == np.float32 and back_cam.dtype == np.float32
+    np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
+    np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
+
+
+def test_compact_flow_is_deterministic_small_and_a_plain_npz(tmp_path):
+    from scenes.formats import FLOW_NPZ_CODEC, encode_flo, encode_flow_npz, read_flow_npz
+
+    flow, cam = _smooth_pair(120, 160)
+    data = encode_flow_npz(flow, cam)
+    assert encode_flow_npz(flow, cam) == data  # no timestamp or other noise in the zip
+    # smooth fields: well under a quarter of the two .flo files they replace
+    assert len(data) < 0.25 * (len(encode_flo(flow)) + len(encode_flo(cam)))
+    (tmp_path / "f.npz").write_bytes(data)
+    with np.load(tmp_path / "f.npz") as z:  # any numpy opens it
+        assert sorted(z.files) == ["codec", "flow_camera_rowdelta", "flow_xor_camera"]
+        assert z["codec"].item() == FLOW_NPZ_CODEC
+        assert z["flow_xor_camera"].shape == (4, 2, 120, 160)
+    back_flow, back_cam = read_flow_npz(tmp_path / "f.npz")
+    np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
+    np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
+
+
+def test_bad_compact_flow_files_are_named_in_the_error(tmp_path):
+    from scenes.formats import encode_flow_npz, read_flow_npz
+
+    flow, cam = _smooth_pair()
+    data = encode_flow_npz(flow, cam)
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(FormatError, match=r"cut.npz: not a readable compact flow file"):
+        read_flow_npz(tmp_path / "cut.npz")
+    np.savez(tmp_path / "other.npz", flow=flow)
+    with pytest.raises(FormatError, match=r"other.npz: not a compact flow file: codec None"):
+        read_flow_npz(tmp_path / "other.npz")
+    with pytest.raises(ValueError, match=r"flow: expected shape \(48, 64, 2\) \(as flow_camera\), got \(48, 63, 2\)"):
+        encode_flow_npz(flow[:, :63], cam)
+    with pytest.raises(ValueError, match=r"flow_camera: expected \(H, W, 2\) float32, got \(48, 64, 2\) float64"):
+        encode_flow_npz(flow, cam.astype(np.float64))
+
+
+def test_png_strategy_changes_bytes_not_pixels():
+    from scenes.formats import encode_png
+
+    rng = np.random.default_rng(2)
+    img = np.clip(rng.normal(120, 30, (40, 50, 3)), 0, 255).astype(np.uint8)
+    rle = encode_png(img, compression=1, strategy="rle")
+    assert rle != encode_png(img, compression=1)
+    np.testing.assert_array_equal(cv2.cvtColor(cv2.imdecode(np.frombuffer(rle, np.uint8), cv2.IMREAD_UNCHANGED),
+                                               cv2.COLOR_BGR2RGB), img)
+    with pytest.raises(ValueError, match=r"strategy: expected one of default, rle, filtered, huffman, got 'lz4'"):
+        encode_png(img, strategy="lz4")

@@ -93,6 +93,16 @@ def test_render_writes_a_sequence_folder(tmp_path, capsys):
 
 
 @pytest.mark.gl
+def test_render_exports_flo_on_request(tmp_path):
+    out = tmp_path / "seq"
+    assert main(["render", "tiny", "--out", str(out), "--set", "image.n_frames=2", "--flow-format", "flo"]) == 0
+    assert [p.name for p in (out / "flow").iterdir()] == ["000000.flo"]
+    assert [p.name for p in (out / "flow_camera").iterdir()] == ["000000.flo"]
+    assert main(["render", "tiny", "--out", str(tmp_path / "compact"), "--set", "image.n_frames=2"]) == 0
+    assert [p.name for p in (tmp_path / "compact" / "flow").iterdir()] == ["000000.npz"]
+
+
+@pytest.mark.gl
 @pytest.mark.slow
 def test_smoke_run_passes_the_committed_baseline(tmp_path, cli_env):
     """What CI does: run the smoke suite end to end (report included), then gate it."""

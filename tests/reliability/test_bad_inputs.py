@@ -402,7 +402,7 @@ def test_a_truncated_or_edited_cache_entry_is_detected_and_rebuilt(reference_run
     for how in ("truncated", "edited"):
         cache = tmp_path / how
         shutil.copytree(entry, cache / entry.name)
-        victim = cache / entry.name / ("frames/000001.png" if how == "truncated" else "flow/000000.flo")
+        victim = cache / entry.name / ("frames/000001.png" if how == "truncated" else "flow/000000.npz")
         raw = bytearray(victim.read_bytes())
         if how == "truncated":
             raw = raw[: len(raw) // 2]

@@ -29,8 +29,10 @@ TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_p
 def test_folder_follows_the_contract(tiny_sequence):
     spec, folder = tiny_sequence
     n = spec.image.n_frames
-    for sub, count in (("frames", n), ("instances", n), ("flow", n - 1), ("flow_camera", n - 1), ("valid", n - 1)):
+    for sub, count in (("frames", n), ("instances", n), ("flow", n - 1), ("valid", n - 1)):
         assert len(list((folder / sub).iterdir())) == count, sub
+    assert sorted(p.name for p in (folder / "flow").iterdir())[0] == "000000.npz"
+    assert not (folder / "flow_camera").exists()  # the compact file holds both fields
     seq = open_sequence(folder, verify=True)
     assert list(seq.camera.columns) == CAMERA_COLUMNS
     assert list(seq.tracks.columns) == TRACK_COLUMNS
@@ -80,7 +82,7 @@ def test_noise_is_seeded_and_changes_frames_not_truth(tmp_path):
     clean = render_sequence(load_scene_spec("tiny", overrides={"image.n_frames": 2}), tmp_path / "c")
     fa, fc = _manifest_files(a), _manifest_files(clean)
     assert fa["frames/000000.png"] != fc["frames/000000.png"]
-    assert fa["flow/000000.flo"] == fc["flow/000000.flo"]
+    assert fa["flow/000000.npz"] == fc["flow/000000.npz"]
 
 
 def test_refuses_to_overwrite_and_leaves_no_partial_folder(tmp_path):
@@ -111,11 +113,11 @@ def test_partial_folder_and_edited_file_are_detected(tiny_sequence, tmp_path):
     _, folder = tiny_sequence
     copy = tmp_path / "copy"
     shutil.copytree(folder, copy)
-    flo = copy / "flow" / "000001.flo"
+    flo = copy / "flow" / "000001.npz"
     data = bytearray(flo.read_bytes())
     data[len(data) // 2 + 4] ^= 0xFF
     flo.write_bytes(bytes(data))
-    with pytest.raises(ManifestError, match=r"000001\.flo: .*differs"):
+    with pytest.raises(ManifestError, match=r"000001\.npz: .*differs"):
         open_sequence(copy, verify=True)
     (copy / "MANIFEST.json").unlink()
     with pytest.raises(ManifestError, match="partial"):
@@ -131,7 +133,7 @@ def test_cache_reuses_and_rebuilds_corrupt_entries(tmp_path):
     good = _manifest_files(first.path)
 
     # truncated big file: caught by its size
-    flo = first.path / "flow" / "000000.flo"
+    flo = first.path / "flow" / "000000.npz"
     flo.write_bytes(flo.read_bytes()[:-100])
     rebuilt = cached_sequence_result(spec, tmp_path)
     assert rebuilt.rendered and _manifest_files(rebuilt.path) == good
@@ -186,3 +188,68 @@ def test_a_killed_renders_partial_folder_is_removed_but_a_live_ones_is_kept(tmp_
     cached_sequence_result(spec, tmp_path)
     assert not orphan.exists()
     assert alive.exists() and other_host.exists()  # still rendering, or another machine's: not ours to judge
+
+
+def _bits(a):
+    return np.ascontiguousarray(a).view(np.uint32)
+
+
+def test_flo_export_and_old_flo_folders_read_the_same_truth_bit_for_bit(tiny_sequence, tmp_path):
+    from scenes.sequence import read_pair_flow, write_manifest
+
+    spec, folder = tiny_sequence
+    flo = render_sequence(spec, tmp_path / "flo", flow_format="flo")
+    n = spec.image.n_frames
+    assert len(list((flo / "flow").glob("*.flo"))) == n - 1 == len(list((flo / "flow_camera").glob("*.flo")))
+    compact, exported = open_sequence(folder), open_sequence(flo, verify=True)
+    assert (compact.flow_format, exported.flow_format) == ("npz", "flo")
+    for i in range(n - 1):
+        a, b = compact.pair_truth(i), exported.pair_truth(i)
+        np.testing.assert_array_equal(_bits(a.flow), _bits(b.flow))
+        np.testing.assert_array_equal(_bits(a.flow_camera), _bits(b.flow_camera))
+        for path in (folder, flo):
+            f, c = read_pair_flow(path, i)
+            np.testing.assert_array_equal(_bits(f), _bits(a.flow))
+            np.testing.assert_array_equal(_bits(c), _bits(a.flow_camera))
+    assert read_pair_flow(flo, n - 1) == (None, None)
+    # a folder written before the compact format: .flo files and no flow_format in meta.json
+    meta = json.loads((flo / "meta.json").read_text())
+    del meta["flow_format"], meta["layout"]
+    (flo / "meta.json").write_text(json.dumps(meta))
+    (flo / "MANIFEST.json").unlink()
+    write_manifest(flo)
+    old = open_sequence(flo, verify=True)
+    assert old.flow_format == "flo"
+    np.testing.assert_array_equal(_bits(old.pair_truth(1).flow), _bits(compact.pair_truth(1).flow))
+    with pytest.raises(ValueError, match=r"flow_format: expected one of npz, flo, got 'exr'"):
+        render_sequence(spec, tmp_path / "exr", flow_format="exr")
+    assert not (tmp_path / "exr").exists()
+
+
+def test_writer_threads_change_no_byte_and_a_writer_error_reaches_the_caller(tmp_path, monkeypatch):
+    import scenes.sequence as sequence
+
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 3})
+    a = render_sequence(spec, tmp_path / "threads0", writer_threads=0)
+    b = render_sequence(spec, tmp_path / "threads3", writer_threads=3)
+    assert _manifest_files(a) == _manifest_files(b)
+
+    def broken(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(sequence, "encode_flow_npz", broken)
+    with pytest.raises(OSError, match="No space left on device"):
+        render_sequence(spec, tmp_path / "broken", writer_threads=2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["threads0", "threads3"]  # no partial folder left
+
+
+def test_cache_entry_of_another_layout_is_rendered_again(tmp_path):
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 2})
+    first = cached_sequence_result(spec, tmp_path)
+    manifest = first.path / "MANIFEST.json"
+    doc = json.loads(manifest.read_text())
+    assert doc["layout"] == 2 and doc["flow_format"] == "npz"
+    doc["layout"] = 1
+    manifest.write_text(json.dumps(doc))
+    again = cached_sequence_result(spec, tmp_path)
+    assert again.rendered and json.loads(manifest.read_text())["layout"] == 2
