@@ -26,6 +26,7 @@ __all__ = [
     "as_gray",
     "check_frame_pair",
     "check_flow",
+    "endpoint_error",
     "warp_backward",
     "flow_to_color",
     "color_wheel_image",
@@ -110,6 +111,19 @@ def check_flow(flow: np.ndarray, *, name: str = "flow", shape: tuple[int, int] |
     if not allow_nan and not np.isfinite(a).all():
         raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(a)))} value(s) are NaN or infinite")
     return a.astype(FLOW_DTYPE, copy=False)
+
+
+def endpoint_error(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
+    """Endpoint error ``sqrt((u_e - u_t)^2 + (v_e - v_t)^2)`` per pixel, ``(...)`` float64 px.
+
+    The one home of EPE: metrics, reports and benchmarks import it. Both fields
+    are ``(..., 2)`` (u, v), taken to float64 before the difference, so the value
+    does not depend on the fields' dtypes; NaN in either gives NaN.
+    """
+    d = np.asarray(flow_est, np.float64) - np.asarray(flow_true, np.float64)
+    if d.shape[-1:] != (2,):
+        raise ValueError(f"flow: expected (..., 2) (u, v) fields, got {np.shape(flow_est)} and {np.shape(flow_true)}")
+    return np.hypot(d[..., 0], d[..., 1])
 
 
 def warp_backward(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -62,11 +62,12 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
-from algorithms.flow import check_flow
+from algorithms.flow import check_flow, endpoint_error
 
 __all__ = [
     "METRICS", "MetricDef", "register_metric", "metric_def", "describe_metrics", "timing_metric_name",
@@ -192,10 +193,8 @@ for _s in STAGES:
 
 # --------------------------------------------------------------------------- per-pixel errors
 
-def endpoint_error(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
-    """Endpoint error ``sqrt((u_e - u_t)^2 + (v_e - v_t)^2)``, ``(H, W)`` float64 px."""
-    d = np.asarray(flow_est, np.float64) - np.asarray(flow_true, np.float64)
-    return np.hypot(d[..., 0], d[..., 1])
+# endpoint_error (per-pixel EPE) lives in algorithms.flow, its one home; imported above and
+# re-exported here for the metric code's readers.
 
 
 def angular_error_deg(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
@@ -268,8 +267,9 @@ def epe_histogram(epe: np.ndarray) -> np.ndarray:
 
 def encode_hist(counts: np.ndarray) -> str:
     """Sparse text form of a histogram: ``"bin:count bin:count ..."`` for the non-empty bins."""
+    counts = np.asarray(counts)
     nz = np.flatnonzero(counts)
-    return " ".join(f"{i}:{int(counts[i])}" for i in nz)
+    return " ".join(f"{i}:{c}" for i, c in zip(nz.tolist(), counts[nz].tolist()))
 
 
 def decode_hist(text: str) -> np.ndarray:
@@ -324,34 +324,156 @@ def error_rows(epe: np.ndarray, ae_deg: np.ndarray, true_mag: np.ndarray, *, reg
                motion: str = "total", frame: int | None = None) -> list[dict]:
     """The flow metric rows from per-pixel endpoint errors, angular errors and true magnitudes (1-D)."""
     n = int(epe.size)
+    if n:
+        # nearest-rank quantiles (the sample of rank ceil(q n)), as hist_quantile reads them
+        k50, k95 = _rank_index(0.5, n), _rank_index(0.95, n)
+        part = np.partition(epe, (k50, k95))
+        med, p95 = float(part[k50]), float(part[k95])
+    else:
+        med = p95 = float("nan")
+    over = [int(np.count_nonzero(epe > thr)) for thr in OUTLIER_PX]
+    fl = int(np.count_nonzero((epe > 3.0) & (epe > 0.05 * true_mag)))
+    return _error_rows_from_totals(n, float(epe.sum()), float(epe @ epe), float(ae_deg.sum()), over, fl, med, p95,
+                                   epe_histogram(epe), region=region, motion=motion, frame=frame)
+
+
+OUTLIER_PX = (1, 3, 5)
+
+
+def _rank_index(q: float, n: int) -> int:
+    """0-based index of the nearest-rank ``q`` quantile of ``n`` sorted samples (rank ceil(q n))."""
+    return max(1, math.ceil(q * n)) - 1
+
+
+def _error_rows_from_totals(n: int, s_epe: float, s_sq: float, s_ae: float, over: list[int], fl: int,
+                            med: float, p95: float, hist: np.ndarray, *, region: str, motion: str,
+                            frame: int | None) -> list[dict]:
+    """The flow metric rows of one region from its totals (one place builds them, whichever path counted)."""
     nan = float("nan")
     kw = {"region": region, "motion": motion, "frame": frame}
 
     def mean(s: float) -> float:
         return s / n if n else nan
 
-    hist = encode_hist(epe_histogram(epe))
-    if n:
-        # nearest-rank quantiles (the sample of rank ceil(q n)), as hist_quantile reads them
-        k50, k95 = max(1, math.ceil(0.5 * n)) - 1, max(1, math.ceil(0.95 * n)) - 1
-        part = np.partition(epe, (k50, k95))
-        med, p95 = float(part[k50]), float(part[k95])
-    else:
-        med = p95 = nan
-    s_epe, s_sq, s_ae = float(epe.sum()), float(epe @ epe), float(ae_deg.sum())
+    text = encode_hist(hist)
     rows = [
         _row("epe_mean", mean(s_epe), s_epe, n, **kw),
         _row("epe_rms", math.sqrt(s_sq / n) if n else nan, s_sq, n, **kw),
-        _row("epe_median", med, nan, n, hist=hist, **kw),
-        _row("epe_p95", p95, nan, n, hist=hist, **kw),
+        _row("epe_median", med, nan, n, hist=text, **kw),
+        _row("epe_p95", p95, nan, n, hist=text, **kw),
         _row("ae_mean", mean(s_ae), s_ae, n, **kw),
     ]
-    for thr in (1, 3, 5):
-        k = int(np.count_nonzero(epe > thr))
+    for thr, k in zip(OUTLIER_PX, over):
         rows.append(_row(f"outlier_{thr}px", 100.0 * mean(k), k, n, **kw))
-    k = int(np.count_nonzero((epe > 3.0) & (epe > 0.05 * true_mag)))
-    rows.append(_row("fl_all", 100.0 * mean(k), k, n, **kw))
+    # KITTI Fl: EPE > 3 px and EPE > 5 % of |w_true|
+    rows.append(_row("fl_all", 100.0 * mean(fl), fl, n, **kw))
     return rows
+
+
+# columns of the per-region totals of _field_totals
+_N, _S_EPE, _S_SQ, _S_AE, _K1, _K3, _K5, _KFL, _KCOV = range(9)
+
+
+@numba.njit(cache=True)
+def _field_totals(e, t, bits, n_regions, valid_est, bin_px, nbins, stats, hist, epe_out, bin_out):  # pragma: no cover
+    """One pass over the pixels: per region r (bit r of ``bits``) the totals and the EPE histogram.
+
+    e, t : (H, W, 2) float32 estimate and truth; bits : (H, W) uint8 region membership (0 = not
+    scored); stats : (2**R, 9) float64 out (columns _N .. _KCOV) and hist : (2**R, nbins) int64 out,
+    both per membership pattern (row b: the pixels whose ``bits`` equal b);
+    epe_out (H, W) float64 and bin_out (H, W) int32: each scored pixel's EPE and histogram bin
+    (for :func:`_values_in_bins`).
+    Per pixel the same float64 operations as endpoint_error and angular_error_deg, so each
+    pixel's EPE (and so its histogram bin and outlier tests) is bit-identical to theirs.
+    """
+    h, w = bits.shape
+    for y in range(h):
+        for x in range(w):
+            b = bits[y, x]
+            if b == 0:
+                continue
+            eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
+            tu, tv = np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
+            epe = math.hypot(eu - tu, ev - tv)
+            # Barron 1994: angle between (u_e, v_e, 1) and (u_t, v_t, 1)
+            num = eu * tu + ev * tv + 1.0
+            den = math.sqrt((eu * eu + ev * ev + 1.0) * (tu * tu + tv * tv + 1.0))
+            c = min(max(num / den, -1.0), 1.0)
+            ae = math.acos(c) * (180.0 / math.pi)
+            mag = math.hypot(tu, tv)
+            k = math.floor(epe / bin_px)
+            k = nbins - 1 if k > nbins - 1 else k
+            epe_out[y, x] = epe
+            bin_out[y, x] = k
+            # totals per membership pattern b (one update per pixel), summed into regions below
+            stats[b, 0] += 1.0
+            stats[b, 1] += epe
+            stats[b, 2] += epe * epe
+            stats[b, 3] += ae
+            if epe > 1.0:
+                stats[b, 4] += 1.0
+            if epe > 3.0:
+                stats[b, 5] += 1.0
+                if epe > 0.05 * mag:
+                    stats[b, 7] += 1.0
+            if epe > 5.0:
+                stats[b, 6] += 1.0
+            if valid_est[y, x]:
+                stats[b, 8] += 1.0
+            hist[b, k] += 1
+
+
+@numba.njit(cache=True)
+def _values_in_bins(epe_px, bin_idx, bits, n_regions, target, start, out):  # pragma: no cover - numba
+    """The EPEs of region r's pixels that fall in bin ``target[r, j]``, into ``out[start[r, j]:...]``.
+
+    The nearest-rank quantile lies in a known bin (from the histogram); the exact value is
+    found among the few samples of that bin instead of partitioning every pixel's EPE.
+    """
+    fill = start.copy()
+    h, w = bits.shape
+    for y in range(h):
+        for x in range(w):
+            b = bits[y, x]
+            if b == 0:
+                continue
+            k = bin_idx[y, x]
+            for r in range(n_regions):
+                if b & (1 << r):
+                    for j in range(target.shape[1]):
+                        if target[r, j] == k:
+                            out[fill[r, j]] = epe_px[y, x]
+                            fill[r, j] += 1
+
+
+def _quantiles_from_hist(epe_px: np.ndarray, bin_idx: np.ndarray, bits: np.ndarray, hist: np.ndarray,
+                         qs: tuple[float, ...]) -> np.ndarray:
+    """Exact nearest-rank quantiles ``(R, len(qs))`` of each region's EPE (NaN for an empty region)."""
+    n_regions = hist.shape[0]
+    out = np.full((n_regions, len(qs)), np.nan)
+    cum = np.cumsum(hist, axis=1)
+    target = np.full((n_regions, len(qs)), -1, np.int64)
+    rank = np.zeros((n_regions, len(qs)), np.int64)
+    for r in range(n_regions):
+        n = int(cum[r, -1])
+        if n == 0:
+            continue
+        for j, q in enumerate(qs):
+            k = _rank_index(q, n)
+            b = int(np.searchsorted(cum[r], k + 1))  # the bin holding the sample of rank k + 1
+            target[r, j] = b
+            rank[r, j] = k - (int(cum[r, b - 1]) if b else 0)  # its index among that bin's samples
+    sizes = np.where(target >= 0, hist[np.arange(n_regions)[:, None], np.maximum(target, 0)], 0)
+    start = np.zeros_like(sizes)
+    start.ravel()[1:] = np.cumsum(sizes.ravel())[:-1]
+    values = np.empty(int(sizes.sum()), np.float64)
+    _values_in_bins(epe_px, bin_idx, bits, n_regions, target, start, values)
+    for r in range(n_regions):
+        for j in range(len(qs)):
+            if target[r, j] >= 0:
+                seg = values[start[r, j]:start[r, j] + sizes[r, j]]
+                out[r, j] = float(np.partition(seg, rank[r, j])[rank[r, j]])
+    return out
 
 
 def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarray, *,
@@ -366,6 +488,12 @@ def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarr
     way); ``valid_est`` only feeds ``coverage``. A non-finite estimate is an
     error, not a pixel to skip. Regions are built from the truth's validity and
     instances (:func:`region_masks`).
+
+    All regions are counted in one pass over the pixels (sums, outlier counts,
+    EPE histogram); the median and 95th percentile are exact, read among the
+    samples of the histogram bin that holds them. The values equal
+    :func:`flow_rows` on each region's mask (sums to rounding, ~1e-15 relative;
+    counts, quantiles and histograms exactly).
     """
     t = check_flow(flow_true, name="flow_true", allow_nan=True)
     e = check_flow(flow_est, name="flow_est", shape=t.shape[:2])
@@ -375,17 +503,44 @@ def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarr
     vt = vt & np.isfinite(t).all(-1)
     ve = np.ones(vt.shape, bool) if valid_est is None else np.asarray(valid_est, bool)
     masks = region_masks(vt, instances, boundary_px=boundary_px, regions=regions)
-    # per-pixel errors once for the whole field, then indexed per region
-    scored = vt
-    e64, t64 = e[scored].astype(np.float64), t[scored].astype(np.float64)
-    epe = np.hypot(e64[:, 0] - t64[:, 0], e64[:, 1] - t64[:, 1])
-    ae = angular_error_deg(e64, t64)
-    mag = np.hypot(t64[:, 0], t64[:, 1])
-    rows = []
-    for r, m in masks.items():
-        sel = m[scored]
-        rows += error_rows(epe[sel], ae[sel], mag[sel], region=r, motion=motion, frame=frame)
-        n, k = int(m.sum()), int((m & ve).sum())
+    return _score_field(e, t, masks, ve, motion=motion, frame=frame)
+
+
+def _score_field(e: np.ndarray, t: np.ndarray, masks: Mapping[str, np.ndarray], ve: np.ndarray, *,
+                 motion: str, frame: int | None) -> list[dict]:
+    """Rows of checked float32 fields ``e``, ``t`` in the regions ``masks`` (subsets of the scored pixels)."""
+    names = list(masks)
+    if len(names) > 8:
+        raise ValueError(f"regions: at most 8 in one pass, got {len(names)}")
+    bits = np.zeros(ve.shape, np.uint8)
+    for j, name in enumerate(names):
+        bits |= masks[name].astype(np.uint8) << np.uint8(j)
+    by_code = np.zeros((1 << len(names), 9), np.float64)
+    hist_code = np.zeros((1 << len(names), HIST_NBINS), np.int64)
+    e = np.ascontiguousarray(e, np.float32)
+    t = np.ascontiguousarray(t, np.float32)
+    epe_px = np.empty(ve.shape, np.float64)
+    bin_idx = np.empty(ve.shape, np.int32)
+    _field_totals(e, t, bits, len(names), np.ascontiguousarray(ve, np.bool_), HIST_BIN_PX, HIST_NBINS, by_code,
+                  hist_code, epe_px, bin_idx)
+    member = (np.arange(1 << len(names))[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
+    used = np.flatnonzero(by_code[:, _N])
+    stats = np.zeros((len(names), 9), np.float64)
+    hist = np.zeros((len(names), HIST_NBINS), np.int64)
+    for c in used:
+        for j in np.flatnonzero(member[:, c]):
+            stats[j] += by_code[c]
+            hist[j] += hist_code[c]
+    quant = _quantiles_from_hist(epe_px, bin_idx, bits, hist, (0.5, 0.95))
+    rows: list[dict] = []
+    for j, r in enumerate(names):
+        st = stats[j]
+        n = int(st[_N])
+        rows += _error_rows_from_totals(n, float(st[_S_EPE]), float(st[_S_SQ]), float(st[_S_AE]),
+                                        [int(st[_K1]), int(st[_K3]), int(st[_K5])], int(st[_KFL]),
+                                        float(quant[j, 0]), float(quant[j, 1]), hist[j],
+                                        region=r, motion=motion, frame=frame)
+        k = int(st[_KCOV])
         rows.append(_row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
                          frame=frame))
     return rows
@@ -418,12 +573,24 @@ def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] = REGIONS,
         Index of the first frame of the pair.
     """
     regions = tuple(regions)
-    kw = {"valid_est": estimate.valid, "instances": truth.instances, "frame": frame, "regions": regions,
-          "boundary_px": boundary_px}
-    rows = score_flow(estimate.flow_total, truth.flow, truth.valid, motion="total", **kw)
-    est_local = np.asarray(estimate.flow_total, np.float32) - np.asarray(estimate.flow_global, np.float32)
-    true_local = np.asarray(truth.flow, np.float32) - np.asarray(truth.flow_camera, np.float32)
-    rows += score_flow(est_local, true_local, truth.valid, motion="local", **kw)
+    t = check_flow(truth.flow, name="flow_true", allow_nan=True)
+    e = check_flow(estimate.flow_total, name="flow_est", shape=t.shape[:2])
+    vt0 = np.asarray(truth.valid, bool)
+    if vt0.shape != t.shape[:2]:
+        raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt0.shape}")
+    ve = np.ones(vt0.shape, bool) if estimate.valid is None else np.asarray(estimate.valid, bool)
+    # local motion: the global model's field taken out of the estimate, the camera's out of the truth
+    e_local = check_flow(np.asarray(estimate.flow_total, np.float32) - np.asarray(estimate.flow_global, np.float32),
+                         name="flow_est", shape=t.shape[:2])
+    t_local = check_flow(t - np.asarray(truth.flow_camera, np.float32), name="flow_true", allow_nan=True)
+    vt = vt0 & np.isfinite(t).all(-1)
+    vt_local = vt0 & np.isfinite(t_local).all(-1)
+    masks = region_masks(vt, truth.instances, boundary_px=boundary_px, regions=regions)
+    # the regions depend on the scored pixels only: the same for both motions unless the camera flow has NaN
+    masks_local = masks if np.array_equal(vt, vt_local) else region_masks(
+        vt_local, truth.instances, boundary_px=boundary_px, regions=regions)
+    rows = _score_field(e, t, masks, ve, motion="total", frame=frame)
+    rows += _score_field(e_local, t_local, masks_local, ve, motion="local", frame=frame)
     if timings and getattr(estimate, "stage_ms", None):
         rows += timing_rows(estimate.stage_ms, frame=frame)
     return rows

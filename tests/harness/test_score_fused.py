@@ -1,0 +1,166 @@
+"""The one-pass flow scoring gives the numbers of the per-region numpy scoring it replaced.
+
+The reference below is the scoring as it was before the fused pass (one boolean mask
+and one ``np.partition`` per region and motion); it lives only here, as the yardstick.
+Sums may differ by rounding (summation order), to 1e-9 relative; counts, quantiles
+and histograms must be identical.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import harness.metrics as M
+from scenes.ground_truth import PairTruth
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+
+# --------------------------------------------------------------------------- the reference
+
+
+def _ref_hist(epe):
+    idx = np.minimum(np.floor(np.asarray(epe, np.float64).ravel() / M.HIST_BIN_PX), M.HIST_NBINS - 1)
+    counts = np.bincount(idx.astype(np.int64), minlength=M.HIST_NBINS)
+    return " ".join(f"{i}:{int(counts[i])}" for i in np.flatnonzero(counts))
+
+
+def _ref_error_rows(epe, ae, mag, *, region, motion, frame):
+    n = int(epe.size)
+    nan = float("nan")
+    out = {}
+    hist = _ref_hist(epe)
+    if n:
+        k50, k95 = max(1, math.ceil(0.5 * n)) - 1, max(1, math.ceil(0.95 * n)) - 1
+        part = np.partition(epe, (k50, k95))
+        med, p95 = float(part[k50]), float(part[k95])
+    else:
+        med = p95 = nan
+    s_epe, s_sq, s_ae = float(epe.sum()), float(epe @ epe), float(ae.sum())
+    mean = (lambda s: s / n) if n else (lambda s: nan)
+    out["epe_mean"] = (mean(s_epe), s_epe, n, "")
+    out["epe_rms"] = (math.sqrt(s_sq / n) if n else nan, s_sq, n, "")
+    out["epe_median"] = (med, nan, n, hist)
+    out["epe_p95"] = (p95, nan, n, hist)
+    out["ae_mean"] = (mean(s_ae), s_ae, n, "")
+    for thr in (1, 3, 5):
+        k = int(np.count_nonzero(epe > thr))
+        out[f"outlier_{thr}px"] = (100.0 * mean(k), k, n, "")
+    k = int(np.count_nonzero((epe > 3.0) & (epe > 0.05 * mag)))
+    out["fl_all"] = (100.0 * mean(k), k, n, "")
+    return {(m, region, motion, frame): v for m, v in out.items()}
+
+
+def _ref_score_flow(flow_est, flow_true, valid_true, *, valid_est, instances, motion, frame):
+    t = np.asarray(flow_true, np.float32)
+    e = np.asarray(flow_est, np.float32)
+    vt = np.asarray(valid_true, bool) & np.isfinite(t).all(-1)
+    ve = np.ones(vt.shape, bool) if valid_est is None else np.asarray(valid_est, bool)
+    masks = M.region_masks(vt, instances)
+    e64, t64 = e[vt].astype(np.float64), t[vt].astype(np.float64)
+    epe = np.hypot(e64[:, 0] - t64[:, 0], e64[:, 1] - t64[:, 1])
+    num = e64[:, 0] * t64[:, 0] + e64[:, 1] * t64[:, 1] + 1.0
+    den = np.sqrt((e64[:, 0] ** 2 + e64[:, 1] ** 2 + 1.0) * (t64[:, 0] ** 2 + t64[:, 1] ** 2 + 1.0))
+    ae = np.degrees(np.arccos(np.clip(num / den, -1.0, 1.0)))
+    mag = np.hypot(t64[:, 0], t64[:, 1])
+    out = {}
+    for r, m in masks.items():
+        sel = m[vt]
+        out.update(_ref_error_rows(epe[sel], ae[sel], mag[sel], region=r, motion=motion, frame=frame))
+        n, k = int(m.sum()), int((m & ve).sum())
+        out[("coverage", r, motion, frame)] = (100.0 * k / n if n else float("nan"), k, n, "")
+    return out
+
+
+def reference_score_pair(estimate, truth, *, frame):
+    """Flow rows of a pair as the per-region scoring computed them: key -> (value, sum, count, hist)."""
+    kw = {"valid_est": estimate.valid, "instances": truth.instances, "frame": frame}
+    out = _ref_score_flow(estimate.flow_total, truth.flow, truth.valid, motion="total", **kw)
+    est_local = np.asarray(estimate.flow_total, np.float32) - np.asarray(estimate.flow_global, np.float32)
+    true_local = np.asarray(truth.flow, np.float32) - np.asarray(truth.flow_camera, np.float32)
+    out.update(_ref_score_flow(est_local, true_local, truth.valid, motion="local", **kw))
+    return out
+
+
+# --------------------------------------------------------------------------- comparison
+
+
+def _same(a, b):
+    return (math.isnan(a) and math.isnan(b)) or a == pytest.approx(b, rel=1e-9, abs=1e-12)
+
+
+def assert_same_scores(estimate, truth, frame):
+    rows = [r for r in M.score_pair(estimate, truth, frame=frame) if r["kind"] == "accuracy"]
+    new = {(r["metric"], r["region"], r["motion"], r["frame"]): (r["value"], r["sum"], r["count"], r["hist"])
+           for r in rows}
+    old = reference_score_pair(estimate, truth, frame=frame)
+    assert new.keys() == old.keys()
+    for key, (v, s, n, h) in old.items():
+        nv, ns, nn, nh = new[key]
+        assert nn == n and nh == h, key
+        assert _same(nv, v) and _same(ns, s), (key, (nv, ns), (v, s))
+        if key[0] in ("epe_median", "epe_p95") or key[0].startswith(("outlier", "fl_", "coverage")):
+            assert nv == v or (math.isnan(nv) and math.isnan(v)), key  # exact: ranks and counts
+
+
+def _synthetic_pair(rng, h=90, w=120, *, scale=1.0):
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    cam = np.stack([2.0 + 0.01 * xs, -1.0 + 0.02 * ys], -1).astype(np.float32)
+    flow = cam.copy()
+    instances = np.zeros((h, w), np.uint16)
+    instances[20:35, 30:60] = 1
+    instances[60:70, 90:110] = 2
+    flow[instances > 0] += np.float32([3.0, -1.5])
+    valid = rng.random((h, w)) > 0.05
+    est = flow + rng.standard_t(2, size=flow.shape).astype(np.float32) * np.float32(scale)
+    est[5:9, 5:9] += np.float32(150.0)  # past the histogram's last edge: the overflow bin
+    glob = np.broadcast_to(np.float32([2.2, -0.8]), flow.shape).copy()
+    truth = PairTruth(flow=flow, flow_camera=cam, valid=valid, instances=instances)
+    estimate = SimpleNamespace(flow_total=est, flow_global=glob, valid=rng.random((h, w)) > 0.2, stage_ms={})
+    return estimate, truth
+
+
+@pytest.mark.parametrize("scale", [0.01, 0.5, 5.0])
+def test_fused_scoring_equals_the_reference_on_synthetic_fields(scale):
+    rng = np.random.default_rng(7)
+    estimate, truth = _synthetic_pair(rng, scale=scale)
+    assert_same_scores(estimate, truth, 3)
+
+
+def test_fused_scoring_equals_the_reference_with_nan_truth_and_empty_regions():
+    rng = np.random.default_rng(8)
+    estimate, truth = _synthetic_pair(rng)
+    cam = truth.flow_camera.copy()
+    cam[40:50, :] = np.nan  # unknown camera flow: the local motion scores fewer pixels
+    flow = truth.flow.copy()
+    flow[:3] = np.nan
+    truth = PairTruth(flow=flow, flow_camera=cam, valid=truth.valid, instances=np.zeros_like(truth.instances))
+    assert_same_scores(estimate, truth, 0)
+    empty = PairTruth(flow=flow, flow_camera=cam, valid=np.zeros_like(truth.valid), instances=truth.instances)
+    assert_same_scores(estimate, empty, 0)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
+    """Every pair of every cell of the smoke suite, scored both ways."""
+    from algorithms.pipeline import Pipeline
+    from harness.runner import point_seeds
+    from harness.suites import expand, load_suite
+    from scenes import cached_sequence, open_sequence
+
+    cells = expand(load_suite("smoke"))
+    assert len(cells) == 20
+    pairs = 0
+    for cell in cells:
+        seq = open_sequence(cached_sequence(cell.variant.spec, render_cache))
+        for est in Pipeline.from_dict(cell.pipeline_spec).run(seq, seeds=point_seeds(seq.tracks)):
+            if hasattr(est, "flow_total"):
+                assert_same_scores(est, seq.pair_truth(est.index), est.index)
+                pairs += 1
+    assert pairs == 20 * 5
