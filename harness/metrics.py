@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
@@ -274,11 +275,23 @@ def encode_hist(counts: np.ndarray) -> str:
 
 
 def decode_hist(text: str) -> np.ndarray:
-    """Inverse of :func:`encode_hist`: dense ``(HIST_NBINS,)`` int64 counts."""
+    """Inverse of :func:`encode_hist`: dense ``(HIST_NBINS,)`` int64 counts.
+
+    Several encoded histograms joined by spaces decode to their sum (a bin may repeat),
+    which is how :func:`aggregate` sums a group's histograms in one parse.
+    """
     if not isinstance(text, str) or not text:
         return np.zeros(HIST_NBINS, np.int64)
-    pairs = np.array(text.replace(":", " ").split(), dtype=np.int64).reshape(-1, 2)
-    return np.bincount(pairs[:, 0], weights=pairs[:, 1], minlength=HIST_NBINS).astype(np.int64)
+    flat = text.replace(":", " ")
+    pairs = text.count(":")
+    # numpy's C text parser: ~4x faster than str.split into Python ints (a 640x480 pair's
+    # histograms are ~170 kB of text; a suite's results hold ~10^5 of them)
+    with warnings.catch_warnings():  # text it cannot read to the end: the count check below says so
+        warnings.simplefilter("ignore", DeprecationWarning)
+        a = np.fromstring(flat, dtype=np.int64, sep=" ") if pairs else np.zeros(0, np.int64)
+    if a.size != 2 * pairs or (a.size and (a[0::2].min() < 0 or a[0::2].max() >= HIST_NBINS)):
+        raise ValueError(f"hist: expected 'bin:count' pairs with bins 0..{HIST_NBINS - 1}, got {text[:60]!r}")
+    return np.bincount(a[0::2], weights=a[1::2], minlength=HIST_NBINS).astype(np.int64)
 
 
 def hist_quantile(counts: np.ndarray, q: float) -> float:
@@ -889,9 +902,8 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
         hist = None
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
-            hist = np.zeros(HIST_NBINS, np.int64)
-            for h in g["hist"]:
-                hist += decode_hist(h)
+            # one parse of the group's histograms joined: decode_hist sums repeated bins
+            hist = decode_hist(" ".join(h for h in g["hist"] if isinstance(h, str) and h))
             total = float("nan")
         rec.update(kind=g["kind"].iloc[0], value=reduce_totals(metric, total, count, hist), sum=total,
                    count=count, unit=g["unit"].iloc[0], higher_is_better=bool(g["higher_is_better"].iloc[0]),

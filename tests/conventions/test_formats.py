@@ -160,5 +160,12 @@ def test_png_strategy_changes_bytes_not_pixels():
     assert rle != encode_png(img, compression=1)
     np.testing.assert_array_equal(cv2.cvtColor(cv2.imdecode(np.frombuffer(rle, np.uint8), cv2.IMREAD_UNCHANGED),
                                                cv2.COLOR_BGR2RGB), img)
+    ids = np.zeros((40, 50), np.uint16)
+    ids[10:20, 5:30] = 3
+    for kw in ({"strategy": "rle", "filters": "none"}, {"filters": "none"}):
+        data = encode_png(ids, compression=1, **kw)
+        np.testing.assert_array_equal(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED), ids)
     with pytest.raises(ValueError, match=r"strategy: expected one of default, rle, filtered, huffman, got 'lz4'"):
         encode_png(img, strategy="lz4")
+    with pytest.raises(ValueError, match=r"filters: expected one of adaptive, none, got 'paeth'"):
+        encode_png(img, filters="paeth")
