@@ -8,6 +8,7 @@ table and the command lines it ran. Run from the project root:
     /work/venv/bin/python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
                                               [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
     /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
+    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
   render cache, then again into a fresh run folder with the cache warm; wall times, and
@@ -23,6 +24,13 @@ table and the command lines it ran. Run from the project root:
 - ``standard``: the ``standard`` suite, or with ``--cells N`` a subset of N of its cells
   taken evenly over its scenes and pipelines (seed 1), timed and extrapolated to the whole
   suite by cell count; says which.
+- ``cores``: the many-core curve. A suite of ``--cells`` cells of similar cost (cache
+  warmed first) run with 1, 2, 4, ... up to ``--max-workers`` workers (default: the cores
+  here); per worker count: wall time, cells per minute, speed-up over one worker, how
+  busy the workers were (sum of the cells' own ``elapsed_s`` over workers x wall: what
+  is missing is start-up, scheduling gaps, a serial tail or contention), and how long
+  the driver's serial collection (``harness.results.collect_cells``: read, sort, write
+  results.parquet, summary) takes on that run folder.
 """
 
 from __future__ import annotations
@@ -307,6 +315,56 @@ def cmd_standard(args: argparse.Namespace) -> None:
         shutil.rmtree(work, ignore_errors=True)
 
 
+# --------------------------------------------------------------------------- many cores
+
+
+def _worker_counts(max_workers: int) -> list[int]:
+    counts, w = [], 1
+    while w < max_workers:
+        counts.append(w)
+        w *= 2
+    return counts + [max_workers]
+
+
+def cmd_cores(args: argparse.Namespace) -> None:
+    import yaml
+
+    from harness.results import collect_cells
+
+    max_workers = args.max_workers or os.cpu_count() or 1
+    n_cells = args.cells or 2 * max_workers
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-cores-"))
+    cache, shown, rows = work / "cache", [], []
+    size = tuple(int(v) for v in args.size.split("x"))
+    data = _speedup_suite(n_cells, args.frames, size)
+    data["pipelines"] = [args.pipeline]
+    suite = work / "suite.yaml"
+    suite.write_text(yaml.safe_dump(data, sort_keys=False))
+    try:
+        _cli(["run", str(suite), "--out", str(work / "warmup"), "--workers", str(max_workers), "--quiet",
+              "--no-report"], cache, shown)
+        base = None
+        for w in _worker_counts(max_workers):
+            out = work / f"run-{w}"
+            wall, proc = _cli(["run", str(suite), "--out", str(out), "--workers", str(w), "--quiet", "--no-report"],
+                              cache, shown)
+            if "0 rendered" not in _scenes_line(proc):
+                raise SystemExit(f"the cache was not warm: {_scenes_line(proc)}")
+            busy = sum(json.loads(p.read_text())["elapsed_s"] for p in (out / "cells").glob("*/cell.json"))
+            t0 = time.perf_counter()
+            collect_cells(out)
+            collect_s = time.perf_counter() - t0
+            base = base or wall
+            rows.append((w, f"{wall:.1f}", f"{60 * n_cells / wall:.1f}", f"{base / wall:.2f}",
+                         f"{100 * busy / (w * wall):.0f}", f"{collect_s:.2f}"))
+        print(f"many cores: {n_cells} cells ({args.pipeline}, nominal {args.size} x {args.frames} frames, one seed "
+              f"each), warm cache, no report; {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}\n")
+        print(_table(rows, ("workers", "wall_s", "cells_per_min", "speedup", "busy_%", "collect_s")))
+        _print_commands(shown)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "_render":
         return child_render(sys.argv[2], sys.argv[3])
@@ -336,6 +394,13 @@ def main() -> None:
     s.add_argument("--workers", type=int, default=2)
     s.add_argument("--cache", default=None)
     s.set_defaults(fn=cmd_standard)
+    s = sub.add_parser("cores")
+    s.add_argument("--max-workers", type=int, default=0, help="largest worker count (default: the cores here)")
+    s.add_argument("--cells", type=int, default=0, help="cells in the suite (default: 2 per worker at most)")
+    s.add_argument("--frames", type=int, default=30)
+    s.add_argument("--size", default="640x480")
+    s.add_argument("--pipeline", default="thesis-lk")
+    s.set_defaults(fn=cmd_cores)
     args = p.parse_args()
     args.fn(args)
 

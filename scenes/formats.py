@@ -236,20 +236,24 @@ def _check_field(a: np.ndarray, name: str, shape: tuple | None = None) -> np.nda
 def encode_flow_npz(flow: np.ndarray, flow_camera: np.ndarray, *, level: int = FLOW_NPZ_LEVEL) -> bytes:
     """The bytes of a lossless compact ``.npz`` holding a pair's total and camera-induced flow.
 
-    Members (all ``uint8`` byte planes, shape ``(4, 2, H, W)``: byte k, little-endian, of
-    component c = u, v):
+    Members:
 
     - ``codec``: the string :data:`FLOW_NPZ_CODEC`.
-    - ``flow_camera_rowdelta``: the float32 bits of ``flow_camera`` as uint32, each minus its
-      left neighbour in the row (modulo 2**32; the first column kept). The camera-induced flow
-      is smooth, so neighbouring bit patterns differ in their low bits only.
-    - ``flow_xor_camera``: the bits of ``flow`` XOR those of ``flow_camera``: zero wherever
-      the total flow is the camera's (the static world), so nearly all of it.
+    - ``flow_camera_rowdelta``: ``uint8 (4, 2, H, W)``, byte k (little-endian) of component
+      c = u, v of the float32 bits of ``flow_camera`` as uint32, each minus its left neighbour
+      in the row (modulo 2**32; the first column kept). The camera-induced flow is smooth,
+      so neighbouring bit patterns differ in their low bits only, and the byte planes of
+      the differences are mostly runs that zlib compresses.
+    - ``flow_xor_index`` ``int64 (K,)`` and ``flow_xor_bits`` ``uint32 (K,)``: where the bits
+      of ``flow`` differ from those of ``flow_camera`` (flat indices into ``(H, W, 2)``), their
+      XOR. The total flow is the camera's on the whole static world, so K is small (the
+      vehicles' pixels).
 
     Decoding (what :func:`decode_flow_npz` does)::
 
-        bits_c = cumsum(planes_to_uint32(flow_camera_rowdelta), axis=1) mod 2**32
-        flow_camera = bits_c.view(float32);  flow = (bits_c ^ planes_to_uint32(flow_xor_camera)).view(float32)
+        bits_c = cumsum(planes_to_uint32(flow_camera_rowdelta), axis=W) mod 2**32   # (H, W, 2)
+        bits = bits_c.copy();  bits.flat[flow_xor_index] ^= flow_xor_bits
+        flow_camera, flow = bits_c.view(float32), bits.view(float32)
 
     Parameters
     ----------
@@ -261,10 +265,13 @@ def encode_flow_npz(flow: np.ndarray, flow_camera: np.ndarray, *, level: int = F
     bits_c = fc.view(np.uint32)
     delta = bits_c.copy()
     np.subtract(bits_c[:, 1:], bits_c[:, :-1], out=delta[:, 1:])  # wraps modulo 2**32
+    xor = (f.view(np.uint32) ^ bits_c).ravel()
+    index = np.flatnonzero(xor)
     members = {
         "codec": np.array(FLOW_NPZ_CODEC),
         "flow_camera_rowdelta": _byte_planes(delta),
-        "flow_xor_camera": _byte_planes(f.view(np.uint32) ^ bits_c),
+        "flow_xor_index": index.astype("<i8"),
+        "flow_xor_bits": xor[index].astype("<u4"),
     }
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as zf:
@@ -286,18 +293,23 @@ def decode_flow_npz(data: bytes, *, name: str = "<bytes>") -> tuple[np.ndarray, 
             codec = str(z["codec"].item()) if "codec" in z.files else None
             if codec != FLOW_NPZ_CODEC:
                 raise FormatError(f"{name}: not a compact flow file: codec {codec!r}, expected {FLOW_NPZ_CODEC!r}")
-            delta, xor = z["flow_camera_rowdelta"], z["flow_xor_camera"]
+            delta, index, xor = z["flow_camera_rowdelta"], z["flow_xor_index"], z["flow_xor_bits"]
     except FormatError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
         raise FormatError(f"{name}: not a readable compact flow file ({type(err).__name__}: {err})") from None
-    if delta.dtype != np.uint8 or delta.ndim != 4 or delta.shape[:2] != (4, 2) or xor.shape != delta.shape:
-        raise FormatError(f"{name}: flow members of shape {delta.shape} and {xor.shape}, "
-                          f"expected (4, 2, H, W) uint8 both")
+    if delta.dtype != np.uint8 or delta.ndim != 4 or delta.shape[:2] != (4, 2):
+        raise FormatError(f"{name}: flow_camera_rowdelta of {delta.shape} {delta.dtype}, expected (4, 2, H, W) uint8")
+    n = 2 * delta.shape[2] * delta.shape[3]
+    if (index.ndim != 1 or index.shape != xor.shape or index.dtype.kind != "i" or xor.dtype != np.uint32
+            or (index.size and (index.min() < 0 or index.max() >= n))):
+        raise FormatError(f"{name}: flow_xor_index {index.shape} {index.dtype} and flow_xor_bits {xor.shape} "
+                          f"{xor.dtype}: expected K int64 indices below {n} and K uint32 values")
     bits_c = np.cumsum(_from_byte_planes(delta), axis=2, dtype=np.uint32)  # (2, H, W); wraps modulo 2**32
-    bits = bits_c ^ _from_byte_planes(xor)
-    return (np.ascontiguousarray(bits.transpose(1, 2, 0)).view(np.float32),
-            np.ascontiguousarray(bits_c.transpose(1, 2, 0)).view(np.float32))
+    bits_c = np.ascontiguousarray(bits_c.transpose(1, 2, 0))
+    bits = bits_c.copy()
+    bits.ravel()[index] ^= xor
+    return bits.view(np.float32), bits_c.view(np.float32)
 
 
 def read_flow_npz(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:

@@ -126,9 +126,10 @@ def test_compact_flow_is_deterministic_small_and_a_plain_npz(tmp_path):
     assert len(data) < 0.25 * (len(encode_flo(flow)) + len(encode_flo(cam)))
     (tmp_path / "f.npz").write_bytes(data)
     with np.load(tmp_path / "f.npz") as z:  # any numpy opens it
-        assert sorted(z.files) == ["codec", "flow_camera_rowdelta", "flow_xor_camera"]
+        assert sorted(z.files) == ["codec", "flow_camera_rowdelta", "flow_xor_bits", "flow_xor_index"]
         assert z["codec"].item() == FLOW_NPZ_CODEC
-        assert z["flow_xor_camera"].shape == (4, 2, 120, 160)
+        assert z["flow_camera_rowdelta"].shape == (4, 2, 120, 160)
+        assert z["flow_xor_index"].size == 10 * 14 * 2  # the moving box's pixels, both components
     back_flow, back_cam = read_flow_npz(tmp_path / "f.npz")
     np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
     np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
