@@ -63,7 +63,6 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import cv2
-import numba
 import numpy as np
 import pandas as pd
 from scipy.optimize import linear_sum_assignment
@@ -384,124 +383,8 @@ def _error_rows_from_totals(n: int, s_epe: float, s_sq: float, s_ae: float, over
     return rows
 
 
-# columns of the per-region totals of _field_totals
+# columns of the per-region totals of harness._flow_kernels.field_totals
 _N, _S_EPE, _S_SQ, _S_AE, _K1, _K3, _K5, _KFL, _KCOV = range(9)
-
-
-# A pixel's EPE is computed as sqrt(du^2 + dv^2), within 2 ulp of hypot's (libm hypot costs
-# more than the rest of the pass). Where that could change a decision (a histogram bin edge,
-# which includes the 1, 3 and 5 px outlier limits, or the Fl limit), the pixel's EPE is
-# recomputed with hypot, as endpoint_error has it: bins and counts are exactly theirs.
-_EDGE = 1e-9
-
-
-@numba.njit(cache=True)
-def _field_totals(e, t, bits, valid_est, bin_px, nbins, stats, hist, bin_out, cos_out, code_out):  # pragma: no cover
-    """One pass over the pixels: the totals and EPE histogram of every membership pattern.
-
-    e, t : (H, W, 2) float32 estimate and truth; bits : (H, W) uint8, bit r set when the pixel
-    is in region r (0: not scored); valid_est : (H, W) bool. Out: stats (2**R, 9) float64
-    (columns _N .. _KCOV) and hist (2**R, nbins) int64, row b for the pixels whose ``bits``
-    equal b (one update per pixel; regions sum their patterns); bin_out (H, W) int32, the
-    histogram bin of each scored pixel (for :func:`_values_in_bins`); cos_out (H*W,) float64
-    and code_out (H*W,) int64, the clipped cosine of each scored pixel's angular error and its
-    pattern, in pixel order. Returns the number of scored pixels. The arccos is left to numpy
-    (SIMD, several times faster than libm's per call), which is what angular_error_deg uses.
-    """
-    h, w = bits.shape
-    # running totals of the current pattern in locals (a store and reload of stats[b, :] per
-    # pixel would chain every pixel on memory), added to stats[cur] when the pattern changes
-    cur = -1
-    m = 0
-    n = s1 = s2 = k1 = k3 = k5 = kfl = kcov = 0.0
-    for y in range(h):
-        for x in range(w):
-            b = bits[y, x]
-            if b == 0:
-                continue
-            if b != cur:
-                if cur >= 0:
-                    _add_totals(stats, cur, n, s1, s2, k1, k3, k5, kfl, kcov)
-                cur = b
-                n = s1 = s2 = k1 = k3 = k5 = kfl = kcov = 0.0
-            eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
-            tu, tv = np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
-            du, dv = eu - tu, ev - tv
-            epe = math.sqrt(du * du + dv * dv)
-            q = epe / bin_px
-            frac = q - math.floor(q)
-            if frac < _EDGE or frac > 1.0 - _EDGE:
-                epe = math.hypot(du, dv)
-                q = epe / bin_px
-            k = math.floor(q)
-            k = nbins - 1 if k > nbins - 1 else k
-            bin_out[y, x] = k
-            hist[b, k] += 1
-            # Barron 1994: angle between (u_e, v_e, 1) and (u_t, v_t, 1)
-            num = eu * tu + ev * tv + 1.0
-            den = math.sqrt((eu * eu + ev * ev + 1.0) * (tu * tu + tv * tv + 1.0))
-            cos_out[m] = min(max(num / den, -1.0), 1.0)
-            code_out[m] = b
-            m += 1
-            n += 1.0
-            s1 += epe
-            s2 += epe * epe
-            if epe > 1.0:
-                k1 += 1.0
-            if epe > 3.0:
-                k3 += 1.0
-                # KITTI Fl: also > 5 % of |w_true|
-                limit = 0.05 * math.hypot(tu, tv)
-                if abs(epe - limit) <= _EDGE * limit:
-                    epe = math.hypot(du, dv)
-                if epe > limit:
-                    kfl += 1.0
-            if epe > 5.0:
-                k5 += 1.0
-            if valid_est[y, x]:
-                kcov += 1.0
-    if cur >= 0:
-        _add_totals(stats, cur, n, s1, s2, k1, k3, k5, kfl, kcov)
-    return m
-
-
-@numba.njit(cache=True, inline="always")
-def _add_totals(stats, b, n, s1, s2, k1, k3, k5, kfl, kcov):  # pragma: no cover - numba
-    stats[b, 0] += n
-    stats[b, 1] += s1
-    stats[b, 2] += s2
-    stats[b, 4] += k1
-    stats[b, 5] += k3
-    stats[b, 6] += k5
-    stats[b, 7] += kfl
-    stats[b, 8] += kcov
-
-
-@numba.njit(cache=True)
-def _values_in_bins(e, t, bits, bin_idx, is_target, target, start, out):  # pragma: no cover - numba
-    """The EPEs (hypot, as endpoint_error) of region r's pixels in bin ``target[r, j]``, into
-    ``out[start[r, j]:...]``.
-
-    The nearest-rank quantile lies in a known bin (from the histogram); the exact value is
-    found among the few samples of that bin instead of partitioning every pixel's EPE.
-    """
-    fill = start.copy()
-    h, w = bits.shape
-    n_regions, n_q = target.shape
-    for y in range(h):
-        for x in range(w):
-            b = bits[y, x]
-            if b == 0 or not is_target[bin_idx[y, x]]:
-                continue
-            k = bin_idx[y, x]
-            epe = math.hypot(np.float64(e[y, x, 0]) - np.float64(t[y, x, 0]),
-                             np.float64(e[y, x, 1]) - np.float64(t[y, x, 1]))
-            for r in range(n_regions):
-                if b & (1 << r):
-                    for j in range(n_q):
-                        if target[r, j] == k:
-                            out[fill[r, j]] = epe
-                            fill[r, j] += 1
 
 
 def _quantiles_from_hist(e: np.ndarray, t: np.ndarray, bin_idx: np.ndarray, bits: np.ndarray, hist: np.ndarray,
@@ -527,7 +410,9 @@ def _quantiles_from_hist(e: np.ndarray, t: np.ndarray, bin_idx: np.ndarray, bits
     values = np.empty(int(sizes.sum()), np.float64)
     is_target = np.zeros(HIST_NBINS, np.bool_)
     is_target[target[target >= 0]] = True
-    _values_in_bins(e, t, bits, bin_idx, is_target, target, start, values)
+    from harness._flow_kernels import values_in_bins
+
+    values_in_bins(e, t, bits, bin_idx, is_target, target, start, values)
     for r in range(n_regions):
         for j in range(len(qs)):
             if target[r, j] >= 0:
@@ -587,8 +472,10 @@ def _score_field(e: np.ndarray, t: np.ndarray, masks: Mapping[str, np.ndarray], 
     bin_idx = np.empty(ve.shape, np.int32)
     cos = np.empty(ve.size, np.float64)
     code = np.empty(ve.size, np.int64)
-    m = _field_totals(e, t, bits, np.ascontiguousarray(ve, np.bool_), HIST_BIN_PX, HIST_NBINS, by_code, hist_code,
-                      bin_idx, cos, code)
+    from harness._flow_kernels import field_totals  # numba: imported on the first scoring, not with the module
+
+    m = field_totals(e, t, bits, np.ascontiguousarray(ve, np.bool_), HIST_BIN_PX, HIST_NBINS, by_code, hist_code,
+                     bin_idx, cos, code)
     # angular error (Barron 1994) from the cosines, as angular_error_deg computes it
     by_code[:, _S_AE] = np.bincount(code[:m], weights=np.degrees(np.arccos(cos[:m])), minlength=len(by_code))
     member = (np.arange(1 << len(names))[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
