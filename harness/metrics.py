@@ -456,15 +456,26 @@ def _finite_uv(flow: np.ndarray) -> np.ndarray:
     return np.isfinite(flow[..., 0]) & np.isfinite(flow[..., 1])
 
 
+def _region_bits(masks: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(H, W) uint8: bit j set where the pixel is in the j-th region of ``masks`` (at most 8)."""
+    if len(masks) > 8:
+        raise ValueError(f"regions: at most 8 in one pass, got {len(masks)}")
+    bits = None
+    for j, m in enumerate(masks.values()):
+        b = m.view(np.uint8) << np.uint8(j) if m.dtype == bool else m.astype(np.uint8) << np.uint8(j)
+        bits = b if bits is None else bits | b
+    return bits
+
+
 def _score_field(e: np.ndarray, t: np.ndarray, masks: Mapping[str, np.ndarray], ve: np.ndarray, *,
-                 motion: str, frame: int | None) -> list[dict]:
-    """Rows of checked float32 fields ``e``, ``t`` in the regions ``masks`` (subsets of the scored pixels)."""
+                 motion: str, frame: int | None, bits: np.ndarray | None = None) -> list[dict]:
+    """Rows of checked float32 fields ``e``, ``t`` in the regions ``masks`` (subsets of the scored pixels).
+
+    ``bits`` is :func:`_region_bits` of ``masks`` when the caller has it already.
+    """
     names = list(masks)
-    if len(names) > 8:
-        raise ValueError(f"regions: at most 8 in one pass, got {len(names)}")
-    bits = np.zeros(ve.shape, np.uint8)
-    for j, name in enumerate(names):
-        bits |= masks[name].astype(np.uint8) << np.uint8(j)
+    if bits is None:
+        bits = _region_bits(masks) if names else np.zeros(ve.shape, np.uint8)
     by_code = np.zeros((1 << len(names), 9), np.float64)
     hist_code = np.zeros((1 << len(names), HIST_NBINS), np.int64)
     e = np.ascontiguousarray(e, np.float32)
@@ -544,8 +555,10 @@ def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] = REGIONS,
     # the regions depend on the scored pixels only: the same for both motions unless the camera flow has NaN
     masks_local = masks if np.array_equal(vt, vt_local) else region_masks(
         vt_local, truth.instances, boundary_px=boundary_px, regions=regions)
-    rows = _score_field(e, t, masks, ve, motion="total", frame=frame)
-    rows += _score_field(e_local, t_local, masks_local, ve, motion="local", frame=frame)
+    bits = _region_bits(masks)
+    rows = _score_field(e, t, masks, ve, motion="total", frame=frame, bits=bits)
+    rows += _score_field(e_local, t_local, masks_local, ve, motion="local", frame=frame,
+                         bits=bits if masks_local is masks else None)
     if timings and getattr(estimate, "stage_ms", None):
         rows += timing_rows(estimate.stage_ms, frame=frame)
     return rows
