@@ -69,7 +69,8 @@ def cell_entry(*, cell_id: str, scene: str, seed: int, pipeline: str, config_has
 def write_run(run_dir: str | os.PathLike, info: Mapping) -> Path:
     """Write ``RUN/run.json`` atomically with ``format`` = :data:`RUN_FORMAT`.
 
-    ``info`` must hold :data:`RUN_KEYS` (``pipelines``: name -> resolved pipeline dict;
+    ``info`` must hold :data:`RUN_KEYS` (``pipelines``: the resolved pipeline dicts in suite order,
+    each with its ``name``;
     ``cells``: dicts from :func:`cell_entry`); other keys (counts, executor, error)
     are kept as given.
     """
@@ -105,7 +106,9 @@ class RunFolder:
     def pipelines(self) -> dict[str, dict]:
         """Pipeline name -> resolved pipeline dict (``Pipeline.from_dict`` form), in suite order."""
         p = self.info.get("pipelines")
-        return {str(k): dict(v) for k, v in p.items() if isinstance(v, Mapping)} if isinstance(p, Mapping) else {}
+        if not isinstance(p, list):
+            return {}
+        return {str(v["name"]): dict(v) for v in p if isinstance(v, Mapping) and v.get("name")}
 
     @property
     def cache_dir(self) -> Path | None:

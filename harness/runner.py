@@ -479,7 +479,7 @@ def run_suite(
         run_info = {
             "suite": suite.name, "suite_source": source, "resolved_suite": suite_dict,
             "config_hash": suite_hash, "provenance": prov, "cache_dir": str(cache),
-            "pipelines": {c.pipeline: c.pipeline_spec for c in cells},
+            "pipelines": list({c.pipeline: {**c.pipeline_spec, "name": c.pipeline} for c in cells}.values()),
             "cells": [_cell_entry(c, cache) for c in cells], "status": "running",
             "started": started, "finished": None, "executor": executor,
             "workers": workers,
