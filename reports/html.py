@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import math
+import re
 from importlib import resources
 
 import numpy as np
@@ -55,6 +56,42 @@ _SECTIONS = [
 def _e(x) -> str:
     """Escape any text that comes from data."""
     return html.escape("" if x is None else str(x), quote=True)
+
+
+_CELL = re.compile(r"<(td|th)\b([^>]*)>")
+
+
+def _header_text(cell_html: str) -> str:
+    """The visible label of a header cell: its text before any ``<small>`` note, tags dropped."""
+    return re.sub(r"<[^>]+>", "", cell_html.split("<small>", 1)[0]).strip()
+
+
+def _cards(table_html: str, labels: list[str] | None = None) -> str:
+    """Mark a table for the narrow layout: each body cell gets ``data-label`` (its column's header, or
+    ``labels`` in column order) so that under 600 px every row becomes a card of label: value lines
+    (report.css) instead of a table wider than the screen."""
+    head, sep, body = table_html.partition("</thead>")
+    if not sep or "data-cards" in head or 'class="meta"' in head:
+        return table_html
+    if labels is None:
+        last_row = head.rsplit("<tr>", 1)[-1]
+        labels = [_header_text(c) for c in re.findall(r"<th\b[^>]*>(.*?)</th>", last_row, flags=re.S)]
+
+    def row(m: re.Match) -> str:
+        i = -1
+
+        def cell(c: re.Match) -> str:
+            nonlocal i
+            i += 1
+            if c.group(1) == "th" or i >= len(labels) or "data-label" in c.group(2):
+                return c.group(0)
+            return f'<{c.group(1)}{c.group(2)} data-label="{_e(labels[i])}">'
+
+        return _CELL.sub(cell, m.group(0))
+
+    body = re.sub(r"<tr>.*?</tr>", row, body, flags=re.S)
+    tag_end = head.index(">", head.index("<table"))
+    return head[:tag_end] + ' data-cards="1"' + head[tag_end:] + sep + body
 
 
 def _missing(text: str) -> str:
@@ -396,8 +433,11 @@ def _table41_html(tr: pd.DataFrame, *, pipe: str, vehicle: int) -> str:
             "<th colspan=\"2\">Position error [px] \u2193</th></tr><tr>"
             + "".join(f"<th>{h}</th>" for h in ("Optical flow", "Kalman filter", "True") * 2)
             + "<th>Optical flow</th><th>Kalman filter</th></tr>")
-    return (f'<div class="scroll"><table class="t41"><caption class="note">{_e(caption)}</caption>'
-            f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table></div>")
+    labels = ["Frame"] + [f"{d} {w}" for d in ("\u0394x", "\u0394y") for w in ("optical flow", "Kalman", "true")] \
+        + ["error optical flow", "error Kalman"]
+    return ('<div class="scroll">' + _cards(f'<table class="t41"><caption class="note">{_e(caption)}</caption>'
+                                            f"<thead>{head}</thead><tbody>{''.join(rows)}</tbody></table>", labels)
+            + "</div>")
 
 
 def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None, specs: dict[str, dict]
@@ -534,6 +574,7 @@ def render_html(model: ReportModel) -> str:
     sec["failed"] = _failed_html(data)
     nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
     body = "".join(f'<section id="{k}"><h2>{_e(v)}</h2>{sec[k]}</section>' for k, v in _SECTIONS)
+    body = re.sub(r"<table\b.*?</table>", lambda m: _cards(m.group(0)), body, flags=re.S)
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{_e(model.title)}</title><style>{stylesheet()}</style></head><body><main>"

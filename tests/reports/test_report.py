@@ -153,8 +153,8 @@ def test_a_degraded_method_is_marked_worse_by_the_gate_rules(degraded, tmp_path)
     bad, base, _ = degraded
     out = write_report(bad, baseline=base, out_dir=tmp_path)
     verdict = section(out["html"].read_text(), "verdict")
-    rows = re.findall(r"<tr><td>([^<]*)</td><th scope=\"row\">([^<]*)</th><td>([^<]*)</td>.*?<td>(worse|better)"
-                      r"</td><td>([^<]*)</td></tr>", verdict)
+    rows = re.findall(r"<tr><td[^>]*>([^<]*)</td><th scope=\"row\">([^<]*)</th><td[^>]*>([^<]*)</td>.*?"
+                      r"<td[^>]*>(worse|better)</td><td[^>]*>([^<]*)</td></tr>", verdict)
     assert rows, "the changed entries are listed"
     assert {r[1] for r in rows} == {"dis"} and {r[3] for r in rows} == {"worse"}
     assert any(r[2] == "epe_mean [all, total]" and r[4] == "abs 0.01" for r in rows)
