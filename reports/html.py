@@ -17,6 +17,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
+from harness.metrics import endpoint_error
 from reports import pictures, plots
 from reports.lkhs import LEVEL, N_BOOT
 from reports.load import (RunData, open_scene_sequence, picture_frames, read_cell_flow, read_stabilisation,
@@ -271,7 +272,7 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
         return "".join(out)
     errs = []
     for flow in present:
-        d = np.hypot(*(flow.astype(np.float64) - truth.astype(np.float64)).transpose(2, 0, 1))
+        d = endpoint_error(flow, truth)
         known = np.isfinite(d) & (valid if valid is not None else True)
         if known.any():
             errs.append(float(np.percentile(d[known], 99)))

@@ -13,6 +13,7 @@ import numpy as np
 from matplotlib import colormaps
 
 from algorithms.flow import color_wheel_image, flow_to_color
+from harness.metrics import endpoint_error
 
 __all__ = ["NO_TRUTH_RGB", "png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
            "display_scale", "upscale_nearest", "mask_image", "swatch"]
@@ -88,8 +89,7 @@ def epe_map(estimate: np.ndarray, truth: np.ndarray, *, max_epe_px: float,
 
     Returns the RGB image and the mean endpoint error over known pixels [px].
     """
-    d = estimate.astype(np.float64) - truth.astype(np.float64)
-    epe = np.hypot(d[..., 0], d[..., 1])
+    epe = endpoint_error(estimate, truth)
     known = np.isfinite(epe)
     if valid is not None and valid.shape == epe.shape:
         known &= valid

@@ -17,6 +17,7 @@ ALLOWED = {
     "harness.cli": ("harness", "scenes", "algorithms", "reports"),
     "harness": ("harness", "scenes", "algorithms"),
     "reports": ("reports", "harness.results", "harness.run_folder", "harness.cell_artifacts", "harness.gate",
+                "harness.metrics",
                 "scenes.sequence", "scenes.formats", "algorithms.flow"),
 }
 

@@ -187,3 +187,11 @@ def test_help_says_how_to_add_a_flow_method(capsys):
         main(["--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "register_flow" in out and "imports:" in out and "Benchmark your own method" in out
+
+
+def test_report_takes_a_gate_verdict_and_checks_its_files(tmp_path, capsys):
+    assert main(["report", str(tmp_path), "--gate", str(tmp_path / "v.json")]) == 2
+    assert "not a finished run folder" in capsys.readouterr().err
+    (tmp_path / "results.parquet").write_bytes(b"")
+    assert main(["report", str(tmp_path), "--gate", str(tmp_path / "v.json")]) == 2
+    assert capsys.readouterr().err == f"aerobench: error: --gate: {tmp_path / 'v.json'}: no such file\n"
