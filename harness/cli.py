@@ -119,7 +119,7 @@ def _list_flow_methods() -> dict[str, str]:
     for name, doc in describe()["flow"].items():
         knobs = [p.name for p in inspect.signature(FLOW_METHODS[name]).parameters.values()
                  if p.kind is p.KEYWORD_ONLY]
-        out[name] = f"{_one_line(doc, 70)} params: {', '.join(knobs) or 'none'}"
+        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc)}"
     return out
 
 

@@ -190,6 +190,17 @@ def _lkhs_html(model: ReportModel) -> str:
                    f"<th>LK [{unit}]</th><th>HS [{unit}]</th><th>LK \u2212 HS [{unit}]</th>"
                    f"<th>{LEVEL:.0%} CI</th><th>LK lower / pairs</th></tr></thead><tbody>{''.join(rows)}"
                    "</tbody></table></div>")
+        per = pair.by_scene_seed
+        if len(per):
+            cols = [c for c in per.columns if c not in ("scene", "seed")]
+            body = "".join(f'<tr><th scope="row">{_e(r["scene"])}, seed {_e(r["seed"])}</th>'
+                           + "".join(f'<td class="num">{r[c]:+.3f}</td>' if np.isfinite(r[c]) else
+                                     '<td class="num">\u2013</td>' for c in cols) + "</tr>"
+                           for r in per.to_dict("records"))
+            out.append(f"<details><summary>LK \u2212 HS [{unit}] per scene and seed</summary>"
+                       '<div class="scroll"><table class="lkhs-scene"><thead><tr><th>Scene, seed</th>'
+                       + "".join(f"<th>{_e(c)}</th>" for c in cols)
+                       + f"</tr></thead><tbody>{body}</tbody></table></div></details>")
     return "".join(out)
 
 

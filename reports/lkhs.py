@@ -22,6 +22,7 @@ pair_pipelines(specs) -> [(lk, hs)]            twins by flow method in the resol
 paired_units(table, lk, hs, *, metric, region, motion) -> DataFrame
 bootstrap_difference(sum_a, count_a, sum_b, count_b, *, rng, n_boot, level) -> (d, lo, hi)
 compare_pair(table, lk, hs, *, metric, regions, motions, seed) -> [Comparison]
+by_scene_seed(table, lk, hs, *, metric, regions, motions) -> DataFrame   the difference per (scene, seed)
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["LK", "HS", "N_BOOT", "LEVEL", "Comparison", "pair_pipelines", "paired_units", "bootstrap_difference",
-           "compare_pair", "verdict"]
+           "compare_pair", "by_scene_seed", "verdict"]
 
 LK, HS = "lucas_kanade", "horn_schunck"
 N_BOOT = 4000
@@ -188,3 +189,21 @@ def compare_pair(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_me
                                   hs_value=float(u["sum_hs"].sum() / u["count_hs"].sum()),
                                   diff=d, lo=lo, hi=hi))
     return out
+
+
+def by_scene_seed(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_mean",
+                  regions: tuple[str, ...] = ("background", "vehicles"),
+                  motions: tuple[str, ...] = ("total", "local")) -> pd.DataFrame:
+    """The pooled difference LK - HS per (scene, seed): one row per scene and seed, one column
+    ``"<region> / <motion>"`` per comparison (NaN where that pair has no unit)."""
+    parts = []
+    for motion in motions:
+        for region in regions:
+            u = paired_units(table, lk, hs, metric=metric, region=region, motion=motion)
+            if u.empty:
+                continue
+            g = u.groupby(["scene", "seed"], sort=True)[["sum_lk", "count_lk", "sum_hs", "count_hs"]].sum()
+            parts.append((g["sum_lk"] / g["count_lk"] - g["sum_hs"] / g["count_hs"]).rename(f"{region} / {motion}"))
+    if not parts:
+        return pd.DataFrame(columns=["scene", "seed"])
+    return pd.concat(parts, axis=1).reset_index()

@@ -87,6 +87,15 @@ def _lkhs_md(model: ReportModel) -> list[str]:
             md.append(f"| {c.region} | {c.motion} | {format_value(c.lk_value)} | {format_value(c.hs_value)} | "
                       f"{c.diff:+.3f} | {c.lo:+.3f} to {c.hi:+.3f} | {c.n_lk_lower} / {c.n_units} |")
         md.append("")
+        per = pair.by_scene_seed
+        if len(per):
+            cols = [c for c in per.columns if c not in ("scene", "seed")]
+            md += [f"LK \u2212 HS [{unit}] per scene and seed:", "",
+                   "| Scene, seed | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+            md += [f"| {_md(r['scene'])}, seed {r['seed']} | "
+                   + " | ".join(f"{r[c]:+.3f}" if np.isfinite(r[c]) else "\u2013" for c in cols) + " |"
+                   for r in per.to_dict("records")]
+            md.append("")
     return md
 
 

@@ -43,6 +43,7 @@ class LkHsPair:
     lk: str
     hs: str
     comparisons: list[lkhs.Comparison]
+    by_scene_seed: pd.DataFrame            # scene, seed, then LK - HS per "region / motion"
 
 
 @dataclass
@@ -107,8 +108,8 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
                     "was run.")
     if "epe_mean" not in data.metrics:
         return [], "The run has no epe_mean rows: nothing to compare."
-    pairs = [LkHsPair(lk, hs, lkhs.compare_pair(data.table[data.table["cell_id"].isin(data.ok["cell_id"])], lk, hs))
-             for lk, hs in twins]
+    ok = data.table[data.table["cell_id"].isin(data.ok["cell_id"])]
+    pairs = [LkHsPair(lk, hs, lkhs.compare_pair(ok, lk, hs), lkhs.by_scene_seed(ok, lk, hs)) for lk, hs in twins]
     return pairs, ""
 
 

@@ -86,3 +86,16 @@ def test_a_failed_cell_leaves_its_frames_unpaired():
     t.loc[t["cell_id"] == "0-0-mine-b", "status"] = "failed"
     u = paired_units(t, "mine-a", "mine-b", region="vehicles", motion="total")
     assert len(u) == (N_SCENES * N_SEEDS - 1) * N_FRAMES
+
+
+def test_the_difference_per_scene_and_seed_pools_that_scene_and_seed_only():
+    from reports.lkhs import by_scene_seed
+
+    t = _table(0.1)
+    per = by_scene_seed(t, "mine-a", "mine-b", regions=("vehicles",), motions=("total",))
+    assert len(per) == N_SCENES * N_SEEDS and list(per.columns) == ["scene", "seed", "vehicles / total"]
+    rows = t[(t["scene"] == "scene1") & (t["seed"] == 2)]
+    a, b = rows[rows["pipeline"] == "mine-a"], rows[rows["pipeline"] == "mine-b"]
+    want = a["sum"].sum() / a["count"].sum() - b["sum"].sum() / b["count"].sum()
+    got = per[(per["scene"] == "scene1") & (per["seed"] == 2)]["vehicles / total"].item()
+    assert got == pytest.approx(want)
