@@ -9,10 +9,14 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
     aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
-    aerobench report RUN_DIR [--baseline FILE]
+    aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE]
     aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
     aerobench baseline RUN_DIR --out FILE
-    aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE]
+    aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
+
+Your own flow method: a module that registers it (``algorithms.registry.register_flow``),
+listed under ``imports:`` of a suite; modules in the working folder are importable
+(README, "Benchmark your own method").
 """
 
 from __future__ import annotations
@@ -29,8 +33,6 @@ from typing import Any
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before anything imports OpenGL
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
-# the gate's tolerances unless --rules names another file
-DEFAULT_RULES = Path(__file__).resolve().parent / "gate_rules.yaml"
 
 __all__ = ["main", "build_parser", "UsageError"]
 
@@ -62,11 +64,10 @@ def _one_line(text: str, width: int = 100) -> str:
 
 
 def _error_text(exc: BaseException) -> str:
-    """One line for a user error; an OS error says what failed and on which file."""
-    if isinstance(exc, OSError) and not isinstance(exc, FileNotFoundError | NotADirectoryError | IsADirectoryError):
-        what = exc.strerror or str(exc)
+    """One line for a user error; an OS error says what failed and on which file (no "[Errno N]")."""
+    if isinstance(exc, OSError) and exc.strerror:
         where = exc.filename if exc.filename is not None else "(no file named by the system)"
-        return _one_line(f"{what}: {where}", 2000)
+        return _one_line(f"{exc.strerror}: {where}", 2000)
     return _one_line(str(exc), 2000)
 
 
@@ -110,16 +111,41 @@ def _list_metrics() -> dict[str, str]:
             for n, d in sorted(METRICS.items())}
 
 
+def _list_flow_methods() -> dict[str, str]:
+    import algorithms.pipeline  # noqa: F401  (importing it registers every built-in flow method)
+    from algorithms.registry import FLOW_METHODS, describe
+
+    out = {}
+    for name, doc in describe()["flow"].items():
+        knobs = [p.name for p in inspect.signature(FLOW_METHODS[name]).parameters.values()
+                 if p.kind is p.KEYWORD_ONLY]
+        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc)}"
+    return out
+
+
+def _list_stage_keys() -> dict[str, str]:
+    """The keys of a pipeline dict (``Pipeline.from_dict``), each with thesis-lk's resolved value."""
+    import json
+
+    from algorithms.pipeline import get_pipeline
+
+    resolved = get_pipeline("thesis-lk").to_dict()
+    return {key: f"e.g. {json.dumps(value)}" for key, value in resolved.items() if key not in ("name", "description")}
+
+
 def cmd_list(args: argparse.Namespace) -> int:
     from harness.suites import describe_suites
 
     sections = [("scene presets", _list_presets), ("suites", describe_suites),
-                ("pipelines", _list_pipelines), ("metrics", _list_metrics)]
+                ("pipelines", _list_pipelines), ("flow methods", _list_flow_methods),
+                ("pipeline stage keys (the flow key names a flow method)", _list_stage_keys),
+                ("metrics", _list_metrics)]
     for title, fn in sections:
         items = fn()
         print(f"{title}:")
         width = max((len(k) for k in items), default=0)
-        for name, desc in sorted(items.items()):
+        keep_order = title.startswith("pipeline stage keys")  # in the order the stages run
+        for name, desc in (items.items() if keep_order else sorted(items.items())):
             print(f"  {name:<{width}}  {_one_line(desc, 110)}".rstrip())
         print()
     return EXIT_OK
@@ -149,6 +175,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: is a file; expected a folder to write the sequence into")
     if out.exists() and any(out.iterdir()):
         raise UsageError(f"{out}: the output folder is not empty")
     render_sequence(spec, out, flow_format=args.flow_format)
@@ -159,13 +187,14 @@ def cmd_render(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- run / report
 
 
-def _write_report(run_dir: Path, baseline: str | None = None) -> Path | None:
+def _write_report(run_dir: Path, baseline: str | None = None, gate: str | None = None,
+                  rules: str | None = None) -> Path | None:
     """``reports.write_report`` if the reports package provides it (it is optional for a run)."""
     try:
         from reports import write_report
     except ImportError:
         return None
-    return write_report(run_dir, baseline=baseline)
+    return write_report(run_dir, baseline=baseline, gate_verdict=gate, rules=rules)
 
 
 def _paths(report: Any) -> str:
@@ -204,9 +233,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    if args.baseline is not None and not Path(args.baseline).is_file():
-        raise UsageError(f"--baseline: {args.baseline}: no such file")
-    report = _write_report(run_dir, args.baseline)
+    for option, value in (("--baseline", args.baseline), ("--gate", args.gate), ("--rules", args.rules)):
+        if value is not None and not Path(value).is_file():
+            raise UsageError(f"{option}: {value}: no such file")
+    report = _write_report(run_dir, args.baseline, args.gate, args.rules)
     if report is None:
         raise UsageError("the reports package provides no write_report")
     print(f"report: {_paths(report)}")
@@ -274,14 +304,16 @@ def cmd_gate(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
     if not Path(args.baseline).is_file():
         raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
-    if args.rules is None and not DEFAULT_RULES.is_file():  # an install without the package data
-        print(f"aerobench: warning: {DEFAULT_RULES} is missing; gating with the built-in defaults",
+    if args.rules is None and not gate.DEFAULT_RULES.is_file():  # an install without the package data
+        print(f"aerobench: warning: {gate.DEFAULT_RULES} is missing; gating with the built-in defaults",
               file=sys.stderr)
-    rules = gate.load_rules(args.rules or (DEFAULT_RULES if DEFAULT_RULES.is_file() else None))
+    rules = gate.load_rules(args.rules or (gate.DEFAULT_RULES if gate.DEFAULT_RULES.is_file() else None))
     outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)
     if args.junit:
         atomic_write_bytes(args.junit, gate.to_junit_xml(outcome).encode())
+    if args.json:
+        gate.write_verdict(outcome, args.json)
     if args.summary:
         atomic_write_bytes(args.summary, markdown.encode())
     print(markdown)
@@ -294,7 +326,13 @@ def cmd_gate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from harness.executors import EXECUTORS
 
-    p = argparse.ArgumentParser(prog="aerobench", description="Synthetic benchmark of motion estimation in aerial video.")
+    p = argparse.ArgumentParser(
+        prog="aerobench", description="Synthetic benchmark of motion estimation in aerial video.",
+        epilog="Your own flow method: write a module that registers it with "
+               "algorithms.registry.register_flow, list the module under `imports:` in a suite YAML and use "
+               "the method in an inline pipeline ({name: mine, base: thesis-lk, spec: {flow: {method: NAME}}}); "
+               "modules in the working folder are importable. `aerobench list` shows the flow methods and "
+               "the pipeline stage keys; README.md, 'Benchmark your own method', has a complete example.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics")
@@ -324,7 +362,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("report", help="(re)write report.html and report.md of a run")
     s.add_argument("run_dir")
-    s.add_argument("--baseline", default=None, help="a baseline JSON to compare against")
+    s.add_argument("--baseline", default=None,
+                   help="a baseline JSON to compare against (directions and tolerances from the gate rules)")
+    s.add_argument("--gate", default=None, metavar="VERDICT_JSON",
+                   help="a verdict written by `aerobench gate --json`, shown at the top of the report")
+    s.add_argument("--rules", default=None, help="gate rules YAML for the baseline comparison "
+                                                 "(default: gate_rules.yaml of aerobench)")
     s.set_defaults(fn=cmd_report)
 
     s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder")
@@ -343,9 +386,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")
     s.add_argument("run_dir")
     s.add_argument("--baseline", required=True)
-    s.add_argument("--rules", default=None, help=f"gate rules YAML (default: {DEFAULT_RULES.name} of aerobench)")
+    s.add_argument("--rules", default=None, help="gate rules YAML (default: gate_rules.yaml of aerobench)")
     s.add_argument("--junit", default=None, help="write a JUnit XML report here")
     s.add_argument("--summary", default=None, help="write the Markdown summary here (e.g. $GITHUB_STEP_SUMMARY)")
+    s.add_argument("--json", default=None, help="write the machine-readable verdict here (for `aerobench report --gate`)")
     s.set_defaults(fn=cmd_gate)
     return p
 

@@ -32,6 +32,10 @@ parse_rule(text) -> Rule, load_rules(path=None) -> dict[str, Rule], rules_from_m
 compare(current, baseline, rules=None, *, suite=None, machine=None) -> GateResult
     (current: DataFrame or run folder; baseline: dict or file)
 to_junit_xml(result) -> str, to_markdown(result) -> str
+verdict_dict(result) -> dict, write_verdict(result, path), read_verdict(path) -> dict
+    the machine-readable verdict (format :data:`VERDICT_FORMAT`) that ``aerobench gate --json``
+    writes and ``aerobench report --gate`` shows
+change(check) -> "worse" | "better" | "within tolerance" | "skipped"
 """
 
 from __future__ import annotations
@@ -54,11 +58,15 @@ from harness.metrics import METRICS
 from harness.results import SUMMARY_KEYS, read_results, read_run_json, summarize
 from scenes.formats import atomic_write_bytes
 
-__all__ = ["GateError", "Rule", "Check", "GateResult", "BASELINE_FORMAT", "DEFAULT_ABS", "DEFAULT_REL",
+__all__ = ["GateError", "Rule", "Check", "GateResult", "BASELINE_FORMAT", "VERDICT_FORMAT", "DEFAULT_RULES",
+           "DEFAULT_ABS", "DEFAULT_REL", "change", "verdict_dict", "write_verdict", "read_verdict",
            "make_baseline", "baseline_from_run", "write_baseline", "read_baseline", "parse_rule", "load_rules",
            "rules_from_mapping", "compare", "to_junit_xml", "to_markdown"]
 
 BASELINE_FORMAT = "aerobench-baseline/1"
+VERDICT_FORMAT = "aerobench-gate/1"
+# the tolerances of `aerobench gate` unless --rules names another file (package data)
+DEFAULT_RULES = Path(__file__).resolve().parent / "gate_rules.yaml"
 DEFAULT_ABS = 1e-4   # accuracy: worsening allowed in the metric's unit (px, %, deg, ...)
 DEFAULT_REL = 0.20   # timings: worsening allowed relative to the baseline
 KEY = (*SUMMARY_KEYS, "metric", "region", "motion")
@@ -78,6 +86,25 @@ class Rule:
 
     def allowed(self, baseline: float) -> float:
         return self.tolerance if self.mode == "abs" else self.tolerance * abs(baseline)
+
+    def __str__(self) -> str:
+        """The statement in its canonical form: ``abs 0.05``, ``rel 10%``, ``off`` (``(default)`` when built in)."""
+        if self.mode == "off":
+            text = "off"
+        elif self.mode == "abs":
+            text = f"abs {self.tolerance:g}"
+        else:
+            text = f"rel {100.0 * self.tolerance:g}%"
+        return f"{text} (default)" if self.text == "default" else text
+
+    def exceeded(self, worse: float, baseline: float) -> bool:
+        """Whether a worsening of ``worse`` (in the metric's unit) goes beyond the tolerance.
+
+        A relative 1e-9 slack absorbs float rounding: 0.0223 - 0.0123 is 0.010000000000000002 in
+        binary, and a move of exactly the tolerance must pass.
+        """
+        allowed = self.allowed(baseline)
+        return worse > allowed + 1e-9 * max(allowed, abs(baseline), 1e-3)
 
 
 @dataclass
@@ -367,11 +394,10 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
             status, reason = "fail", "value missing (NaN) on one side"
         else:
             worse = (bv - cv) if hib else (cv - bv)
-            allowed = rule.allowed(bv)
-            if worse > allowed:
+            if rule.exceeded(worse, bv):
                 status = "fail"
                 reason = (f"{'fell' if hib else 'rose'} by {abs(cv - bv):.6g} {b['unit']}, allowed "
-                          f"{allowed:.6g} {b['unit']} ({rule.mode} {rule.text or rule.tolerance})")
+                          f"{rule.allowed(bv):.6g} {b['unit']} ({rule})")
         result.checks.append(Check(key, str(b["unit"]), hib, kind, bv, cv, rule, status, reason))
     # A failed cell leaves no rows, so its scene/pipeline aggregate silently comes from the other
     # seeds (or sweep values): the keys still match and every value may pass. Never a pass.
@@ -425,8 +451,63 @@ def to_markdown(result: GateResult) -> str:
                   "|---|---|---|---:|---:|---:|---|---|"]
         for c in result.failures:
             lines.append(f"| {c.key['scene']} | {c.key['pipeline']} | {c.name} | {c.baseline:.6g} | "
-                         f"{c.current:.6g} | {c.delta:+.6g} | {c.rule.mode} {c.rule.text or c.rule.tolerance} "
-                         f"| {c.unit} |")
+                         f"{c.current:.6g} | {c.delta:+.6g} | {c.rule} | {c.unit} |")
         lines.append("")
     return "\n".join(lines)
 
+
+
+# --------------------------------------------------------------------------- machine-readable verdict
+
+def change(check: Check) -> str:
+    """How ``check`` moved by the gate's own rule: "worse" (beyond the tolerance: the check fails),
+    "better" (improved by more than the tolerance), "within tolerance", or "skipped"."""
+    if check.status == "skipped":
+        return "skipped"
+    if check.status == "fail":
+        return "worse"
+    if math.isnan(check.baseline) or math.isnan(check.current):
+        return "within tolerance"
+    better = (check.current - check.baseline) if check.higher_is_better else (check.baseline - check.current)
+    return "better" if check.rule.exceeded(better, check.baseline) else "within tolerance"
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def verdict_dict(result: GateResult) -> dict:
+    """The verdict as plain data: ``format`` (:data:`VERDICT_FORMAT`), ``suite``, ``passed``, ``exit_code``,
+    ``counts`` (checked, passed, failed, skipped), ``notes`` and one entry per check (key fields,
+    unit, direction, baseline, current, rule, status, change, reason; NaN as null)."""
+    checks = []
+    for c in result.checks:
+        checks.append({**c.key, "unit": c.unit, "higher_is_better": c.higher_is_better, "kind": c.kind,
+                       "baseline": _finite(c.baseline), "current": _finite(c.current), "rule": str(c.rule),
+                       "status": c.status, "change": change(c), "reason": c.reason})
+    n, nf, ns = len(result.checks), len(result.failures), len(result.skipped)
+    return {"format": VERDICT_FORMAT, "suite": result.suite, "passed": result.passed, "exit_code": result.exit_code,
+            "counts": {"checked": n, "passed": n - nf - ns, "failed": nf, "skipped": ns},
+            "notes": list(result.notes), "checks": checks}
+
+
+def write_verdict(result: GateResult, path: str | os.PathLike) -> Path:
+    """Write :func:`verdict_dict` as JSON, atomically."""
+    path = Path(path)
+    atomic_write_bytes(path, (json.dumps(verdict_dict(result), indent=1, allow_nan=False) + "\n").encode())
+    return path
+
+
+def read_verdict(path: str | os.PathLike) -> dict:
+    """Read a verdict written by :func:`write_verdict`; a missing or foreign file raises :class:`GateError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise GateError(f"{path}: no gate verdict file; write one with `aerobench gate RUN --baseline B --json {path}`")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise GateError(f"{path}: gate verdict is not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != VERDICT_FORMAT:
+        got = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise GateError(f"{path}: not an aerobench gate verdict: format {got!r}, expected {VERDICT_FORMAT!r}")
+    return data

@@ -43,12 +43,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.results import ROWS_FILE, collect_cells, rows_to_frame, write_run_json, write_table
+from harness import cell_artifacts as artifacts
+from harness.results import ROWS_FILE, collect_cells, rows_to_frame, write_table
+from harness.run_folder import cell_entry, write_run
 from harness.suites import Cell, SceneVariant, Suite, expand, load_suite
 
 __all__ = ["RunFolderError", "RunResult", "default_cache_dir", "run_suite", "render_task", "cell_task"]
 
-CELL_FILE = "cell.json"  # written last inside a cell folder, before the rename
+CELL_FILE = artifacts.CELL_FILE  # written last inside a cell folder, before the rename
 LOCK_FILE = ".lock"
 CACHE_ENV = "AEROBENCH_CACHE"
 
@@ -94,10 +96,9 @@ def _prepare_worker() -> None:
 
 
 def _import_plugins(modules: Iterable[str]) -> None:
-    import importlib
+    from harness.suites import import_modules
 
-    for name in modules:
-        importlib.import_module(name)
+    import_modules(list(modules), source="worker")
 
 
 def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = ()) -> dict:
@@ -139,46 +140,6 @@ def point_seeds(tracks: pd.DataFrame) -> list[tuple[int, float, float]]:
     first = tracks[(tracks["frame"] == 0) & (tracks["visible"].astype(int) == 1)]
     first = first.sort_values("vehicle_id")
     return [(int(r.vehicle_id), float(r.x_px), float(r.y_px)) for r in first.itertuples()]
-
-
-def _stabilisation_table(est: Any, camera: pd.DataFrame) -> pd.DataFrame:
-    """Per frame: the estimated cumulative shift, flight line, correction and jitter beside the truth."""
-    n = len(camera)
-    out = pd.DataFrame({"frame": np.arange(n)})
-    for name in ("cumulative_px", "flight_line_px", "correction_px", "jitter_px"):
-        a = getattr(est, name, None)
-        if a is None:
-            continue
-        a = np.asarray(a, dtype=float)
-        if a.shape != (n, 2):
-            continue
-        stem = name.removesuffix("_px")
-        out[f"{stem}_x_px"], out[f"{stem}_y_px"] = a[:, 0], a[:, 1]
-    gx = pd.to_numeric(camera.get("global_dx_px"), errors="coerce").to_numpy(float)
-    gy = pd.to_numeric(camera.get("global_dy_px"), errors="coerce").to_numpy(float)
-    # cumulative truth: sum of the pair shifts before frame i (frame 0 at the origin)
-    out["true_cumulative_x_px"] = np.concatenate([[0.0], np.cumsum(np.nan_to_num(gx[:-1]))])
-    out["true_cumulative_y_px"] = np.concatenate([[0.0], np.cumsum(np.nan_to_num(gy[:-1]))])
-    out["true_jitter_x_px"] = camera["jitter_x_px"].to_numpy(float)
-    out["true_jitter_y_px"] = camera["jitter_y_px"].to_numpy(float)
-    return out
-
-
-def _tracks_table(est: Any, truth: pd.DataFrame) -> pd.DataFrame:
-    """The estimated tracks, with the ground-truth centre of the seeded vehicle beside each row."""
-    tracks = getattr(est, "tracks", None)
-    if tracks is None or len(tracks) == 0:
-        return pd.DataFrame(columns=["frame", "track_id", "x_px", "y_px", "source", "true_x_px", "true_y_px"])
-    tracks = tracks.copy()
-    if "seed_vehicle_id" in tracks and truth is not None and len(truth):
-        t = truth[["frame", "vehicle_id", "x_px", "y_px", "visible"]].rename(
-            columns={"vehicle_id": "seed_vehicle_id", "x_px": "true_x_px", "y_px": "true_y_px",
-                     "visible": "true_visible"})
-        ids = pd.to_numeric(tracks["seed_vehicle_id"], errors="coerce")
-        tracks["seed_vehicle_id"] = ids.astype("Int64")
-        t["seed_vehicle_id"] = t["seed_vehicle_id"].astype("Int64")
-        tracks = tracks.merge(t, on=["frame", "seed_vehicle_id"], how="left")
-    return tracks.sort_values([c for c in ("track_id", "frame") if c in tracks]).reset_index(drop=True)
 
 
 def _as_rows(rows: Any) -> list[dict]:
@@ -227,7 +188,6 @@ def _score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
     from algorithms.pipeline import Pipeline
     from harness.metrics import score_pair, score_sequence
     from scenes import open_sequence
-    from scenes.formats import write_flo
 
     seq = open_sequence(payload["sequence"])
     pipeline = Pipeline.from_dict(payload["pipeline_spec"])
@@ -242,15 +202,13 @@ def _score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
         truth = seq.pair_truth(est.index)
         rows += _as_rows(score_pair(est, truth, frame=est.index))
         if est.index in pictures:
-            write_flo(tmp / f"flow_{est.index:06d}.flo", est.flow_total)
-            # the total flow is dominated by the global motion: the local part shows the vehicles
-            write_flo(tmp / f"local_flow_{est.index:06d}.flo", est.flow_total - est.flow_global)
+            artifacts.write_pair_flows(tmp, est.index, est.flow_total, est.flow_global)
         del est, truth  # the arrays of a pair live no longer than its scoring
     if seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
     rows += _as_rows(score_sequence(seq_est, seq.camera, seq.tracks))
-    _write_csv(tmp / "stabilisation.csv", _stabilisation_table(seq_est, seq.camera))
-    _write_csv(tmp / "tracks.csv", _tracks_table(seq_est, seq.tracks))
+    artifacts.write_stabilisation(tmp, artifacts.stabilisation_table(seq_est, seq.camera))
+    artifacts.write_tracks(tmp, artifacts.tracks_table(seq_est, seq.tracks))
     if payload["metrics"] is not None:
         keep = set(payload["metrics"])
         rows = [r for r in rows if r["metric"] in keep]
@@ -294,10 +252,10 @@ def cell_task(payload: Mapping) -> dict:
     except Exception as exc:
         status, error, tb = "failed", f"{type(exc).__name__}: {exc}", traceback.format_exc()
         rows = [{"metric": "cell_failed", "value": math.nan, "sum": math.nan, "count": 0.0}]
-        (tmp / "error.txt").write_text(tb + payload.get("render_traceback", ""))
+        artifacts.write_error(tmp, tb + payload.get("render_traceback", ""))
     table = rows_to_frame(rows, **_cell_columns(payload), renderer=renderer, status=status, error=error)
     write_table(table, tmp / ROWS_FILE)
-    _write_json(tmp / CELL_FILE, {
+    artifacts.write_cell_info(tmp, {
         "cell_id": payload["cell_id"], "config_hash": payload["config_hash"], "status": status,
         "error": error, "rows": len(table), "elapsed_s": round(time.perf_counter() - t0, 3),
         "scene": payload["scene"], "seed": payload["seed"], "pipeline": payload["pipeline"],
@@ -320,16 +278,12 @@ def _rename_into_place(tmp: Path, final: Path) -> None:
 # --------------------------------------------------------------------------- files
 
 
-def _write_csv(path: Path, table: pd.DataFrame) -> None:
-    from scenes.formats import atomic_write_bytes
-
-    atomic_write_bytes(path, table.to_csv(index=False).encode())
-
-
-def _write_json(path: Path, obj: Any) -> None:
-    from scenes.formats import atomic_write_bytes
-
-    atomic_write_bytes(path, (json.dumps(obj, indent=2, sort_keys=True, default=str) + "\n").encode())
+def _cell_info(folder: Path) -> dict | None:
+    """A cell folder's cell.json; None when partial, unreadable or of another cell format (run again)."""
+    try:
+        return artifacts.read_cell_info(folder)
+    except artifacts.CellArtifactError:
+        return None
 
 
 def _read_json(path: Path) -> dict | None:
@@ -393,7 +347,7 @@ def _open_run_dir(run_dir: Path, resume: bool) -> _Lock:
 def _cell_complete(cells_dir: Path, cell: Cell) -> bool:
     """A cell folder is kept on resume when it is complete, succeeded, and has the same config hash."""
     folder = cells_dir / cell.cell_id
-    info = _read_json(folder / CELL_FILE)
+    info = _cell_info(folder)
     return (
         info is not None
         and info.get("config_hash") == cell.config_hash
@@ -525,11 +479,12 @@ def run_suite(
         run_info = {
             "suite": suite.name, "suite_source": source, "resolved_suite": suite_dict,
             "config_hash": suite_hash, "provenance": prov, "cache_dir": str(cache),
+            "pipelines": list({c.pipeline: {**c.pipeline_spec, "name": c.pipeline} for c in cells}.values()),
             "cells": [_cell_entry(c, cache) for c in cells], "status": "running",
             "started": started, "finished": None, "executor": executor,
             "workers": workers,
         }
-        write_run_json(run_dir, run_info)
+        write_run(run_dir, run_info)
 
         try:
             rendered, reused, failed = _execute(
@@ -538,7 +493,7 @@ def run_suite(
         except BaseException as exc:  # Ctrl-C, a lost scheduler: say so in run.json, keep the cells
             run_info.update(status="aborted", error=f"{type(exc).__name__}: {exc}",
                             finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
-            write_run_json(run_dir, run_info)
+            write_run(run_dir, run_info)
             raise
         _say(progress, f"scenes: {rendered} rendered, {reused} reused from the cache ({cache})")
 
@@ -551,7 +506,7 @@ def run_suite(
         run_info.update(status=status, failed_cells=failed_cells, provenance=prov,
                         finished=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                         scenes_rendered=rendered, scenes_reused=reused, cells_reused=reused_cells)
-        write_run_json(run_dir, run_info)
+        write_run(run_dir, run_info)
     finally:
         lock.__exit__(None, None, None)
     return RunResult(run_dir=run_dir, table=table, status=status, cells=len(cells),
@@ -568,15 +523,14 @@ def _sequence_dir(v: SceneVariant, cache: Path) -> Path:
 
 def _cell_entry(c: Cell, cache: Path) -> dict:
     """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache."""
-    return {"cell_id": c.cell_id, "scene": c.variant.label, "seed": c.variant.seed,
-            "pipeline": c.pipeline, "config_hash": c.config_hash,
-            "sequence": str(_sequence_dir(c.variant, cache))}
+    return cell_entry(cell_id=c.cell_id, scene=c.variant.label, seed=c.variant.seed, pipeline=c.pipeline,
+                      config_hash=c.config_hash, sequence=_sequence_dir(c.variant, cache))
 
 
 def _failures(cells_dir: Path, cells: list[Cell]) -> list[str]:
     out = []
     for c in cells:
-        info = _read_json(cells_dir / c.cell_id / CELL_FILE) or {}
+        info = _cell_info(cells_dir / c.cell_id) or {}
         if info.get("status") != "ok":
             out.append(f"{c.cell_id} {c.variant.label} seed {c.variant.seed} x {c.pipeline}: "
                        f"{info.get('error') or 'no result'}")

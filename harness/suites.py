@@ -12,12 +12,16 @@ Example::
     name: sweep-jitter
     scenes:
       - preset: jitter
-        sweep: {camera.jitter_std_px: [0.0, 1.0, 2.0, 4.0]}
+        sweep: {camera.jitter.roll_std_deg: [0.0, 0.3, 0.6]}
     seeds: [1, 2]
     pipelines:
       - thesis-lk
       - {name: hs-alpha-5, base: thesis-hs, spec: {flow: {params: {alpha: 5.0}}}}
-    metrics: [epe_px, global_shift_err_px]
+    metrics: [epe_mean, shift_error]
+
+(``tests/harness/test_suites.py`` parses and expands this example.) ``imports:`` names
+modules to import first, e.g. one that registers your own flow method; modules in the
+working folder are importable (:func:`import_modules`).
 
 Errors raise :class:`SuiteError` naming the file and the field
 (``suite.yaml: scenes[0].sweep: an empty sweep ...``); YAML syntax errors give the line.
@@ -52,6 +56,7 @@ __all__ = [
     "expand",
     "pipeline_names",
     "metric_names",
+    "import_modules",
 ]
 
 # A scene override or pipeline parameter as YAML gives it (checked finite below; the scene
@@ -395,6 +400,31 @@ class Cell:
         }
 
 
+def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>") -> None:
+    """Import each module of a suite's ``imports:`` (plugins that register flow methods or stages).
+
+    The working folder is searched too (after everything else, so a local file never shadows an
+    installed package): ``aerobench`` is a console script, whose ``sys.path`` does not hold it.
+
+    Raises
+    ------
+    SuiteError
+        a module cannot be imported (naming it, its position and the folders searched).
+    """
+    import importlib
+    import sys
+
+    cwd = os.getcwd()
+    if cwd not in sys.path:
+        sys.path.append(cwd)
+    for i, module in enumerate(names):
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r} (searched the installed packages "
+                             f"and the working folder {cwd}): {exc}") from None
+
+
 def _format_value(v: Any) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
@@ -402,13 +432,7 @@ def _format_value(v: Any) -> str:
 def _resolve_pipelines(suite: Suite, source: str) -> list[tuple[str, dict]]:
     from algorithms.pipeline import Pipeline
 
-    import importlib
-
-    for i, module in enumerate(suite.imports):
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r}: {exc}") from None
+    import_modules(suite.imports, source=source)
     builtins = pipeline_names()
     out = []
     for i, p in enumerate(suite.pipelines):

@@ -13,11 +13,14 @@ import numpy as np
 from matplotlib import colormaps
 
 from algorithms.flow import color_wheel_image, flow_to_color
+from harness.metrics import endpoint_error
 
-__all__ = ["png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
-           "display_scale", "upscale_nearest", "mask_image"]
+__all__ = ["NO_TRUTH_RGB", "png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
+           "display_scale", "upscale_nearest", "mask_image", "swatch"]
 
 _EPE_CMAP = "magma"
+# pixels without ground truth in an error map: teal, a hue the magma map never takes (its zero is black)
+NO_TRUTH_RGB = (0, 160, 160)
 
 
 def png_data_uri(rgb: np.ndarray) -> str:
@@ -81,18 +84,18 @@ def flow_row(flow: np.ndarray, *, max_magnitude: float, valid: np.ndarray | None
 
 def epe_map(estimate: np.ndarray, truth: np.ndarray, *, max_epe_px: float,
             valid: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Endpoint-error heat map ``|w_est - w_true|`` (px) coloured 0..``max_epe_px``; unknown black.
+    """Endpoint-error heat map ``|w_est - w_true|`` (px) coloured 0..``max_epe_px`` (zero error black);
+    pixels without ground truth (``valid`` False or non-finite) in :data:`NO_TRUTH_RGB`.
 
     Returns the RGB image and the mean endpoint error over known pixels [px].
     """
-    d = estimate.astype(np.float64) - truth.astype(np.float64)
-    epe = np.hypot(d[..., 0], d[..., 1])
+    epe = endpoint_error(estimate, truth)
     known = np.isfinite(epe)
     if valid is not None and valid.shape == epe.shape:
         known &= valid
     scaled = np.clip(np.where(known, epe, 0.0) / max(max_epe_px, 1e-6), 0.0, 1.0)
     rgb = (colormaps[_EPE_CMAP](scaled)[..., :3] * 255.0).round().astype(np.uint8)
-    rgb[~known] = 0
+    rgb[~known] = NO_TRUTH_RGB
     mean = float(epe[known].mean()) if known.any() else float("nan")
     return rgb, mean
 
@@ -106,3 +109,8 @@ def epe_colorbar(width: int = 256, height: int = 12) -> np.ndarray:
 def wheel_legend(size: int = 101) -> np.ndarray:
     """The flow colour wheel (disc edge = the row's max magnitude)."""
     return color_wheel_image(size)
+
+
+def swatch(rgb: tuple[int, int, int], size: int = 12) -> np.ndarray:
+    """A ``size`` x ``size`` square of one colour (legend of a special value)."""
+    return np.broadcast_to(np.asarray(rgb, np.uint8), (size, size, 3)).copy()

@@ -7,22 +7,18 @@ as plain Python structures that the HTML and Markdown writers both render.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from harness.results import summarize
 from reports.load import RunData, pooled, primary_rows, scene_base
 
 __all__ = ["HEADLINE", "Column", "MetricTable", "headline_columns", "metric_table", "format_value",
-           "best_pipelines", "sweep_curves", "region_table", "baseline_records", "baseline_diffs",
-           "gate_view"]
+           "best_pipelines", "sweep_curves", "region_table", "baseline_diffs", "gate_view", "BASELINE_COLUMNS"]
 
 # (label in the report, metric names in order of preference: the first present is shown)
 HEADLINE: list[tuple[str, tuple[str, ...]]] = [
@@ -103,13 +99,16 @@ class MetricTable:
 
 
 def best_pipelines(values: dict[tuple[str, str], float], col: Column, pipelines: list[str]) -> set[str]:
-    """The pipelines with the best finite value of ``col`` (ties all marked); empty if none."""
+    """The one pipeline with the best finite value of ``col``; empty when none, or when two or more
+    share it (pipelines with a common stage, e.g. one global-motion method, give identical values for
+    that stage's metrics: no single pipeline earns them)."""
     vals = {p: values.get((p, col.metric), math.nan) for p in pipelines}
     finite = {p: v for p, v in vals.items() if np.isfinite(v)}
     if len(finite) < 2:
         return set()
     target = max(finite.values()) if col.higher_is_better else min(finite.values())
-    return {p for p, v in finite.items() if v == target}
+    best = {p for p, v in finite.items() if math.isclose(v, target, rel_tol=1e-9, abs_tol=1e-12)}
+    return best if len(best) == 1 else set()
 
 
 def metric_table(data: RunData, rows: pd.DataFrame, columns: list[Column], *,
@@ -173,172 +172,65 @@ def per_scene_rows(data: RunData) -> dict[str, pd.DataFrame]:
 
 # ------------------------------------------------------------------------------ baseline and gate
 
-_KEYS = ("pipeline", "scene", "sweep_param", "sweep_value", "metric", "region", "motion")
+BASELINE_COLUMNS = ["where", "pipeline", "metric", "region", "motion", "unit", "current", "baseline", "diff",
+                    "diff_pct", "change", "rule"]
 
 
-def baseline_records(baseline) -> tuple[list[dict], str]:
-    """Flatten a baseline (a loaded JSON dict, a list, or a path) to records.
+def baseline_diffs(data: RunData, baseline: str | os.PathLike, *, rules: str | os.PathLike | None = None
+                   ) -> tuple[pd.DataFrame, str]:
+    """The run against a baseline file, judged by the gate's own rules.
 
-    Returns ``(records, note)``; each record has ``pipeline, metric, value`` and,
-    when the baseline has them, ``scene, sweep_param, sweep_value, region,
-    motion`` (the summary keys of :func:`harness.results.summarize`, which
-    harness.gate baselines use). Understood shapes: a list of records, a dict
-    holding one under ``metrics`` / ``rows`` / ``summary`` / ``entries``, or
-    nested ``{pipeline: {metric: value or {"value": v}}}``. Anything else gives
-    no records and a note saying so.
+    The baseline is read by :func:`harness.gate.read_baseline` and compared by
+    :func:`harness.gate.compare` with the rules of ``rules`` (default: the gate's
+    ``gate_rules.yaml``), so "worse" here is exactly what fails the gate and
+    "better" an improvement beyond the same tolerance. Returns the changed entries
+    (``where, pipeline, metric, region, motion, unit, current, baseline, diff,
+    diff_pct, change, rule``; worse first) and a note: the entries within tolerance
+    or skipped, or why nothing could be compared.
     """
-    if isinstance(baseline, (str, os.PathLike)):
-        path = Path(baseline)
-        try:
-            baseline = json.loads(path.read_text())
-        except (OSError, ValueError) as exc:
-            return [], f"baseline {path}: unreadable ({exc})"
-    if isinstance(baseline, Mapping):
-        for key in ("metrics", "rows", "summary", "entries"):
-            if isinstance(baseline.get(key), (list, Mapping)):
-                baseline = baseline[key]
-                break
-    records = []
-    if isinstance(baseline, list):
-        for r in baseline:
-            if isinstance(r, Mapping) and "pipeline" in r and "metric" in r:
-                v = r.get("value")
-                if isinstance(v, (int, float)) and not isinstance(v, bool):
-                    records.append({k: str(r[k]) for k in _KEYS if k in r and r[k] is not None}
-                                   | {"value": float(v)})
-    elif isinstance(baseline, Mapping):
-        for pipe, metrics in baseline.items():
-            if not isinstance(metrics, Mapping):
-                continue
-            for m, v in metrics.items():
-                if isinstance(v, Mapping):
-                    v = v.get("value")
-                if isinstance(v, (int, float)) and not isinstance(v, bool):
-                    records.append({"pipeline": str(pipe), "metric": str(m), "value": float(v)})
-    note = "" if records else "baseline given, but no (pipeline, metric, value) entries were found in it"
-    return records, note
+    from harness import gate
 
-
-def _change(diff: float, higher_is_better: bool) -> str:
-    if not np.isfinite(diff):
-        return "gone"
-    if diff == 0:
-        return "same"
-    return "better" if (diff > 0) == bool(higher_is_better) else "worse"
-
-
-def baseline_diffs(data: RunData, baseline) -> tuple[pd.DataFrame, str]:
-    """Current values against the baseline's, for the headline metrics.
-
-    Baseline records with the full summary keys are matched to the current
-    :func:`harness.results.summarize` rows on those keys; records with only
-    ``pipeline, metric`` to the pooled headline value. Returns ``where,
-    pipeline, metric, unit, current, baseline, diff, diff_pct, change``
-    (change: worse / gone / better, in that order; unchanged entries are counted in the note, not
-    listed) and a note (what was left out).
-    """
-    records, note = baseline_records(baseline)
-    cols = ["where", "pipeline", "metric", "unit", "current", "baseline", "diff", "diff_pct", "change"]
-    if not records:
-        return pd.DataFrame(columns=cols), note
-    shown = {c.metric for c in headline_columns(data)}
-    prim = primary_rows(data.ok)
-    primary_combo = {m: set(zip(g["region"], g["motion"]))
-                     for m, g in data.ok.groupby("metric")} if len(data.ok) else {}
-    # which (region, motion) each headline metric shows: region "all" rows of its primary motion
-    motion_of = dict(zip(prim["metric"], prim["motion"]))
-    full = summarize(data.table)
-    full_idx = {tuple(str(r[k]) for k in _KEYS): r for r in full.to_dict("records")}
-    overall = {(r["pipeline"], r["metric"]): r for r in pooled(prim, ["pipeline"]).to_dict("records")}
-    out, hidden, hidden_worse = [], 0, 0
-    for r in records:
-        keyed = all(k in r for k in _KEYS)
-        if keyed:
-            cur = full_idx.get(tuple(r[k] for k in _KEYS))
-            headline = (r["metric"] in shown and r["motion"] == motion_of.get(r["metric"])
-                        and (r["region"] == "all" or "all" not in {x for x, _ in primary_combo.get(r["metric"], ())}))
-            sweep = f" {r['sweep_param']}={r['sweep_value']}" if r.get("sweep_param") else ""
-            where = f"{r['scene']}{sweep}" + ("" if r["region"] == "all" else f" [{r['region']}]")
-        else:
-            cur = overall.get((r["pipeline"], r["metric"]))
-            headline, where = True, "all scenes"
-        v = float(cur["value"]) if cur is not None else math.nan
-        hib = bool(cur["higher_is_better"]) if cur is not None else False
-        diff = v - r["value"]
-        change = _change(diff, hib)
-        if not headline:
-            hidden += 1
-            hidden_worse += change == "worse"
+    try:
+        base = gate.read_baseline(baseline)
+        rule_set = gate.load_rules(rules if rules is not None else
+                                   (gate.DEFAULT_RULES if gate.DEFAULT_RULES.is_file() else None))
+        result = gate.compare(data.table, base, rule_set, suite=data.folder.suite or None)
+    except gate.GateError as exc:
+        return pd.DataFrame(columns=BASELINE_COLUMNS), f"The baseline cannot be compared with this run: {exc}"
+    out, counts = [], {"within tolerance": 0, "skipped": 0}
+    for c in result.checks:
+        if c.key["metric"] == "cell_failed":
             continue
-        pct = 100.0 * diff / abs(r["value"]) if r["value"] != 0 and np.isfinite(diff) else math.nan
-        out.append({"where": where, "pipeline": r["pipeline"], "metric": r["metric"],
-                    "unit": str(cur["unit"]) if cur is not None else "", "current": v, "baseline": r["value"],
-                    "diff": diff, "diff_pct": pct, "change": change})
-    order = {"worse": 0, "gone": 1, "better": 2}
-    same = sum(r["change"] == "same" for r in out)
-    out = sorted((r for r in out if r["change"] != "same"), key=lambda r: order.get(r["change"], 3))
-    notes = []
-    if same:
-        notes.append(f"{same} headline entries equal the baseline and are not listed.")
-    if hidden:
-        notes.append(f"{hidden} further baseline entries (other metrics, regions and motions) were compared "
-                     f"but are not listed; {hidden_worse} of them are worse than the baseline.")
-    note = " ".join(notes)
-    return pd.DataFrame(out, columns=cols), note
+        change = gate.change(c)
+        if change in counts:
+            counts[change] += 1
+            continue
+        k = c.key
+        sweep = f" {k['sweep_param']}={k['sweep_value']}" if k.get("sweep_param") else ""
+        pct = 100.0 * c.delta / abs(c.baseline) if c.baseline and np.isfinite(c.delta) else math.nan
+        out.append({"where": f"{k['scene']}{sweep}", "pipeline": k["pipeline"], "metric": k["metric"],
+                    "region": k["region"], "motion": k["motion"], "unit": c.unit, "current": c.current,
+                    "baseline": c.baseline, "diff": c.delta, "diff_pct": pct, "change": change, "rule": str(c.rule)})
+    out.sort(key=lambda r: 0 if r["change"] == "worse" else 1)
+    note = (f"Compared by the gate's rules: {counts['within tolerance']} entries within tolerance and "
+            f"{counts['skipped']} skipped (rule off, or timings from another machine) are not listed.")
+    if result.notes:
+        note += " " + " ".join(f"{n[0].upper()}{n[1:]}." for n in result.notes)
+    return pd.DataFrame(out, columns=BASELINE_COLUMNS), note
 
 
-def _describe_item(item) -> str:
-    if isinstance(item, Mapping):
-        return ", ".join(f"{k}={item[k]}" for k in item)
-    if isinstance(item, str):
-        return item
-    parts = []
-    for attr in ("group", "name"):
-        v = getattr(item, attr, None)
-        if isinstance(v, str):
-            parts.append(v)
-    b, c = getattr(item, "baseline", None), getattr(item, "current", None)
-    if isinstance(b, (int, float)) and isinstance(c, (int, float)):
-        parts.append(f"baseline {b:.4g} \u2192 current {c:.4g}")
-    reason = getattr(item, "reason", None)
-    if reason:
-        parts.append(str(reason))
-    return ": ".join(parts[:2]) + (" " + ", ".join(parts[2:]) if len(parts) > 2 else "") if parts else str(item)
+def gate_view(verdict: str | os.PathLike | Mapping) -> dict:
+    """A verdict of ``aerobench gate --json`` (a path, read by :func:`harness.gate.read_verdict`, or its
+    dict) as ``{"passed", "suite", "counts", "failures": [str], "notes": [str]}``."""
+    from harness import gate
 
-
-def gate_view(gate_result) -> dict | None:
-    """A gate result (mapping or object, e.g. ``harness.gate.GateResult``) as ``{"passed": bool |
-    None, "verdict": str, "messages": [str], "notes": [str]}``; None when none was given."""
-    if gate_result is None:
-        return None
-
-    def get(key):
-        if isinstance(gate_result, Mapping):
-            return gate_result.get(key)
-        try:
-            return getattr(gate_result, key, None)
-        except Exception:  # a property that cannot be computed is simply absent
-            return None
-
-    passed = None
-    for key in ("passed", "ok", "success"):
-        if isinstance(get(key), bool):
-            passed = get(key)
-            break
-    verdict = ""
-    for key in ("verdict", "status", "result"):
-        if isinstance(get(key), str):
-            verdict = get(key)
-            break
-    if passed is None and verdict:
-        passed = verdict.strip().lower() in ("pass", "passed", "ok", "success")
-    if not verdict:
-        verdict = "passed" if passed else ("failed" if passed is False else "unknown")
-    messages = []
-    for key in ("failures", "regressions", "messages", "reasons", "details"):
-        v = get(key)
-        if isinstance(v, (list, tuple)):
-            messages = [_describe_item(x) for x in v]
-            break
-    notes = [str(n) for n in (get("notes") or []) if isinstance(get("notes"), (list, tuple))]
-    return {"passed": passed, "verdict": verdict, "messages": messages, "notes": notes}
+    v = verdict if isinstance(verdict, Mapping) else gate.read_verdict(verdict)
+    failures = []
+    for c in v["checks"]:
+        if c["status"] != "fail":
+            continue
+        sweep = f" {c['sweep_param']}={c['sweep_value']}" if c.get("sweep_param") else ""
+        failures.append(f"{c['scene']}{sweep} / {c['pipeline']}: {c['metric']} [{c['region']}, {c['motion']}]: "
+                        f"{c['reason']}")
+    return {"passed": bool(v["passed"]), "suite": str(v.get("suite", "")), "counts": dict(v["counts"]),
+            "failures": failures, "notes": [str(n) for n in v.get("notes", [])]}

@@ -16,7 +16,9 @@ ALLOWED = {
     "scenes": ("scenes", "algorithms.flow"),
     "harness.cli": ("harness", "scenes", "algorithms", "reports"),
     "harness": ("harness", "scenes", "algorithms"),
-    "reports": ("reports", "harness.results", "scenes.sequence", "scenes.formats", "algorithms.flow"),
+    "reports": ("reports", "harness.results", "harness.run_folder", "harness.cell_artifacts", "harness.gate",
+                "harness.metrics",
+                "scenes.sequence", "scenes.formats", "algorithms.flow"),
 }
 
 

@@ -28,7 +28,13 @@ def test_list_names_presets_suites_pipelines_and_metrics(capsys):
         elif line.strip():
             name, _, desc = line.strip().partition("  ")
             sections[current][name] = desc.strip()
-    assert list(sections) == ["scene presets", "suites", "pipelines", "metrics"]
+    stage_title = "pipeline stage keys (the flow key names a flow method)"
+    assert list(sections) == ["scene presets", "suites", "pipelines", "flow methods", stage_title, "metrics"]
+    assert {"lucas_kanade", "horn_schunck", "dis", "farneback", "tvl1", "ilk"} <= set(sections["flow methods"])
+    assert sections["flow methods"]["lucas_kanade"].startswith("params: window, levels, iterations")
+    assert list(sections[stage_title]) == ["global_motion", "jitter", "compensation", "flow", "threshold",
+                                           "spatial", "temporal", "detection", "tracking"]
+    assert '"method": "lucas_kanade"' in sections[stage_title]["flow"]
     assert {"tiny", "nominal", "jitter", "drift", "fast-vehicles", "urban-parallax", "noisy"} <= set(sections["scene presets"])
     assert {"smoke", "standard", "sweep-jitter", "sweep-speed", "sweep-noise"} <= set(sections["suites"])
     assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis"} <= set(sections["pipelines"])
@@ -168,3 +174,34 @@ def test_eval_flow_rejects_bad_parameters_with_exit_2(tmp_path, capsys, param, m
     assert main(["eval-flow", str(root), "--format", "middlebury", "--method", "horn_schunck",
                  "--param", param]) == 2
     assert re.search(match, capsys.readouterr().err)
+
+
+def test_render_into_a_file_says_so_in_one_line(tmp_path, capsys):
+    target = tmp_path / "a-file"
+    target.write_text("x")
+    assert main(["render", "tiny", "--out", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"aerobench: error: --out {target}: is a file; expected a folder to write the sequence into\n"
+
+
+def test_an_os_error_is_one_line_without_errno(tmp_path, capsys):
+    from harness.cli import _error_text
+
+    exc = NotADirectoryError(20, "Not a directory", str(tmp_path / "f" / "x"))
+    assert _error_text(exc) == f"Not a directory: {tmp_path / 'f' / 'x'}"
+    assert "[Errno" not in _error_text(PermissionError(13, "Permission denied", "/root/x"))
+
+
+def test_help_says_how_to_add_a_flow_method(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "register_flow" in out and "imports:" in out and "Benchmark your own method" in out
+
+
+def test_report_takes_a_gate_verdict_and_checks_its_files(tmp_path, capsys):
+    assert main(["report", str(tmp_path), "--gate", str(tmp_path / "v.json")]) == 2
+    assert "not a finished run folder" in capsys.readouterr().err
+    (tmp_path / "results.parquet").write_bytes(b"")
+    assert main(["report", str(tmp_path), "--gate", str(tmp_path / "v.json")]) == 2
+    assert capsys.readouterr().err == f"aerobench: error: --gate: {tmp_path / 'v.json'}: no such file\n"

@@ -150,3 +150,49 @@ def test_make_baseline_needs_a_suite_name():
         G.make_baseline(_results(), {"config_hash": "x"})
     from_summary = G.make_baseline(R.summarize(_results()), META)["metrics"]
     assert from_summary == G.make_baseline(_results(), META)["metrics"]
+
+
+def _quantile_results(bin_index: int):
+    """An epe_median row whose 100 pixels all fall in one 0.01 px bin (aggregate: the bin centre)."""
+    row = {"metric": "epe_median", "frame": 0, "region": "all", "motion": "total", "kind": "accuracy",
+           "value": (bin_index + 0.5) * 0.01, "sum": float("nan"), "count": 100, "unit": "px",
+           "higher_is_better": False, "hist": f"{bin_index}:100"}
+    return R.rows_to_frame([row], cell_id="c", scene="tiny", pipeline="thesis-lk", machine="box-A")
+
+
+def test_a_move_of_exactly_the_tolerance_passes_despite_float_rounding():
+    # bin centres 0.075 -> 0.085: one 0.01 px bin, 0.010000000000000009 in binary
+    assert 0.085 - 0.075 > 0.01
+    rules = G.rules_from_mapping({"epe_median": "abs 0.01"})
+    base = G.make_baseline(_quantile_results(7), META)
+    assert G.compare(_quantile_results(8), base, rules, suite="ci").passed
+    r = G.compare(_quantile_results(9), base, rules, suite="ci")  # two bins: a regression
+    assert [c.key["metric"] for c in r.failures] == ["epe_median"]
+
+
+def test_a_failure_names_its_rule_once(baseline):
+    r = G.compare(_results(epe=0.60), baseline, G.rules_from_mapping({"epe_mean": "abs 0.05"}), suite="ci")
+    (f,) = r.failures
+    assert "(abs 0.05)" in f.reason and "abs abs" not in f.reason
+    assert "| abs 0.05 |" in G.to_markdown(r) and "abs abs" not in G.to_markdown(r)
+    r = G.compare(_results(epe=0.60), baseline, G.rules_from_mapping({"epe_mean": "rel 10%"}), suite="ci")
+    assert "(rel 10%)" in r.failures[0].reason
+    assert "(abs 0.0001 (default))" in G.compare(_results(epe=0.60), baseline, suite="ci").failures[0].reason
+
+
+def test_the_verdict_file_round_trips_and_marks_each_change(baseline, tmp_path):
+    rules = G.rules_from_mapping({"epe_mean": "abs 0.02", "coverage": "abs 0.5"})
+    # epe worse beyond its tolerance, coverage better beyond its tolerance, timing within
+    r = G.compare(_results(epe=0.60, coverage=95.0, time_ms=10.5), baseline, rules, suite="ci")
+    path = G.write_verdict(r, tmp_path / "verdict.json")
+    v = G.read_verdict(path)
+    assert v["format"] == G.VERDICT_FORMAT and v["passed"] is False and v["exit_code"] == 1
+    assert v["counts"] == {"checked": 3, "passed": 2, "failed": 1, "skipped": 0}
+    change = {c["metric"]: c["change"] for c in v["checks"]}
+    assert change == {"epe_mean": "worse", "coverage": "better", "time_flow_ms": "within tolerance"}
+    assert next(c for c in v["checks"] if c["metric"] == "epe_mean")["rule"] == "abs 0.02"
+    (tmp_path / "other.json").write_text('{"format": "aerobench-baseline/1"}')
+    with pytest.raises(G.GateError, match="not an aerobench gate verdict: format 'aerobench-baseline/1'"):
+        G.read_verdict(tmp_path / "other.json")
+    with pytest.raises(G.GateError, match="no gate verdict file"):
+        G.read_verdict(tmp_path / "missing.json")

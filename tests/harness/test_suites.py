@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import copy
+import textwrap
 
 import pytest
+import yaml
 from harness_testdata import TINY_SUITE
 
 from harness.suites import SuiteError, builtin_suites, expand, load_suite, parse_suite
@@ -174,3 +176,29 @@ def test_inline_pipeline_is_its_base_with_the_changes():
     with pytest.raises(SuiteError, match=r"pipelines\[0\] \(bad\): flow.params.windw: unknown parameter"):
         expand(parse_suite(_suite(pipelines=[{"name": "bad", "base": "thesis-lk",
                                               "spec": {"flow": {"params": {"windw": 9}}}}])))
+
+
+def test_the_module_docstring_example_is_a_valid_suite():
+    import harness.suites as S
+
+    doc = S.__doc__
+    example = doc[doc.index("Example::") + len("Example::"):doc.index("(``tests/harness/test_suites.py``")]
+    suite = parse_suite(yaml.safe_load(textwrap.dedent(example)), source="suites.py docstring")
+    cells = expand(suite)
+    assert {c.pipeline for c in cells} == {"thesis-lk", "hs-alpha-5"}
+    assert {c.variant.sweep_value for c in cells} == {0.0, 0.3, 0.6}
+    assert next(c for c in cells if c.pipeline == "hs-alpha-5").pipeline_spec["flow"]["params"]["alpha"] == 5.0
+
+
+def test_imports_find_a_module_in_the_working_folder(tmp_path, monkeypatch):
+    import sys
+
+    from harness.suites import SuiteError, import_modules
+
+    (tmp_path / "my_local_plugin_xyz.py").write_text("LOADED = True\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    import_modules(["my_local_plugin_xyz"])
+    assert sys.modules["my_local_plugin_xyz"].LOADED
+    with pytest.raises(SuiteError, match=r"imports\[0\]: cannot import 'no_such_plugin_xyz' .*working folder"):
+        import_modules(["no_such_plugin_xyz"])

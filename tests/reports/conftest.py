@@ -17,10 +17,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.results import check_schema, summarize, write_run_json, write_table
+from algorithms.pipeline import PIPELINES as BUILTIN_PIPELINES
+from harness import cell_artifacts as artifacts
+from harness.results import check_schema, summarize, write_table
+from harness.run_folder import cell_entry, write_run
 from scenes.formats import write_flo, write_png
 
 PIPELINES = ["lk_thesis", "hs_thesis", "lk_pyramid", "hs_pyramid", "dis"]
+# names that do not say thesis-lk etc.: the report must find LK / HS twins by their flow method
+SPECS = {"lk_thesis": "thesis-lk", "hs_thesis": "thesis-hs", "lk_pyramid": "pyramidal-lk",
+         "hs_pyramid": "pyramidal-hs", "dis": "dis"}
 # scene -> (swept parameter, values)
 SCENES = {"urban": ("jitter_px", [0.0, 2.0, 4.0]), "rural": ("noise_sigma", [0.0, 5.0, 10.0])}
 FAILED = ("rural", 10.0, "hs_thesis")
@@ -131,7 +137,7 @@ def _cell_artifacts(cell: Path, seq: Path | None, rng: np.random.Generator, q: f
         stab[f"true_cumulative_{a}_px"] = cum_true[:, k]
     for k, a in enumerate("xy"):
         stab[f"true_jitter_{a}_px"] = jit_true[:, k]
-    stab.to_csv(cell / "stabilisation.csv", index=False)
+    artifacts.write_stabilisation(cell, stab)
     gt_x, gt_y = 14.0 + 5.0 * t, 11.0 + 0.5 * t
     meas_x = gt_x + q * rng.standard_normal(N_FRAMES)
     meas_y = gt_y + q * rng.standard_normal(N_FRAMES)
@@ -145,16 +151,15 @@ def _cell_artifacts(cell: Path, seq: Path | None, rng: np.random.Generator, q: f
                           "y_filt_px": my, "x_pred_px": mx, "y_pred_px": my, "source": "multi",
                           "seed_vehicle_id": np.nan, "true_x_px": np.nan, "true_y_px": np.nan,
                           "true_visible": np.nan})
-    pd.concat([point, multi], ignore_index=True).to_csv(cell / "tracks.csv", index=False)
+    artifacts.write_tracks(cell, pd.concat([point, multi], ignore_index=True))
     if seq is not None:
         from scenes.formats import read_flo
         gt = read_flo(seq / "flow" / f"{PICTURE_FRAME:06d}.flo")
         cam = read_flo(seq / "flow_camera" / f"{PICTURE_FRAME:06d}.flo")
-        write_flo(cell / f"flow_{PICTURE_FRAME:06d}.flo",
-                  gt + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32))
+        total = gt + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32)
         # local = total - global: the true local motion plus noise and the global model's error
-        write_flo(cell / f"local_flow_{PICTURE_FRAME:06d}.flo",
-                  gt - cam + np.float32(0.1 * q) + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32))
+        local = gt - cam + np.float32(0.1 * q) + (0.3 * q * rng.standard_normal(gt.shape)).astype(np.float32)
+        artifacts.write_pair_flows(cell, PICTURE_FRAME, total, total - local)
 
 
 def build_run(root: Path) -> Path:
@@ -180,23 +185,23 @@ def build_run(root: Path) -> Path:
                           "machine": "fixture-host"}
                 cell = run_dir / "cells" / cell_id
                 cell.mkdir()
-                cells.append({"cell_id": cell_id, "scene": label, "seed": 0, "pipeline": pipeline,
-                              "config_hash": "cfg123"})
+                cells.append(cell_entry(cell_id=cell_id, scene=label, seed=0, pipeline=pipeline,
+                                        config_hash="cfg123", sequence=cache / scene_hash if k == 0 else None))
                 if (scene, value, pipeline) == FAILED:
                     # what harness.runner.cell_task writes for a failed cell
                     rows.append({**common, "metric": "cell_failed", "value": np.nan, "sum": np.nan,
                                  "count": 0.0, "status": "failed", "error": FAILED_ERROR})
-                    (cell / "error.txt").write_text("Traceback (most recent call last):\n  ...\n"
-                                                    + FAILED_ERROR + "\n")
+                    artifacts.write_error(cell, "Traceback (most recent call last):\n  ...\n" + FAILED_ERROR + "\n")
                     continue
                 rows += _cell_rows(common, rng, QUALITY[pipeline], value / max(values))
                 _cell_artifacts(cell, seq, rng, QUALITY[pipeline])
     table = check_schema(pd.DataFrame(rows), source="fixture")
     write_table(table, run_dir / "results.parquet")
     summarize(table).to_csv(run_dir / "summary.csv", index=False)
-    write_run_json(run_dir, {
+    write_run(run_dir, {
         "suite": "fixture_suite", "suite_source": "fixture.yaml",
         "resolved_suite": {"name": "fixture_suite", "pipelines": PIPELINES},
+        "pipelines": [{**BUILTIN_PIPELINES[SPECS[p]], "name": p} for p in PIPELINES],
         "config_hash": "cfg123",
         "provenance": {"git_commit": "abc1234", "git_dirty": False, "renderer": "llvmpipe (LLVM 15)",
                        "machine": "fixture-host <2 cores>",

@@ -71,3 +71,20 @@ def test_nearest_neighbour_enlargement():
     assert display_scale(640, min_width_px=320) == 1
     with pytest.raises(ValueError, match="factor >= 1"):
         upscale_nearest(a, 0)
+
+
+def test_error_maps_tell_no_ground_truth_from_zero_error():
+    from reports.pictures import NO_TRUTH_RGB, epe_map
+
+    truth = np.zeros((4, 6, 2), np.float32)
+    valid = np.ones((4, 6), bool)
+    valid[:, -2:] = False  # no ground truth in the last two columns
+    rgb, mean = epe_map(truth.copy(), truth, max_epe_px=1.0, valid=valid)
+    assert mean == 0.0
+    assert (rgb[:, :4] <= 4).all(), "zero error is black (magma starts at (0, 0, 4))"
+    assert (rgb[:, 4:] == NO_TRUTH_RGB).all(), "no ground truth has its own colour"
+    assert tuple(NO_TRUTH_RGB) != (0, 0, 0)
+
+
+def test_the_error_row_names_both_colours(html_text):
+    assert "black = zero error" in html_text and "teal = no ground truth" in html_text

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import re
 import shutil
 from pathlib import Path
@@ -12,7 +11,7 @@ import pytest
 
 from reports import write_report
 
-SECTIONS = ["provenance", "verdict", "headline", "per-scene", "regions", "all-metrics", "difficulty",
+SECTIONS = ["verdict", "lk-vs-hs", "provenance", "headline", "per-scene", "regions", "all-metrics", "difficulty",
             "pictures", "stabilisation", "tracking", "failed"]
 
 
@@ -44,8 +43,8 @@ def test_every_section_present(report, html_text):
     for heading in ("## Headline", "## Per scene", "## Difficulty", "## Failed cells"):
         assert heading in md
     # pictures per scene, for total and local motion: truth, five methods, wheel; then
-    # frame (total) or valid mask (local), five EPE maps and a colour bar
-    assert section(html_text, "pictures").count("<img") == 2 * 2 * ((1 + 5 + 1) + (1 + 5 + 1))
+    # frame (total) or valid mask (local), five EPE maps, a colour bar and the no-truth swatch
+    assert section(html_text, "pictures").count("<img") == 2 * 2 * ((1 + 5 + 1) + (1 + 5 + 1 + 1))
     # difficulty curves for both swept parameters, stabilisation and tracking figures drawn
     assert "Against jitter_px" in html_text and "Against noise_sigma" in html_text
     assert section(html_text, "stabilisation").count("<svg") == 4
@@ -78,12 +77,24 @@ def test_best_value_marked_by_direction(run_dir, html_text):
     assert head.count('<td class="num best"') >= 1
     for other in set(g.index) - {best}:
         assert f'<th scope="row">{other}</th><td class="num best"' not in head
-    # track_completeness is higher-is-better: the largest pooled value carries the mark
+    # track_completeness: three pipelines share the top value (4 of 5 vehicle-frames): a tie, no mark
     tc = ok[ok["metric"] == "track_completeness"].groupby("pipeline")[["sum", "count"]].sum()
-    top = (100 * tc["sum"] / tc["count"]).idxmax()
-    row = re.search(rf'<th scope="row">{top}</th>(.*?)</tr>', section(html_text, "all-metrics")).group(1)
-    cells = re.findall(r'<td class="([^"]*)"', row)
-    assert "best" in cells[6], "track_completeness (7th column) of the best pipeline is marked"
+    values = 100 * tc["sum"] / tc["count"]
+    assert (values == values.max()).sum() == 3
+    for pipe in tc.index:
+        row = re.search(rf'<th scope="row">{pipe}</th>(.*?)</tr>', section(html_text, "all-metrics")).group(1)
+        assert "best" not in re.findall(r'<td class="([^"]*)"', row)[6], pipe
+
+
+def test_the_best_mark_follows_the_direction_and_skips_ties():
+    from reports.tables import Column, best_pipelines
+
+    values = {("a", "m"): 90.0, ("b", "m"): 95.0, ("c", "m"): 80.0}
+    assert best_pipelines(values, Column("M", "m", "%", True), ["a", "b", "c"]) == {"b"}
+    assert best_pipelines(values, Column("M", "m", "%", False), ["a", "b", "c"]) == {"c"}
+    # two pipelines sharing a stage (e.g. the thesis' global motion) tie exactly: no star for either
+    tied = {("a", "j"): 0.0, ("b", "j"): 0.0, ("c", "j"): 0.2}
+    assert best_pipelines(tied, Column("J", "j", "px", False), ["a", "b", "c"]) == set()
 
 
 def test_failed_cell_listed_and_escaped(html_text, report):
@@ -110,12 +121,6 @@ def test_two_writes_are_byte_identical(run_dir, report, tmp_path):
     assert again["md"].read_bytes() == report["md"].read_bytes()
 
 
-@dataclasses.dataclass
-class _Gate:
-    passed: bool
-    failures: list
-
-
 def _epe(ok: pd.DataFrame, pipeline: str, scene: str | None = None) -> float:
     rows = ok[(ok["metric"] == "epe_mean") & (ok["region"] == "all") & (ok["motion"] == "total")
               & (ok["pipeline"] == pipeline)]
@@ -124,52 +129,67 @@ def _epe(ok: pd.DataFrame, pipeline: str, scene: str | None = None) -> float:
     return rows["sum"].sum() / rows["count"].sum()
 
 
-def test_baseline_diff_and_gate_verdict(run_dir, tmp_path):
-    """Plain (pipeline, metric) entries match the pooled value; entries keyed like
-    harness.results.summarize (as harness.gate writes them) match per key."""
-    ok = pooled_table(run_dir)
-    dis, lk = _epe(ok, "dis"), _epe(ok, "lk_thesis", "urban[jitter_px=2]")
-    keyed = {"pipeline": "lk_thesis", "scene": "urban[jitter_px=2]", "sweep_param": "jitter_px",
-             "sweep_value": "2.0", "metric": "epe_mean", "region": "all", "motion": "total", "value": lk * 1.25}
-    baseline = {"format": "aerobench-baseline/1", "metrics": [
-        {"pipeline": "dis", "metric": "epe_mean", "value": dis / 2},
-        keyed,
-        dict(keyed, region="vehicles", value=0.0),    # compared and counted, not listed
-        dict(keyed, metric="ae_mean", value=1e9),      # headline metric, but no such key: gone
-    ]}
-    out = write_report(run_dir, baseline=baseline, out_dir=tmp_path,
-                       gate_result=_Gate(passed=False, failures=["dis epe_mean +100 % > 5 %"]))
+@pytest.fixture(scope="module")
+def degraded(run_dir, tmp_path_factory):
+    """The fixture run with dis made worse on purpose (every epe total x 1.5), its baseline the original."""
+    from harness import gate
+    from harness.results import read_results, read_run_json, write_table
+
+    out = tmp_path_factory.mktemp("degraded")
+    base = gate.write_baseline(gate.make_baseline(read_results(run_dir), read_run_json(run_dir)), out / "base.json")
+    bad = out / "run"
+    shutil.copytree(run_dir, bad)
+    df = read_results(bad)
+    hit = (df["pipeline"] == "dis") & df["metric"].str.startswith("epe")
+    df.loc[hit, "sum"] *= 1.5
+    df.loc[hit, "value"] *= 1.5
+    write_table(df, bad / "results.parquet")
+    verdict = gate.write_verdict(gate.compare(bad, gate.read_baseline(base), gate.load_rules(gate.DEFAULT_RULES)),
+                                 out / "verdict.json")
+    return bad, base, verdict
+
+
+def test_a_degraded_method_is_marked_worse_by_the_gate_rules(degraded, tmp_path):
+    bad, base, _ = degraded
+    out = write_report(bad, baseline=base, out_dir=tmp_path)
     verdict = section(out["html"].read_text(), "verdict")
-    assert "Gate: FAILED" in verdict and "dis epe_mean +100 % &gt; 5 %" in verdict
-    assert f"{dis - dis / 2:+.4g} (+100.0 %)" in verdict          # worse: lower is better
-    assert f"{lk - lk * 1.25:+.4g} (-20.0 %)" in verdict          # better
-    assert verdict.index("+100.0 %") < verdict.index("-20.0 %"), "worse rows come first"
-    assert "1 further baseline entries" in verdict and "1 of them are worse" in verdict
+    rows = re.findall(r"<tr><td[^>]*>([^<]*)</td><th scope=\"row\">([^<]*)</th><td[^>]*>([^<]*)</td>.*?"
+                      r"<td[^>]*>(worse|better)</td><td[^>]*>([^<]*)</td></tr>", verdict)
+    assert rows, "the changed entries are listed"
+    assert {r[1] for r in rows} == {"dis"} and {r[3] for r in rows} == {"worse"}
+    assert any(r[2] == "epe_mean [all, total]" and r[4] == "abs 0.01" for r in rows)
+    assert "entries within tolerance" in verdict
     md = out["md"].read_text()
-    assert "## Gate: FAILED" in md and "| all scenes | dis | epe_mean |" in md
+    assert "## Against the baseline" in md and "| dis | epe_mean [all, total] |" in md and "| better |" not in md
 
 
-def test_gate_view_reads_mappings_and_objects():
+def test_the_gate_verdict_comes_first(degraded, tmp_path):
+    bad, _, verdict_path = degraded
+    out = write_report(bad, gate_verdict=verdict_path, out_dir=tmp_path)
+    text = out["html"].read_text()
+    assert text.index('<section id="verdict">') < text.index('<section id="lk-vs-hs">') < text.index(
+        '<section id="provenance">')
+    head = section(text, "verdict")
+    assert "Gate: FAILED" in head and "dis: epe_mean [all, total]: rose by" in head
+    assert out["md"].read_text().split("\n## ")[1].startswith("Gate: FAILED")
+
+
+def test_without_a_gate_verdict_the_report_says_how_to_get_one(html_text):
+    assert "aerobench gate RUN --baseline B --json V" in section(html_text, "verdict")
+
+
+def test_gate_view_of_a_verdict(degraded):
+    from harness.gate import read_verdict
     from reports.tables import gate_view
 
-    assert gate_view(None) is None
-    assert gate_view({"passed": True, "failures": []})["passed"] is True
-    assert gate_view({"verdict": "fail"})["passed"] is False
-
-    class Result:  # like harness.gate.GateResult: passed and failures are properties
-        notes = ["machine differs from the baseline's"]
-
-        @property
-        def passed(self):
-            return False
-
-        @property
-        def failures(self):
-            return [{"metric": "epe_mean", "current": 2.0}]
-
-    v = gate_view(Result())
-    assert v["passed"] is False and v["messages"] == ["metric=epe_mean, current=2.0"]
-    assert v["notes"] == ["machine differs from the baseline's"]
+    _, _, path = degraded
+    v = gate_view(path)
+    assert v == gate_view(read_verdict(path))
+    assert v["passed"] is False and v["counts"]["failed"] == len(v["failures"]) > 0
+    # the degraded method's errors, and the fixture's failed cell (a failed cell always fails the gate)
+    assert all(f.startswith(("urban", "rural")) and (" / dis: epe" in f or " / hs_thesis: cell_failed" in f)
+               for f in v["failures"])
+    assert sum("cell_failed" in f for f in v["failures"]) == 1
 
 
 def test_missing_parts_are_stated_not_fatal(run_dir, tmp_path):

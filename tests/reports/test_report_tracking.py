@@ -37,12 +37,13 @@ def test_point_and_multi_tracks_with_the_same_id_are_separate_lines(run_dir):
         assert g["frame"].is_monotonic_increasing
 
 
-def test_tracks_without_source_column_are_point_tracks(tmp_path):
+def test_a_tracks_file_of_another_schema_is_refused_by_name(tmp_path):
+    from harness.cell_artifacts import CellArtifactError
+
     pd.DataFrame({"frame": [1, 0], "track_id": [0, 0], "x_px": [2.0, 1.0], "y_px": [1.0, 1.0]}).to_csv(
         tmp_path / "tracks.csv", index=False)
-    tr = read_tracks(tmp_path)
-    assert list(tr["source"]) == ["point", "point"] and list(tr["frame"]) == [0, 1]
-    assert tr["seed_vehicle_id"].isna().all() and tr["x_true"].isna().all()
+    with pytest.raises(CellArtifactError, match=r"tracks.csv: lacks the column\(s\) \['source', 'seed_vehicle_id'"):
+        read_tracks(tmp_path)
 
 
 def test_figure_names_truth_raw_kalman_per_tracker(tracking):
@@ -53,13 +54,14 @@ def test_figure_names_truth_raw_kalman_per_tracker(tracking):
 
 
 def test_table41_says_which_track_and_shows_both_axes(tracking):
-    table = tracking[tracking.index('<table class="t41">'):]
+    table = tracking[tracking.index('<table class="t41"'):]
     table = table[:table.index("</table>")]
     assert "point tracker seeded on vehicle 1 (track 0)" in table
     assert "distance [px] from the track to the vehicle&#x27;s true projected centre in the same frame" in table
     assert "\u0394x [px]" in table and "\u0394y [px]" in table
     # fixture truth: the vehicle moves 5 px right and 0.5 px down per frame
     row = re.search(r"<th scope=\"row\">Frame 1</th>(.*?)</tr>", table).group(1)
-    cells = re.findall(r'<td class="num">([^<]*)</td>', row)
+    cells = re.findall(r'<td class="num"[^>]*>([^<]*)</td>', row)
     assert len(cells) == 8
     assert cells[2] == "5.000" and cells[5] == "0.5000"
+    assert 'data-label="\u0394x true"' in row, "under 600 px each value keeps its column name"

@@ -1,0 +1,152 @@
+"""report.md: the report's numbers as Markdown, rendered from a :class:`reports.model.ReportModel`.
+
+The same numbers and verdicts as report.html (both writers read one model);
+figures are in report.html only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from reports.lkhs import LEVEL, N_BOOT
+from reports.model import LOCAL_VS_TOTAL, ReportModel
+from reports.tables import MetricTable, format_value
+
+__all__ = ["render_markdown"]
+
+
+def _md(x) -> str:
+    return str(x).replace("|", "\\|").replace("\n", " ")
+
+
+def _metric_table_md(t: MetricTable) -> str:
+    if not t.pipelines:
+        return "_No results for these metrics._\n"
+    head = ["Pipeline"] + [f"{c.label} [{c.unit}] {c.arrow}" if c.unit else f"{c.label} {c.arrow}"
+                           for c in t.columns] + ["Cells ok/total"]
+    lines = ["| " + " | ".join(_md(h) for h in head) + " |", "|" + "---|" * len(head)]
+    for p in t.pipelines:
+        vals = []
+        for c in t.columns:
+            s = format_value(t.values.get((p, c.metric), math.nan))
+            vals.append(f"**{s}**" if p in t.best.get(c.metric, set()) else s)
+        lines.append("| " + " | ".join([_md(p), *vals, t.cells[p]]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _gate_md(model: ReportModel) -> list[str]:
+    gate = model.gate
+    if gate is None:
+        return ["## Gate", "", "_No gate verdict was given (aerobench gate RUN --baseline B --json V, then "
+                "aerobench report RUN --gate V)._", ""]
+    n = gate["counts"]
+    word = "PASSED" if gate["passed"] else "FAILED"
+    md = [f"## Gate: {word}", "", f"{n['checked']} checked, {n['passed']} passed, {n['failed']} failed, "
+          f"{n['skipped']} skipped.", ""]
+    md += [f"- {_md(m)}" for m in gate["failures"]]
+    md += [f"_{_md(x)}_" for x in gate["notes"]] + [""]
+    return md
+
+
+def _baseline_md(model: ReportModel) -> list[str]:
+    diffs = model.baseline
+    if diffs is None:
+        return []
+    md = ["## Against the baseline", ""]
+    if model.baseline_note:
+        md += [f"_{_md(model.baseline_note)}_", ""]
+    if len(diffs):
+        md += ["| Where | Pipeline | Metric | Current | Baseline | Diff | Change | Gate rule |",
+               "|---|---|---|---|---|---|---|---|"]
+        for r in diffs.itertuples(index=False):
+            d = "\u2013" if not np.isfinite(r.diff) else f"{r.diff:+.4g}" + (
+                f" ({r.diff_pct:+.1f} %)" if np.isfinite(r.diff_pct) else "")
+            md.append(f"| {_md(r.where)} | {_md(r.pipeline)} | {_md(r.metric)} [{r.region}, {r.motion}] | "
+                      f"{format_value(r.current)} | {format_value(r.baseline)} | {d} | {r.change} | {_md(r.rule)} |")
+        md.append("")
+    return md
+
+
+def _lkhs_md(model: ReportModel) -> list[str]:
+    md = ["## LK vs HS", ""]
+    if not model.lkhs:
+        return md + [f"_{_md(model.lkhs_note)}_", ""]
+    md += [LOCAL_VS_TOTAL, "",
+           f"Paired by frame pair (same scene, seed and frame): difference LK \u2212 HS of the pooled endpoint "
+           f"error with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} resamples, "
+           "seeded). Negative: LK has the lower error; an interval containing 0 is no clear difference.", ""]
+    for pair in model.lkhs:
+        md += [f"### {_md(pair.lk)} vs {_md(pair.hs)}", ""]
+        md += [f"- {_md(c.sentence)}" for c in pair.comparisons] + [""]
+        unit = pair.comparisons[0].unit if pair.comparisons else "px"
+        md += [f"| Region | Motion | LK [{unit}] | HS [{unit}] | LK \u2212 HS | {LEVEL:.0%} CI | LK lower / pairs |",
+               "|---|---|---|---|---|---|---|"]
+        for c in pair.comparisons:
+            md.append(f"| {c.region} | {c.motion} | {format_value(c.lk_value)} | {format_value(c.hs_value)} | "
+                      f"{c.diff:+.3f} | {c.lo:+.3f} to {c.hi:+.3f} | {c.n_lk_lower} / {c.n_units} |")
+        md.append("")
+        per = pair.by_scene_seed
+        if len(per):
+            cols = [c for c in per.columns if c not in ("scene", "seed")]
+            md += [f"LK \u2212 HS [{unit}] per scene and seed:", "",
+                   "| Scene, seed | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+            md += [f"| {_md(r['scene'])}, seed {r['seed']} | "
+                   + " | ".join(f"{r[c]:+.3f}" if np.isfinite(r[c]) else "\u2013" for c in cols) + " |"
+                   for r in per.to_dict("records")]
+            md.append("")
+    return md
+
+
+def _regions_md(model: ReportModel) -> list[str]:
+    md = ["## By region and motion", ""]
+    for c in model.columns:
+        wide = model.regions.get(c.metric)
+        if wide is None:
+            continue
+        md += [f"{c.label} [{c.unit}] {c.arrow}:", "", "| Pipeline | " + " | ".join(map(_md, wide.columns)) + " |",
+               "|---|" + "---|" * wide.shape[1]]
+        md += [f"| {_md(p)} | " + " | ".join(format_value(float(v)) for v in row) + " |" for p, row in wide.iterrows()]
+        md.append("")
+    return md if len(md) > 2 else md + ["_The table has no region or motion breakdown._", ""]
+
+
+def render_markdown(model: ReportModel) -> str:
+    """The Markdown report of ``model``."""
+    data = model.data
+    md = [f"# {_md(model.title)}", ""]
+    md += _gate_md(model) + _baseline_md(model) + _lkhs_md(model)
+    md += ["## What was run", ""] + [f"- **{_md(k)}**: {_md(v)}" for k, v in model.provenance] + [""]
+    md += ["## Headline", "", "Pooled over every scene, sweep value and seed; best value in bold when one pipeline "
+           "alone holds it; \u2193 lower is better, \u2191 higher is better. Flow errors over all pixels (the "
+           "background dominates them; LK vs HS above splits them).", "", _metric_table_md(model.headline)]
+    md += ["## Per scene", ""]
+    for s, t in model.per_scene.items():
+        md += [f"### {_md(s)}", "", _metric_table_md(t)]
+    md += _regions_md(model)
+    md += ["## All metrics", "", _metric_table_md(model.all_metrics)]
+    if model.curves and model.columns:
+        md += ["## Difficulty", ""]
+        c = model.columns[0]
+        for param, agg in model.curves.items():
+            sub = agg[agg["metric"] == c.metric]
+            if sub.empty:
+                continue
+            xs = sorted(sub["sweep_value"].dropna().unique())
+            md += [f"{c.label} [{c.unit}] {c.arrow} against {_md(param)}:", "",
+                   "| Pipeline | " + " | ".join(f"{x:g}" for x in xs) + " |", "|---|" + "---|" * len(xs)]
+            for p in data.pipelines:
+                vals = {float(r.sweep_value): r.value for r in sub[sub["pipeline"] == p].itertuples()}
+                if vals:
+                    md.append(f"| {_md(p)} | " + " | ".join(format_value(vals.get(x, math.nan)) for x in xs) + " |")
+            md.append("")
+    else:
+        md += ["## Difficulty", "", "_No parameter was swept in this run._", ""]
+    md += ["## Failed cells", ""]
+    if data.failed.empty:
+        md += ["No cell failed.", ""]
+    else:
+        md += [f"- `{_md(r.cell_id)}` ({_md(r.pipeline)}): {_md(r.error)}" for r in data.failed.itertuples()] + [""]
+    md += ["Figures (difficulty curves, flow pictures, stabilisation, tracking): see report.html.", ""]
+    return "\n".join(md)
