@@ -30,7 +30,7 @@ from scipy.signal import savgol_filter
 
 from algorithms.registry import register_stage
 
-__all__ = ["JitterResult", "JITTER_MODELS", "cumulative_path", "fit_flight_path", "remove_jitter"]
+__all__ = ["JitterResult", "JITTER_MODELS", "cumulative_path", "least_squares_line", "fit_flight_path", "remove_jitter"]
 
 JITTER_MODELS = ("line", "smooth")
 
@@ -83,6 +83,29 @@ def cumulative_path(shifts: np.ndarray) -> np.ndarray:
     return np.vstack([np.zeros((1, 2)), np.cumsum(s, axis=0)])
 
 
+def least_squares_line(y: np.ndarray) -> np.ndarray:
+    """The least-squares straight line ``l_i = a i + b`` over the index i, fitted per column (thesis 3.2).
+
+    Parameters
+    ----------
+    y : ndarray, (N,) or (N, K) float
+        Series sampled at i = 0..N-1 (e.g. a cumulative path in px).
+
+    Returns
+    -------
+    ndarray, same shape, float64
+        The fitted line at every index (``y`` itself for N < 2).
+    """
+    y = np.asarray(y, dtype=np.float64)
+    n = y.shape[0]
+    if n < 2:
+        return y.copy()
+    i = np.arange(n, dtype=np.float64)
+    A = np.column_stack([i, np.ones(n)])
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    return A @ coef
+
+
 def fit_flight_path(path: np.ndarray, *, model: str = "line", window_frames: int = 15,
                     polyorder: int = 2) -> np.ndarray:
     """Fit a smooth flight path to a cumulative path, per axis.
@@ -115,10 +138,7 @@ def fit_flight_path(path: np.ndarray, *, model: str = "line", window_frames: int
         # Two points are their own line; nothing to remove.
         return p.copy()
     if model == "line":
-        i = np.arange(n, dtype=np.float64)
-        A = np.column_stack([i, np.ones(n)])
-        coef, *_ = np.linalg.lstsq(A, p, rcond=None)  # least squares per axis: l_i = a i + b
-        return A @ coef
+        return least_squares_line(p)  # least squares per axis: l_i = a i + b
     if window_frames < 3 or window_frames % 2 == 0:
         raise ValueError(f"window_frames: expected an odd integer >= 3, got {window_frames}")
     if polyorder < 0:
