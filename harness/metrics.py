@@ -687,7 +687,7 @@ class MOTCounts:
     """Summed CLEAR-MOT and identity counts of one tracker on one sequence (or summed over many).
 
     objects: visible vehicle-frames (GT); predictions: estimated track-frames;
-    matches, misses (FN), false_positives (FP), switches (IDSW); dist_sum_px: sum
+    matches: corresponding pairs, switches included (py-motmetrics' num_detections); misses (FN), false_positives (FP), switches (IDSW); dist_sum_px: sum
     of the matched distances; idtp, idfn, idfp: identity true positives, false
     negatives, false positives of the best one-to-one vehicle-track assignment
     over the whole sequence (Ristani et al. 2016).
