@@ -537,7 +537,8 @@ def stabilisation_scores(correction_px: np.ndarray, true_shifts_px: np.ndarray, 
       (x and y are the components; no rotation is corrected). Energy
       ``E_k = |FFT(d)_k|^2``; per axis ``sum_{k=1..5} E_k / sum_{k>=1} E_k``;
       the score is the smaller over x and y. An axis with no energy above DC
-      (a static or constant-velocity output, nothing shakes) scores 1.
+      (a static or constant-velocity output, nothing shakes) scores 1. With
+      fewer than 12 pairs the low band is the whole spectrum: NaN (no row).
 
     Parameters
     ----------
@@ -574,7 +575,10 @@ def stabilisation_scores(correction_px: np.ndarray, true_shifts_px: np.ndarray, 
         E = np.abs(np.fft.rfft(d[:, axis])) ** 2
         full = float(E[1:].sum())
         # "static" within rounding: the motion's spread is below 1e-9 px
-        if len(E) < 2 or full <= (1e-9 ** 2) * len(d) ** 2:
+        if len(E) <= 6:
+            # the 2nd-6th lowest frequencies are the whole spectrum: the share is 1 whatever the motion
+            scores.append(math.nan)
+        elif full <= (1e-9 ** 2) * len(d) ** 2:
             scores.append(1.0)
         else:
             scores.append(float(E[1:6].sum()) / full)
@@ -592,7 +596,7 @@ def stabilisation_rows(correction_px: np.ndarray, camera: pd.DataFrame, frame_sh
     if not np.isfinite(true).all():
         return []
     sc = stabilisation_scores(correction_px, true, frame_shape_px)
-    return [_row(f"stab_{k}", v, v, 1, motion="jitter") for k, v in sc.items()]
+    return [_row(f"stab_{k}", v, v, 1, motion="jitter") for k, v in sc.items() if math.isfinite(v)]
 
 
 # --------------------------------------------------------------------------- trajectories

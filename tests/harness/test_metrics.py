@@ -330,5 +330,6 @@ def test_stabilisation_crop_follows_the_correction_extent_and_removed_shake_is_s
     assert fixed["cropping_ratio"] == pytest.approx(min((200 - extent[0]) / 200, (100 - extent[1]) / 100))
     slow = np.stack([5.0 * np.sin(2 * np.pi * i / n), np.zeros(n)], axis=1)  # one slow sway: low frequency
     assert M.stabilisation_scores(np.zeros((n, 2)), np.diff(slow, axis=0), (100, 200))["stability"] > 0.9
+    assert math.isnan(M.stabilisation_scores(np.zeros((8, 2)), np.ones((7, 2)), (100, 200))["stability"])
     with pytest.raises(ValueError, match="expected 63 pair shifts for 64 frames"):
         M.stabilisation_scores(np.zeros((n, 2)), true_shifts[:-1], (100, 200))
