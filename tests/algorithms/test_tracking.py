@@ -124,3 +124,25 @@ def test_point_tracker_with_underestimated_flow_drifts_open_loop_and_holds_when_
     assert err[-1] > 6.0                                    # 0.6 px/frame, integrated open loop
     err_rc = [np.hypot(*(np.array([r["x_px"], r["y_px"]]) - truth[r["frame"]])) for r in trackers[1].rows()]
     assert max(err_rc[:-1]) <= 0.51 and err_rc[-1] <= 1.2   # re-centred every frame (the last one is a step ahead)
+
+
+def test_position_filter_smooths_noisy_recentred_positions_in_the_ground_frame():
+    rng = np.random.default_rng(5)
+    n, h, w = 40, 80, 260
+    pan = np.array([0.0, 0.4])                                    # the camera pans; its path is removed first
+    truth = np.array([[20.0 + 5.0 * t, 20.0 + 0.4 * t] for t in range(n)])
+    trk = PointTracker(*truth[0], recentre_px=12.0, position_filter={"sigma_accel_px": 0.05, "sigma_meas_px": 1.0})
+    for t in range(n - 1):
+        flow = np.zeros((h, w, 2), np.float32)
+        cx, cy = np.round(truth[t] + rng.normal(0, 1.0, 2)).astype(int)   # the moving region is found 1 px off
+        flow[cy - 4:cy + 5, cx - 8:cx + 9] = (5.0, 0.0)
+        trk.step(pan, flow)
+    rows = trk.rows()[5:-1]                                       # after the filter settles; last frame unmeasured
+    raw = np.array([[r["x_px"], r["y_px"]] for r in rows])
+    filt = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows])
+    ref = truth[5:-1]
+    raw_err, filt_err = np.hypot(*(raw - ref).T), np.hypot(*(filt - ref).T)
+    assert np.abs(filt - raw).max() > 0.5                         # the Kalman output is not the raw track
+    assert filt_err.mean() < 0.7 * raw_err.mean()
+    with pytest.raises(ValueError, match="position_filter: unknown key"):
+        PointTracker(0.0, 0.0, position_filter={"q": 1.0})
