@@ -403,7 +403,12 @@ class Pipeline:
     naming the field. The point tracker samples the filtered local flow as
     Appendix B does (``field: filtered``; the pixel-by-pixel temporal filter
     shrinks the flow of targets moving more than their size per frame) or the
-    raw local flow (``field: local``). ``jitter.iterations > 1`` re-measures the global shifts on
+    raw local flow (``field: local``). ``recentre_px`` moves the point each frame to the
+    centroid of the region that moves like it before sampling (closing the loop that
+    flow integration leaves open; null: the thesis's open loop); ``filter: flow`` is the
+    thesis's scalar Kalman filter on the sampled flow (``kalman``), ``filter: position``
+    a constant-velocity filter of the positions in the ground frame (``sigma_accel_px``,
+    ``sigma_meas_px``). ``jitter.iterations > 1`` re-measures the global shifts on
     the corrected frames (one more pass over the frames per round).
     """
 
