@@ -30,7 +30,7 @@ from scipy.signal import savgol_filter
 
 from algorithms.registry import register_stage
 
-__all__ = ["JitterResult", "JITTER_MODELS", "cumulative_path", "fit_flight_path", "remove_jitter"]
+__all__ = ["JitterResult", "JITTER_MODELS", "cumulative_path", "least_squares_line", "fit_flight_path", "remove_jitter"]
 
 JITTER_MODELS = ("line", "smooth")
 
@@ -83,6 +83,47 @@ def cumulative_path(shifts: np.ndarray) -> np.ndarray:
     return np.vstack([np.zeros((1, 2)), np.cumsum(s, axis=0)])
 
 
+def least_squares_line(y: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
+    """The least-squares straight line ``l = a t + b`` through ``(t, y)``, per column, evaluated at every t.
+
+    The thesis's flight line (3.2) over the frame index, and the one line fit of
+    the project (detrending a true jitter, drawing a fitted path).
+
+    Parameters
+    ----------
+    y : ndarray, (N,) or (N, K) float
+        Samples, e.g. a cumulative path in px; NaN samples are left out of the fit.
+    t : ndarray, (N,) float, optional
+        Abscissa (e.g. frame numbers); default the index 0..N-1.
+
+    Returns
+    -------
+    ndarray, same shape as ``y``, float64
+        The fitted line at every t; a column with fewer than 2 finite samples is
+        NaN (``y`` itself is returned when N < 2).
+    """
+    y = np.asarray(y, dtype=np.float64)
+    n = y.shape[0]
+    if n < 2:
+        return y.copy()
+    t = np.arange(n, dtype=np.float64) if t is None else np.asarray(t, dtype=np.float64)
+    if t.shape != (n,):
+        raise ValueError(f"t: expected ({n},) abscissae, got shape {t.shape}")
+    Y = y.reshape(n, -1)
+    A = np.column_stack([t, np.ones(n)])
+    out = np.full(Y.shape, np.nan)
+    ok = np.isfinite(Y)
+    if ok.all():
+        coef, *_ = np.linalg.lstsq(A, Y, rcond=None)  # l = a t + b per column
+        out = A @ coef
+    else:
+        for k in range(Y.shape[1]):
+            if ok[:, k].sum() >= 2:
+                coef, *_ = np.linalg.lstsq(A[ok[:, k]], Y[ok[:, k], k], rcond=None)
+                out[:, k] = A @ coef
+    return out.reshape(y.shape)
+
+
 def fit_flight_path(path: np.ndarray, *, model: str = "line", window_frames: int = 15,
                     polyorder: int = 2) -> np.ndarray:
     """Fit a smooth flight path to a cumulative path, per axis.
@@ -115,10 +156,7 @@ def fit_flight_path(path: np.ndarray, *, model: str = "line", window_frames: int
         # Two points are their own line; nothing to remove.
         return p.copy()
     if model == "line":
-        i = np.arange(n, dtype=np.float64)
-        A = np.column_stack([i, np.ones(n)])
-        coef, *_ = np.linalg.lstsq(A, p, rcond=None)  # least squares per axis: l_i = a i + b
-        return A @ coef
+        return least_squares_line(p)  # least squares per axis: l_i = a i + b
     if window_frames < 3 or window_frames % 2 == 0:
         raise ValueError(f"window_frames: expected an odd integer >= 3, got {window_frames}")
     if polyorder < 0:

@@ -31,10 +31,10 @@ import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, scalar_kalman
+from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["detect_moving_objects", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
+__all__ = ["detect_moving_objects", "recentre_on_region", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
 TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
@@ -71,6 +71,68 @@ def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
     return sorted(out, key=lambda d: -d[2])
 
 
+def recentre_on_region(flow: np.ndarray, x_px: float, y_px: float, *, radius_px: float,
+                       min_magnitude_px: float = 0.5, rel_tol: float = 0.3,
+                       valid: np.ndarray | None = None) -> tuple[float, float]:
+    """The centroid of the region that moves like the point, within ``radius_px`` of it.
+
+    The region: pixels of the square window of half-side ``radius_px`` around
+    the point whose flow differs from the flow at the point's pixel ``w0`` by at most
+    ``max(min_magnitude_px, rel_tol |w0|)`` and is itself at least
+    ``min_magnitude_px`` long, 8-connected to the point's pixel. A vehicle's
+    pixels move alike and unlike the ground and unlike other vehicles (unless they
+    drive side by side at the same velocity), so the region is the vehicle (with
+    the flow method's halo, which is symmetric about it).
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+        Local flow (u, v) of the pair in px, frame t pixels (x right, y down).
+    x_px, y_px : float
+        The point in frame t.
+    radius_px : float
+        Half-side of the search window, px; larger than the vehicle, smaller than
+        the distance to the next vehicle.
+    min_magnitude_px : float
+        Slower pixels are ground (and a point slower than this is not re-centred).
+    rel_tol : float
+        Relative flow tolerance (fraction of ``|w0|``).
+    valid : ndarray, (H, W) bool, optional
+        Pixels the flow method marks invalid never join the region.
+
+    Returns
+    -------
+    (x_px, y_px) : float
+        The region's centroid; the point itself when it is outside the image or
+        does not move faster than ``min_magnitude_px``.
+    """
+    f = np.asarray(flow)
+    if f.ndim != 3 or f.shape[2] != 2:
+        raise ValueError(f"flow: expected (H, W, 2), got {tuple(f.shape)}")
+    if not (math.isfinite(radius_px) and radius_px > 0):
+        raise ValueError(f"radius_px: expected a finite number > 0, got {radius_px!r}")
+    h, w = f.shape[:2]
+    if not (math.isfinite(x_px) and math.isfinite(y_px)):
+        return x_px, y_px
+    c, r = round(x_px), round(y_px)
+    if not (0 <= c < w and 0 <= r < h) or (valid is not None and not valid[r, c]):
+        return x_px, y_px
+    w0 = f[r, c].astype(np.float64)
+    m0 = math.hypot(w0[0], w0[1])
+    if not m0 >= min_magnitude_px:
+        return x_px, y_px
+    rad = int(math.ceil(radius_px))
+    x0, x1, y0, y1 = max(0, c - rad), min(w, c + rad + 1), max(0, r - rad), min(h, r + rad + 1)
+    win = f[y0:y1, x0:x1].astype(np.float64)
+    similar = (np.hypot(win[..., 0] - w0[0], win[..., 1] - w0[1]) <= max(min_magnitude_px, rel_tol * m0)) \
+        & (np.hypot(win[..., 0], win[..., 1]) >= min_magnitude_px)
+    if valid is not None:
+        similar &= np.asarray(valid, bool)[y0:y1, x0:x1]
+    _, labels = cv2.connectedComponents(similar.astype(np.uint8), connectivity=8)
+    ys, xs = np.nonzero(labels == labels[r - y0, c - x0])
+    return float(xs.mean() + x0), float(ys.mean() + y0)
+
+
 class PointTracker:
     """The thesis point tracker: one pixel followed by global shift + local flow, Kalman-filtered flow.
 
@@ -85,15 +147,39 @@ class PointTracker:
         ``x0, p0, q, r`` of :func:`~algorithms.kalman.scalar_kalman` per axis.
         Default: the thesis's P(1|1), Q, R with ``x0=None`` (X(1|1) = the first
         flow measurement), since the thesis's X(1|1) = -1 encodes its video's
-        upward motion. Pass ``THESIS_KALMAN`` for the thesis exactly.
+        upward motion. Pass ``THESIS_KALMAN`` for the thesis exactly. With
+        Q / R = 20 the thesis's gain is about 0.95: X(k|k) stays within 5 % of the
+        measurement (its Table 4.1 shows as much), so its filtered track is
+        nearly the raw one.
+    recentre_px : float, optional
+        Re-centre on the region that moves like the point (see :meth:`step`).
+    position_filter : mapping, optional
+        ``{"sigma_accel_px": ..., "sigma_meas_px": ...}``: instead of the thesis's
+        filter on the flow, filter the raw positions with a constant-velocity
+        Kalman filter (:func:`~algorithms.kalman.kalman_cv_filter`) in the
+        ground-fixed frame (raw position minus the cumulative global shift, so
+        camera sway is not read as vehicle acceleration), then add the camera
+        path back. Meant with ``recentre_px``, whose positions are measurements
+        with noise of their own (the region's centroid), not integrated flow.
 
     Use :meth:`step` once per pair in order, then :meth:`rows`.
     """
 
     def __init__(self, x_px: float, y_px: float, *, track_id: int = 0, seed_vehicle_id=None,
-                 kalman: Mapping | None = None):
+                 kalman: Mapping | None = None, recentre_px: float | None = None,
+                 position_filter: Mapping | None = None):
+        if position_filter is not None:
+            unknown = set(position_filter) - {"sigma_accel_px", "sigma_meas_px"}
+            if unknown:
+                raise ValueError(f"position_filter: unknown key(s) {sorted(unknown)}; valid: sigma_accel_px, "
+                                 "sigma_meas_px")
+            ConstantVelocityKalman((0.0, 0.0), **position_filter)  # its own checks, now rather than in rows()
+        self.position_filter = None if position_filter is None else dict(position_filter)
+        if recentre_px is not None and not (math.isfinite(recentre_px) and recentre_px > 0):
+            raise ValueError(f"recentre_px: expected None or a finite number > 0, got {recentre_px!r}")
         self.track_id, self.seed_vehicle_id = int(track_id), seed_vehicle_id
         self.kalman = dict(THESIS_KALMAN, x0=None) if kalman is None else dict(kalman)
+        self.recentre_px = None if recentre_px is None else float(recentre_px)
         self._pos = [(float(x_px), float(y_px))]
         self._shift: list[tuple[float, float]] = []
         self._w: list[tuple[float, float]] = []
@@ -103,8 +189,21 @@ class PointTracker:
 
         Outside the image, or where ``valid`` is False, the measurement is NaN
         (the Kalman filter only predicts) and the point moves by the global shift.
+
+        With ``recentre_px`` set, the point is first moved to the centroid of the
+        region around it that moves like it (:func:`recentre_on_region` on the
+        same flow field, twice, ``radius_px=recentre_px``): that centroid is the
+        raw position of frame t. Integrating flow alone is open loop: a flow that
+        is biased on the target (a window that also covers ground shrinks a small
+        vehicle's flow; coarse-to-fine LK stops short of large motions) makes the
+        point slide off its vehicle in a straight line, and once on the ground it
+        follows the ground for good. The vehicle's region closes the loop.
         """
         x, y = self._pos[-1]
+        if self.recentre_px is not None:
+            for _ in range(2):
+                x, y = recentre_on_region(flow_local, x, y, radius_px=self.recentre_px, valid=valid)
+            self._pos[-1] = (x, y)
         h, w = flow_local.shape[:2]
         c, r = (round(x), round(y)) if math.isfinite(x) and math.isfinite(y) else (-1, -1)
         inside = 0 <= c < w and 0 <= r < h and (valid is None or bool(valid[r, c]))
@@ -116,7 +215,12 @@ class PointTracker:
         self._pos.append((x + sx + (wu if inside else 0.0), y + sy + (wv if inside else 0.0)))
 
     def rows(self) -> list[dict]:
-        """One row per frame 0..len(steps): raw, filtered and one-step-predicted positions."""
+        """One row per frame 0..len(steps): raw, filtered and one-step-predicted positions.
+
+        The filtered path makes the same moves as the raw one (global shift, and
+        re-centring jumps) with the Kalman-filtered flow X(k|k) in place of the
+        measured flow Z(k): ``filt(k) = raw(k) + sum_{j<k} (X(j|j) - Z(j))``.
+        """
         n = len(self._w)
         rows = []
         raw = np.array(self._pos)
@@ -124,9 +228,18 @@ class PointTracker:
             x, y = raw[0]
             return [self._row(0, x, y, x, y, x, y)]
         s, w = np.array(self._shift), np.array(self._w)
+        if self.position_filter is not None:
+            # ground-fixed frame: the camera path c(k) = sum of the global shifts before frame k
+            cam = np.vstack([np.zeros((1, 2)), np.cumsum(s, axis=0)])
+            res = kalman_cv_filter(raw - cam, sigma_accel_px=self.position_filter.get("sigma_accel_px", 0.5),
+                                   sigma_meas_px=self.position_filter.get("sigma_meas_px", 1.0))
+            filt, pred = res.filtered_px + cam, res.predicted_px + cam
+            return [self._row(k, *raw[k], *filt[k], *pred[k]) for k in range(n + 1)]
         w_f = np.column_stack([self._filter(w[:, a]) for a in (0, 1)])  # X(k|k) per axis
-        # filtered path: the same integration with the filtered local flow
-        filt = np.vstack([raw[:1], raw[:1] + np.cumsum(s + np.nan_to_num(w_f), axis=0)])
+        # where the raw point moved by the shift alone (no measurement), the filtered one moves by the
+        # shift plus the prediction X(k|k) (NaN only before any measurement)
+        delta = np.nan_to_num(w_f) - np.nan_to_num(w)
+        filt = raw + np.vstack([np.zeros((1, 2)), np.cumsum(delta, axis=0)])
         rows.append(self._row(0, *raw[0], *filt[0], *raw[0]))
         for k in range(1, n + 1):
             # eq. 4.6: the prediction of the flow of pair k-1 is X(k-1|k-1) of the pair before

@@ -18,6 +18,7 @@ mean        sum / count                                 sum of x, number of item
 rms         sqrt(sum / count)                           sum of x**2, number of items
 rate        100 * sum / count  (percent)                items over the limit, items
 total       sum                                         sum of x, number of items
+complement  1 - sum / count  (MOTA)                      errors, number of items
 quantile    from the summed EPE histogram (``hist``)    NaN, number of pixels
 ==========  ==========================================  ===========================
 
@@ -49,7 +50,9 @@ score_flow                                             all flow rows of one pair
 timing_rows                                            rows from ``stage_ms``
 score_pair                                             PairEstimate + PairTruth -> rows
 shift_rows, jitter_rows, detrend                       global motion and stabilisation
-associate_tracks, track_rows                           trajectories, CLEAR-MOT ID switches
+stabilisation_scores, stabilisation_rows               cropping ratio, distortion, stability (Liu 2013)
+position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID switches
+MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
 score_sequence                                         SequenceEstimate + camera.csv + tracks.csv -> rows
 aggregate                                              rows DataFrame -> aggregates from totals
 """
@@ -68,6 +71,7 @@ import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
 from algorithms.flow import check_flow, endpoint_error
+from algorithms.jitter import least_squares_line
 
 __all__ = [
     "METRICS", "MetricDef", "register_metric", "metric_def", "describe_metrics", "timing_metric_name",
@@ -75,7 +79,8 @@ __all__ = [
     "endpoint_error", "angular_error_deg", "boundary_mask", "region_masks",
     "epe_histogram", "encode_hist", "decode_hist", "hist_quantile",
     "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair",
-    "shift_rows", "detrend", "jitter_rows", "associate_tracks", "track_rows", "score_sequence",
+    "shift_rows", "detrend", "jitter_rows", "stabilisation_scores", "stabilisation_rows", "position_error_px", "associate_tracks", "track_rows", "MOTCounts", "mot_counts", "mot_rows",
+    "score_sequence",
     "aggregate", "reduce_totals",
 ]
 
@@ -84,7 +89,7 @@ MOTIONS = ("total", "local")
 HIST_BIN_PX = 0.01
 HIST_MAX_PX = 100.0
 HIST_NBINS = int(round(HIST_MAX_PX / HIST_BIN_PX)) + 1  # the last bin is the overflow
-REDUCES = ("mean", "rms", "rate", "total", "quantile")
+REDUCES = ("mean", "rms", "rate", "total", "complement", "quantile")
 # stages of algorithms.pipeline that report wall time (others are registered on first use)
 STAGES = ("global_motion", "jitter", "compensation", "flow", "compose", "threshold", "spatial", "temporal",
           "detection", "tracking", "total")
@@ -171,6 +176,16 @@ register_metric("shift_error", "px", higher_is_better=False, weighting="per fram
 register_metric("jitter_residual_rms", "px", higher_is_better=False, weighting="per frame, RMS over frames",
                 reduce="rms", description="RMS of estimated jitter minus detrended true jitter "
                 "(jitter left after remove_jitter)")
+_SEQ = "per sequence (the paper's per-video score), mean over sequences"
+register_metric("stab_cropping_ratio", "ratio", higher_is_better=True, weighting=_SEQ,
+                description="share of the frame kept (as a uniform zoom) by the crop inside every corrected "
+                "frame (Liu 2013 cropping ratio, for a translation correction)")
+register_metric("stab_distortion", "ratio", higher_is_better=True, weighting=_SEQ,
+                description="worst eigenvalue ratio of the correction's affine part (Liu 2013); 1 for a "
+                "translation correction by construction")
+register_metric("stab_stability", "ratio", higher_is_better=True, weighting=_SEQ,
+                description="share of the stabilised video's frame-to-frame motion energy in the 2nd-6th "
+                "lowest frequencies, smaller axis (Liu 2013 stability score)")
 _TRK = "per vehicle and frame where visible and tracked, pooled"
 register_metric("track_error", "px", higher_is_better=False, weighting=_TRK,
                 description="|filtered track position - true vehicle centre|")
@@ -187,6 +202,19 @@ register_metric("track_completeness", "%", higher_is_better=True,
                 description="share of frames where a vehicle is visible and a track is assigned to it")
 register_metric("id_switches", "count", higher_is_better=False, weighting="summed over vehicles",
                 reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT)")
+_MOT = "per sequence and tracker, from summed counts (never an average of per-sequence scores)"
+register_metric("mota", "ratio", higher_is_better=True, weighting=_MOT + "; 1 - (FN + FP + IDSW) / objects",
+                reduce="complement", description="CLEAR-MOT accuracy 1 - (misses + false positives + ID switches) "
+                "/ visible vehicle-frames (Bernardin 2008), match within the association gate")
+register_metric("motp", "px", higher_is_better=False, weighting=_MOT + "; per matched vehicle-frame",
+                description="CLEAR-MOT precision: mean distance of matched track-vehicle pairs (Bernardin 2008)")
+register_metric("idf1", "ratio", higher_is_better=True, weighting=_MOT + "; 2 IDTP / (objects + predictions)",
+                description="identity F1: share of vehicle-frames and track-frames on the best one-to-one "
+                "vehicle-track assignment (Ristani 2016)")
+register_metric("mot_misses", "count", higher_is_better=False, weighting=_MOT, reduce="total",
+                description="CLEAR-MOT misses (FN): visible vehicle-frames without a track within the gate")
+register_metric("mot_false_positives", "count", higher_is_better=False, weighting=_MOT, reduce="total",
+                description="CLEAR-MOT false positives (FP): track-frames matched to no vehicle")
 for _s in STAGES:
     timing_metric_name(_s)
 
@@ -586,10 +614,7 @@ def shift_rows(shifts_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
 def detrend(y: np.ndarray) -> np.ndarray:
     """``y`` minus its own least-squares line ``a + b i`` over the index i, column by column."""
     y = np.asarray(y, np.float64)
-    i = np.arange(len(y), dtype=np.float64)
-    A = np.stack([np.ones_like(i), i], axis=1)
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-    return y - A @ coef
+    return y - least_squares_line(y)
 
 
 def jitter_rows(jitter_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
@@ -617,62 +642,295 @@ def jitter_rows(jitter_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
     return rows
 
 
+def stabilisation_scores(correction_px: np.ndarray, true_shifts_px: np.ndarray, frame_shape_px) -> dict:
+    """Cropping ratio, distortion and stability of a translation-corrected video (Liu et al. 2013).
+
+    Liu, Yuan, Tan, Sun, "Bundled camera paths for video stabilization", ACM TOG
+    32(4) 2013, sec. 6: a homography B_t is fitted between each input frame and
+    its stabilised output. *Cropping ratio*: the scale component of B_t (the
+    area kept after cropping the empty borders, as a zoom), averaged over frames.
+    *Distortion*: the anisotropy of B_t, the ratio of the two eigenvalues of its
+    affine part, the worst (smallest) over frames. *Stability*: the frame-to-frame
+    motion of the stabilised video is analysed in the frequency domain; the share
+    of the energy in the lowest frequencies (the 2nd to 6th, DC excluded) of all
+    energy, the smaller over its components.
+
+    Adapted to what this pipeline estimates, a translation ``correction_px[i]``
+    applied to frame i (thesis 3.2):
+
+    * B_i is a translation, whose scale is 1, so the zoom that removes the empty
+      borders is set by the correction's extent instead: one crop window must
+      lie inside every corrected frame, (W - range_x) x (H - range_y) with
+      range = max - min of the correction per axis; the uniform zoom that fills
+      the frame with it is ``min((W - range_x) / W, (H - range_y) / H)``, the
+      cropping ratio of every frame and so of the video (1: nothing cropped).
+    * The affine part of a translation is the identity, both eigenvalues 1:
+      the distortion is 1 by construction. It is computed from that model, not
+      assumed, so a richer correction model would report its own.
+    * Stability uses the motion the viewer sees, the true camera shift of each
+      pair plus the change of correction, ``d_i = s_true_i + c_{i+1} - c_i``
+      (x and y are the components; no rotation is corrected). Energy
+      ``E_k = |FFT(d)_k|^2``; per axis ``sum_{k=1..5} E_k / sum_{k>=1} E_k``;
+      the score is the smaller over x and y. An axis with no energy above DC
+      (a static or constant-velocity output, nothing shakes) scores 1. With
+      fewer than 12 pairs the low band is the whole spectrum: NaN (no row).
+
+    Parameters
+    ----------
+    correction_px : ndarray, (N, 2) float
+        Per-frame correction (dx, dy), px.
+    true_shifts_px : ndarray, (N-1, 2) float
+        True global shift of each pair i -> i+1 (camera.csv ``global_dx_px, global_dy_px``), px.
+    frame_shape_px : (H, W)
+        Frame size in pixels.
+
+    Returns
+    -------
+    dict with ``cropping_ratio``, ``distortion``, ``stability`` (floats in [0, 1]).
+    """
+    c = np.asarray(correction_px, np.float64).reshape(-1, 2)
+    s = np.asarray(true_shifts_px, np.float64).reshape(-1, 2)
+    if len(s) != len(c) - 1:
+        raise ValueError(f"true_shifts_px: expected {len(c) - 1} pair shifts for {len(c)} frames, got {len(s)}")
+    h, w = (float(v) for v in frame_shape_px)
+    if not (h > 0 and w > 0):
+        raise ValueError(f"frame_shape_px: expected (H, W) > 0, got {tuple(frame_shape_px)}")
+    extent = c.max(axis=0) - c.min(axis=0) if len(c) else np.zeros(2)
+    crop = max(0.0, min((w - extent[0]) / w, (h - extent[1]) / h))
+    # affine part of each frame's correction model (a translation: the identity); distortion = min over frames
+    # of the eigenvalue ratio (smaller / larger) of its 2x2 linear part
+    distortion = 1.0
+    for _ in range(len(c)):
+        A = np.eye(2)
+        ev = np.sort(np.abs(np.linalg.eigvals(A)))
+        distortion = min(distortion, float(ev[0] / ev[-1]))
+    d = s + np.diff(c, axis=0)
+    scores = []
+    for axis in (0, 1):
+        E = np.abs(np.fft.rfft(d[:, axis])) ** 2
+        full = float(E[1:].sum())
+        # "static" within rounding: the motion's spread is below 1e-9 px
+        if len(E) <= 6:
+            # the 2nd-6th lowest frequencies are the whole spectrum: the share is 1 whatever the motion
+            scores.append(math.nan)
+        elif full <= (1e-9 ** 2) * len(d) ** 2:
+            scores.append(1.0)
+        else:
+            scores.append(float(E[1:6].sum()) / full)
+    return {"cropping_ratio": float(crop), "distortion": distortion, "stability": float(min(scores))}
+
+
+def stabilisation_rows(correction_px: np.ndarray, camera: pd.DataFrame, frame_shape_px) -> list[dict]:
+    """``stab_cropping_ratio``, ``stab_distortion``, ``stab_stability`` of a sequence (one row each).
+
+    See :func:`stabilisation_scores`; the true shifts come from camera.csv. Each
+    row is one sequence (sum = value, count = 1): aggregates are means over sequences.
+    """
+    cam = camera.sort_values("frame").reset_index(drop=True)
+    true = cam[["global_dx_px", "global_dy_px"]].to_numpy(np.float64)[:-1]
+    if not np.isfinite(true).all():
+        return []
+    sc = stabilisation_scores(correction_px, true, frame_shape_px)
+    return [_row(f"stab_{k}", v, v, 1, motion="jitter") for k, v in sc.items() if math.isfinite(v)]
+
+
 # --------------------------------------------------------------------------- trajectories
+
+def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
+    """Track position error ``|p_est - p_true|`` (Euclidean, px), elementwise, float64; NaN where either is NaN.
+
+    The one definition of a trajectory's error used by every track metric (and
+    by reports that show per-frame track errors).
+    """
+    return np.hypot(np.asarray(x_est, np.float64) - np.asarray(x_true, np.float64),
+                    np.asarray(y_est, np.float64) - np.asarray(y_true, np.float64))
+
+
+_ASSOC_COLUMNS = ["frame", "vehicle_id", "track_id", "dist_px", "switch"]
+
+
+def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
+    """Frame by frame CLEAR-MOT correspondences (Bernardin and Stiefelhagen 2008, sec. 2.1.1).
+
+    Yields ``(frame, vehicle_ids, track_ids, D, match)`` for every frame that has
+    a visible vehicle or a finite estimate: ``D`` (V, T) Euclidean distances
+    between true centres ``x_px, y_px`` and filtered estimates ``x_filt_px,
+    y_filt_px``; ``match`` maps row -> column. A pair farther than ``gate_px``
+    never corresponds. A vehicle's last correspondence (of any earlier frame) is
+    kept while the same track is present and within the gate; the rest are
+    matched by the Hungarian method on distance. ``switch`` flags: the
+    vehicle's track differs from its last matched track.
+    """
+    if not gate_px > 0:
+        raise ValueError(f"gate_px: expected > 0, got {gate_px}")
+    vis = truth[truth["visible"].astype(bool)]
+    est = est[np.isfinite(est["x_filt_px"].to_numpy(np.float64)) & np.isfinite(est["y_filt_px"].to_numpy(np.float64))]
+    vis_by_f = {f: g for f, g in vis.groupby("frame")}
+    est_by_f = {f: g for f, g in est.groupby("frame")}
+    last: dict[int, int] = {}   # vehicle -> last matched track ever (Bernardin's M_{t-1}, carried on)
+    for f in sorted(set(vis_by_f) | set(est_by_f)):
+        g, e = vis_by_f.get(f), est_by_f.get(f)
+        vids = g["vehicle_id"].to_numpy(np.int64) if g is not None else np.zeros(0, np.int64)
+        tids = e["track_id"].to_numpy(np.int64) if e is not None else np.zeros(0, np.int64)
+        P = g[["x_px", "y_px"]].to_numpy(np.float64) if g is not None else np.zeros((0, 2))
+        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64) if e is not None else np.zeros((0, 2))
+        D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
+        match: dict[int, int] = {}
+        switch: dict[int, bool] = {}
+        for a, vid in enumerate(vids):
+            t = last.get(int(vid))
+            if t is not None and t in tids:
+                b = int(np.flatnonzero(tids == t)[0])
+                if D[a, b] <= gate_px and b not in match.values():
+                    match[a], switch[a] = b, False
+        ra = [a for a in range(len(vids)) if a not in match]
+        rb = [b for b in range(len(tids)) if b not in match.values()]
+        if ra and rb:
+            sub = D[np.ix_(ra, rb)]
+            big = 1e6 * (1.0 + float(np.nanmax(sub, initial=0.0)))
+            ia, ib = linear_sum_assignment(np.where(sub <= gate_px, sub, big))
+            for x, y in zip(ia, ib):
+                if sub[x, y] <= gate_px:
+                    a, b = ra[x], rb[y]
+                    match[a] = b
+                    switch[a] = int(vids[a]) in last and last[int(vids[a])] != int(tids[b])
+        for a, b in match.items():
+            last[int(vids[a])] = int(tids[b])
+        yield f, vids, tids, D, match, switch
+
 
 def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> pd.DataFrame:
     """Match estimated tracks to visible vehicles frame by frame (CLEAR-MOT, Bernardin 2008).
 
-    In each frame a correspondence of the previous frame is kept while its
-    distance stays within ``gate_px``; the remaining tracks and vehicles are
+    In each frame a vehicle's last correspondence is kept while that track is
+    present and within ``gate_px``; the remaining tracks and vehicles are
     matched by the Hungarian method on Euclidean distance, pairs farther than
-    ``gate_px`` rejected. Positions: estimated ``x_filt_px, y_filt_px`` vs
-    truth ``x_px, y_px``.
+    ``gate_px`` rejected (the rules of py-motmetrics' ``MOTAccumulator``).
+    Positions: estimated ``x_filt_px, y_filt_px`` vs truth ``x_px, y_px``.
 
     Returns
     -------
     DataFrame with columns frame, vehicle_id, track_id, dist_px, switch (bool:
     the vehicle's track differs from its last matched track).
     """
-    vis = truth[truth["visible"].astype(bool)]
-    est_by_f = {f: g for f, g in est.groupby("frame")}
-    prev: dict[int, int] = {}   # vehicle -> track in the previous frame
-    last: dict[int, int] = {}   # vehicle -> last matched track ever
     out = []
-    for f, g in vis.groupby("frame"):
-        e = est_by_f.get(f)
-        if e is None or e.empty:
-            prev = {}
-            continue
-        e = e[np.isfinite(e["x_filt_px"]) & np.isfinite(e["y_filt_px"])]
-        vids = g["vehicle_id"].to_numpy()
-        tids = e["track_id"].to_numpy()
-        P = g[["x_px", "y_px"]].to_numpy(np.float64)
-        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64)
-        D = np.hypot(P[:, None, 0] - Q[None, :, 0], P[:, None, 1] - Q[None, :, 1])
-        match: dict[int, int] = {}
-        for a, vid in enumerate(vids):
-            t = prev.get(int(vid))
-            if t is not None and t in tids:
-                b = int(np.flatnonzero(tids == t)[0])
-                if D[a, b] <= gate_px and b not in match.values():
-                    match[a] = b
-        ra = [a for a in range(len(vids)) if a not in match]
-        rb = [b for b in range(len(tids)) if b not in match.values()]
-        if ra and rb:
-            sub = D[np.ix_(ra, rb)]
-            cost = np.where(sub <= gate_px, sub, 1e12)
-            ia, ib = linear_sum_assignment(cost)
-            for x, y in zip(ia, ib):
-                if sub[x, y] <= gate_px:
-                    match[ra[x]] = rb[y]
-        prev = {}
-        for a, b in match.items():
-            vid, tid = int(vids[a]), int(tids[b])
-            out.append({"frame": int(f), "vehicle_id": vid, "track_id": tid, "dist_px": float(D[a, b]),
-                        "switch": vid in last and last[vid] != tid})
-            prev[vid] = tid
-            last[vid] = tid
-    return pd.DataFrame(out, columns=["frame", "vehicle_id", "track_id", "dist_px", "switch"])
+    for f, vids, tids, D, match, switch in _mot_frames(est, truth, gate_px=gate_px):
+        for a, b in sorted(match.items()):
+            out.append({"frame": int(f), "vehicle_id": int(vids[a]), "track_id": int(tids[b]),
+                        "dist_px": float(D[a, b]), "switch": bool(switch[a])})
+    return pd.DataFrame(out, columns=_ASSOC_COLUMNS)
+
+
+@dataclass(frozen=True)
+class MOTCounts:
+    """Summed CLEAR-MOT and identity counts of one tracker on one sequence (or summed over many).
+
+    objects: visible vehicle-frames (GT); predictions: estimated track-frames;
+    matches: corresponding pairs, switches included (py-motmetrics' num_detections); misses (FN), false_positives (FP), switches (IDSW); dist_sum_px: sum
+    of the matched distances; idtp, idfn, idfp: identity true positives, false
+    negatives, false positives of the best one-to-one vehicle-track assignment
+    over the whole sequence (Ristani et al. 2016).
+    """
+
+    objects: int
+    predictions: int
+    matches: int
+    misses: int
+    false_positives: int
+    switches: int
+    dist_sum_px: float
+    idtp: int
+    idfn: int
+    idfp: int
+
+    @property
+    def mota(self) -> float:
+        """MOTA = 1 - (FN + FP + IDSW) / GT (Bernardin 2008, eq. 2); NaN without objects."""
+        return 1.0 - (self.misses + self.false_positives + self.switches) / self.objects if self.objects else math.nan
+
+    @property
+    def motp_px(self) -> float:
+        """MOTP = sum of matched distances / matches (Bernardin 2008, eq. 1), px; NaN without matches."""
+        return self.dist_sum_px / self.matches if self.matches else math.nan
+
+    @property
+    def idf1(self) -> float:
+        """IDF1 = 2 IDTP / (2 IDTP + IDFP + IDFN) (Ristani 2016, eq. 7); NaN when both sides are empty."""
+        den = 2 * self.idtp + self.idfp + self.idfn
+        return 2 * self.idtp / den if den else math.nan
+
+
+def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> MOTCounts:
+    """CLEAR-MOT (Bernardin and Stiefelhagen 2008) and identity (Ristani et al. 2016) counts.
+
+    Parameters
+    ----------
+    est : DataFrame
+        One tracker's rows (``frame, track_id, x_filt_px, y_filt_px``); rows with
+        a NaN position are not predictions.
+    truth : DataFrame
+        tracks.csv (``frame, vehicle_id, x_px, y_px, visible``); visible rows are objects.
+    gate_px : float
+        A vehicle and a track correspond only within this distance (the
+        threshold of both the frame matching and the identity matching).
+
+    The identity assignment pairs each vehicle with at most one track over the
+    whole sequence so as to maximise IDTP, the number of frames where the pair
+    is present and within the gate (equivalently, to minimise IDFN + IDFP);
+    IDFN = objects - IDTP and IDFP = predictions - IDTP.
+    """
+    objects = predictions = matches = switches = 0
+    dist_sum = 0.0
+    overlap: dict[tuple[int, int], int] = {}
+    for _f, vids, tids, D, match, switch in _mot_frames(est, truth, gate_px=gate_px):
+        objects += len(vids)
+        predictions += len(tids)
+        matches += len(match)
+        switches += sum(switch.values())
+        dist_sum += float(sum(D[a, b] for a, b in match.items()))
+        for a, b in zip(*np.nonzero(D <= gate_px)):
+            key = (int(vids[a]), int(tids[b]))
+            overlap[key] = overlap.get(key, 0) + 1
+    idtp = 0
+    if overlap:
+        vs = sorted({k[0] for k in overlap})
+        ts = sorted({k[1] for k in overlap})
+        W = np.zeros((len(vs), len(ts)))
+        for (v, t), n in overlap.items():
+            W[vs.index(v), ts.index(t)] = n
+        ia, ib = linear_sum_assignment(-W)
+        idtp = int(W[ia, ib].sum())
+    return MOTCounts(objects=objects, predictions=predictions, matches=matches, misses=objects - matches,
+                     false_positives=predictions - matches, switches=switches, dist_sum_px=dist_sum,
+                     idtp=idtp, idfn=objects - idtp, idfp=predictions - idtp)
+
+
+def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
+    """MOTA, MOTP, IDF1 and the FN / FP counts per tracker (``region`` = ``source``), as summable totals.
+
+    One row per metric and tracker, no frame or track id. Each carries the
+    counts its aggregate is recomputed from (:class:`MOTCounts`): ``mota`` sum =
+    FN + FP + IDSW, count = objects (value 1 - sum / count, reduce
+    ``complement``); ``motp`` sum = matched distances, count = matches; ``idf1``
+    sum = 2 IDTP, count = objects + predictions; ``mot_misses``,
+    ``mot_false_positives`` totals. Summed over cells or seeds these give the
+    pooled scores, as py-motmetrics' overall row does.
+    """
+    rows: list[dict] = []
+    if est_tracks is None or est_tracks.empty:
+        return rows
+    for source, est in est_tracks.groupby("source"):
+        c = mot_counts(est, truth_tracks, gate_px=gate_px)
+        kw = {"region": str(source), "motion": "track"}
+        errors = c.misses + c.false_positives + c.switches
+        rows += [
+            _row("mota", c.mota, errors, c.objects, **kw),
+            _row("motp", c.motp_px, c.dist_sum_px, c.matches, **kw),
+            _row("idf1", c.idf1, 2 * c.idtp, c.objects + c.predictions, **kw),
+            _row("mot_misses", c.misses, c.misses, c.objects, **kw),
+            _row("mot_false_positives", c.false_positives, c.false_positives, c.predictions, **kw),
+        ]
+    return rows
 
 
 def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
@@ -707,9 +965,9 @@ def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px:
         for vid, g in m.sort_values("frame").groupby("vehicle_id"):
             vid = int(vid)
             xt, yt = g["x_px_true"].to_numpy(float), g["y_px_true"].to_numpy(float)
-            err = np.hypot(g["x_filt_px"].to_numpy(float) - xt, g["y_filt_px"].to_numpy(float) - yt)
-            raw = np.hypot(g["x_px_est"].to_numpy(float) - xt, g["y_px_est"].to_numpy(float) - yt)
-            pred = np.hypot(g["x_pred_px"].to_numpy(float) - xt, g["y_pred_px"].to_numpy(float) - yt)
+            err = position_error_px(g["x_filt_px"], g["y_filt_px"], xt, yt)
+            raw = position_error_px(g["x_px_est"], g["y_px_est"], xt, yt)
+            pred = position_error_px(g["x_pred_px"], g["y_pred_px"], xt, yt)
             for f, e1, e2, e3 in zip(g["frame"].to_numpy(), err, raw, pred):
                 rows.append(_row("track_error", e1, e1, 1, frame=int(f), track_id=vid, **kw))
                 if np.isfinite(e2):
@@ -745,9 +1003,13 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame, tracks_df: pd.DataFram
         rows += shift_rows(seq_estimate.shifts_px, camera_df)
     if getattr(seq_estimate, "jitter_px", None) is not None:
         rows += jitter_rows(seq_estimate.jitter_px, camera_df)
+    shape = getattr(seq_estimate, "frame_shape_px", None)
+    if getattr(seq_estimate, "correction_px", None) is not None and shape is not None:
+        rows += stabilisation_rows(seq_estimate.correction_px, camera_df, shape)
     tracks = getattr(seq_estimate, "tracks", None)
     if tracks is not None and tracks_df is not None and len(tracks):
         rows += track_rows(tracks, tracks_df, gate_px=gate_px)
+        rows += mot_rows(tracks, tracks_df, gate_px=gate_px)
     return rows
 
 
@@ -767,6 +1029,8 @@ def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | No
         return float(math.sqrt(total / count))
     if rule == "rate":
         return float(100.0 * total / count)
+    if rule == "complement":
+        return float(1.0 - total / count)
     if hist is None:
         return float("nan")
     return hist_quantile(hist, d.q)

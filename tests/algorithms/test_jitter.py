@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from algorithms.jitter import cumulative_path, fit_flight_path, remove_jitter
+from algorithms.jitter import cumulative_path, fit_flight_path, least_squares_line, remove_jitter
 
 
 def _line_plus_jitter(rng: np.random.Generator, n=30):
@@ -81,3 +81,25 @@ def test_bad_input_rejected():
         remove_jitter(np.zeros((5, 2)), iterations=2)
     with pytest.raises(ValueError, match="NaN"):
         remove_jitter(np.array([[0.0, np.nan]]))
+
+
+def test_least_squares_line_is_exact_on_a_line_skips_nan_and_takes_an_abscissa():
+    t = np.array([3.0, 4.0, 6.0, 9.0, 10.0])
+    y = np.column_stack([2.0 * t - 1.0, -0.5 * t + 7.0])
+    assert np.allclose(least_squares_line(y, t), y, atol=1e-12)
+    noisy = y + np.array([[0.3, -0.2], [-0.3, 0.2], [0.0, 0.0], [0.3, -0.2], [-0.3, 0.2]])
+    fit = least_squares_line(noisy, t)
+    # the residual of a least-squares line is orthogonal to (t, 1)
+    r = noisy - fit
+    assert np.allclose(r.sum(axis=0), 0.0, atol=1e-12) and np.allclose(t @ r, 0.0, atol=1e-12)
+    gap = noisy.copy()
+    gap[2, 0] = np.nan                       # left out of the fit, the line is still evaluated there
+    g = least_squares_line(gap, t)
+    keep = [0, 1, 3, 4]
+    assert np.isfinite(g).all() and np.allclose(g[:, 1], fit[:, 1])
+    assert np.allclose(g[keep, 0], least_squares_line(noisy[keep, :1], t[keep])[:, 0])
+    assert np.isnan(least_squares_line(np.array([1.0, np.nan, np.nan]))).all()
+    # over the frame index by default: the thesis's flight line
+    assert np.allclose(least_squares_line(np.array([0.0, 1.0, 5.0])), [-0.5, 2.0, 4.5])
+    with pytest.raises(ValueError, match=r"t: expected \(5,\) abscissae"):
+        least_squares_line(y, t[:3])

@@ -306,3 +306,30 @@ def test_score_flow_per_region_equals_flow_rows_on_the_region_mask():
             got = _by(rows, metric, region)
             assert got["count"] == r["count"] and got["hist"] == r["hist"], (metric, region)
             assert got["value"] == pytest.approx(r["value"], rel=1e-12, nan_ok=True), (metric, region)
+
+
+# --------------------------------------------------------------------------- stabilisation (Liu et al. 2013)
+
+def test_stabilisation_identity_correction_of_a_steady_flight_scores_one_one_one():
+    n = 30
+    steady = np.tile([0.0, 2.0], (n - 1, 1))   # constant flight: the output does not shake
+    sc = M.stabilisation_scores(np.zeros((n, 2)), steady, (120, 160))
+    assert sc == {"cropping_ratio": 1.0, "distortion": 1.0, "stability": 1.0}
+
+
+def test_stabilisation_crop_follows_the_correction_extent_and_removed_shake_is_stable():
+    rng = np.random.default_rng(4)
+    n = 64
+    i = np.arange(n)
+    shake = np.stack([3.0 * np.sin(2.9 * i), rng.normal(0, 1.0, n)], axis=1)   # high-frequency jitter
+    true_shifts = np.diff(shake, axis=0) + [0.0, 2.0]
+    raw = M.stabilisation_scores(np.zeros((n, 2)), true_shifts, (100, 200))
+    fixed = M.stabilisation_scores(-shake, true_shifts, (100, 200))   # the correction removes it exactly
+    assert raw["stability"] < 0.3 and fixed["stability"] == 1.0
+    extent = shake.max(axis=0) - shake.min(axis=0)
+    assert fixed["cropping_ratio"] == pytest.approx(min((200 - extent[0]) / 200, (100 - extent[1]) / 100))
+    slow = np.stack([5.0 * np.sin(2 * np.pi * i / n), np.zeros(n)], axis=1)  # one slow sway: low frequency
+    assert M.stabilisation_scores(np.zeros((n, 2)), np.diff(slow, axis=0), (100, 200))["stability"] > 0.9
+    assert math.isnan(M.stabilisation_scores(np.zeros((8, 2)), np.ones((7, 2)), (100, 200))["stability"])
+    with pytest.raises(ValueError, match="expected 63 pair shifts for 64 frames"):
+        M.stabilisation_scores(np.zeros((n, 2)), true_shifts[:-1], (100, 200))

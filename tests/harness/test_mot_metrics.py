@@ -1,0 +1,98 @@
+"""CLEAR-MOT and identity metrics against py-motmetrics on the same data, and their summed-count aggregates."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import harness.metrics as M
+from harness.results import rows_to_frame
+
+mm = pytest.importorskip("motmetrics")
+
+
+def _scenario(rng: np.random.Generator, n_frames: int = 40, n_vehicles: int = 4):
+    """Vehicles on straight lines (some leave), noisy tracks with a swap, a gap, a late birth and clutter."""
+    truth, est = [], []
+    start = rng.uniform(20, 200, size=(n_vehicles, 2))
+    vel = rng.uniform(-2, 2, size=(n_vehicles, 2))
+    for f in range(n_frames):
+        for v in range(n_vehicles):
+            x, y = start[v] + vel[v] * f
+            visible = int(not (v == 3 and f > 30))
+            truth.append({"frame": f, "vehicle_id": v + 1, "x_px": x, "y_px": y, "visible": visible})
+            if not visible or (v == 1 and 10 <= f < 14) or (v == 2 and f < 5):
+                continue
+            tid = 100 + v
+            if v in (0, 1) and f >= 25:  # vehicles 1 and 2 exchange track ids
+                tid = 101 if v == 0 else 100
+            if v == 2 and f >= 20:
+                tid = 200                # a new track takes over vehicle 3
+            nx, ny = rng.normal(0, 1.5, 2)
+            est.append({"frame": f, "track_id": tid, "x_filt_px": x + nx, "y_filt_px": y + ny, "source": "multi"})
+        if f % 7 == 3:                   # clutter
+            est.append({"frame": f, "track_id": 900 + f, "x_filt_px": rng.uniform(0, 250),
+                        "y_filt_px": rng.uniform(0, 250), "source": "multi"})
+    est.append({"frame": n_frames, "track_id": 999, "x_filt_px": 5.0, "y_filt_px": 5.0, "source": "multi"})
+    return pd.DataFrame(est), pd.DataFrame(truth)
+
+
+def _oracle(est: pd.DataFrame, truth: pd.DataFrame, gate_px: float):
+    acc = mm.MOTAccumulator(auto_id=False)
+    vis = truth[truth["visible"] == 1]
+    for f in sorted(set(vis["frame"]) | set(est["frame"])):
+        g, e = vis[vis["frame"] == f], est[est["frame"] == f]
+        P, Q = g[["x_px", "y_px"]].to_numpy(float), e[["x_filt_px", "y_filt_px"]].to_numpy(float)
+        D = np.hypot(P[:, None, 0] - Q[None, :, 0], P[:, None, 1] - Q[None, :, 1]).reshape(len(P), len(Q))
+        acc.update(g["vehicle_id"].tolist(), e["track_id"].tolist(), np.where(D <= gate_px, D, np.nan), frameid=int(f))
+    return acc
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_clear_mot_and_idf1_equal_py_motmetrics(seed):
+    est, truth = _scenario(np.random.default_rng(seed))
+    gate = 5.0
+    c = M.mot_counts(est, truth, gate_px=gate)
+    s = mm.metrics.create().compute(
+        _oracle(est, truth, gate),
+        metrics=["num_objects", "num_predictions", "num_detections", "num_misses", "num_false_positives",
+                 "num_switches", "mota", "motp", "idtp", "idfn", "idfp", "idf1"], name="x").iloc[0]
+    # motmetrics' num_detections = its MATCH + SWITCH events: every corresponding pair, our ``matches``
+    assert (c.objects, c.predictions, c.matches, c.misses, c.false_positives, c.switches) == (
+        s.num_objects, s.num_predictions, s.num_detections, s.num_misses, s.num_false_positives, s.num_switches)
+    assert (c.idtp, c.idfn, c.idfp) == (s.idtp, s.idfn, s.idfp)
+    assert c.mota == pytest.approx(s.mota, abs=1e-12)
+    assert c.motp_px == pytest.approx(s.motp, rel=1e-12)   # Euclidean distances given: MOTP in px
+    assert c.idf1 == pytest.approx(s.idf1, rel=1e-12)
+    assert c.switches >= 2 and c.false_positives > 0 and c.misses > 0  # the scenario exercises every count
+
+
+def test_mot_rows_aggregate_from_summed_counts_like_motmetrics_overall():
+    seqs = [_scenario(np.random.default_rng(k), n_frames=20 + 10 * k) for k in range(3)]
+    gate = 5.0
+    frames = [rows_to_frame(M.mot_rows(e, t, gate_px=gate), seed=k) for k, (e, t) in enumerate(seqs)]
+    agg = M.aggregate(pd.concat(frames), by=[]).set_index("metric")
+    mh = mm.metrics.create()
+    overall = mh.compute_many([_oracle(e, t, gate) for e, t in seqs], names=["a", "b", "c"],
+                              metrics=["mota", "motp", "idf1", "num_misses", "num_false_positives"],
+                              generate_overall=True).loc["OVERALL"]
+    assert agg.loc["mota", "value"] == pytest.approx(overall.mota, abs=1e-12)
+    assert agg.loc["motp", "value"] == pytest.approx(overall.motp, rel=1e-12)
+    assert agg.loc["idf1", "value"] == pytest.approx(overall.idf1, rel=1e-12)
+    assert agg.loc["mot_misses", "value"] == overall.num_misses
+    assert agg.loc["mot_false_positives", "value"] == overall.num_false_positives
+    # an average of per-sequence MOTAs is not the pooled MOTA here (sequences differ in length)
+    per_seq = [M.mot_counts(e, t, gate_px=gate).mota for e, t in seqs]
+    assert not math.isclose(np.mean(per_seq), agg.loc["mota", "value"], rel_tol=1e-9)
+
+
+def test_perfect_tracks_score_one_and_an_empty_gate_is_refused():
+    est, truth = _scenario(np.random.default_rng(3))
+    vis = truth[truth["visible"] == 1]
+    perfect = pd.DataFrame({"frame": vis["frame"], "track_id": vis["vehicle_id"], "x_filt_px": vis["x_px"],
+                            "y_filt_px": vis["y_px"], "source": "multi"})
+    c = M.mot_counts(perfect, truth, gate_px=1.0)
+    assert (c.mota, c.motp_px, c.idf1, c.switches) == (1.0, 0.0, 1.0, 0)
+    with pytest.raises(ValueError, match="gate_px: expected > 0"):
+        M.mot_counts(est, truth, gate_px=0.0)
