@@ -262,7 +262,7 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
             "fps": spec.image.fps, "K": K.tolist(), "generator_version": GENERATOR_VERSION,
             "spec_hash": spec_hash(spec), "seed": spec.seed, "name": spec.name,
             "gsd_m": spec.gsd_m(), "texel_m": gen.world.texel_m, "n_vehicles": len(gen.vehicles),
-            "n_buildings": len(gen.world.buildings), **gl_info()}
+            "n_buildings": len(gen.world.buildings), "sensor": gen.sensor_meta(), **gl_info()}
     out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
     sheet = preview.sheet(tracks)
     if sheet is not None:
