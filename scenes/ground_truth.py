@@ -361,7 +361,11 @@ class BandedGroundTruth:
         self.nearest = (np.clip(np.rint(cys), 0, self.canvas_h - 1).astype(np.int64) * self.canvas_w
                         + np.clip(np.rint(cxs), 0, self.canvas_w - 1).astype(np.int64))
         self.band = band_of_rows(cys, self.edges)
-        self.band_pixels = [np.nonzero(self.band == b)[0] for b in range(self.n_bands)]
+        self.band_pixels = []  # per band: (its pixel indices, the same as a slice when contiguous)
+        for b in range(self.n_bands):
+            idx = np.nonzero(self.band == b)[0]
+            contiguous = idx.size and idx[-1] - idx[0] + 1 == idx.size
+            self.band_pixels.append((idx, slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx))
 
     def _transforms(self, vehicle_M_per_band: list[list[np.ndarray]]) -> np.ndarray:
         n_v = len(self.vehicle_boxes)
@@ -382,44 +386,43 @@ class BandedGroundTruth:
         R : (B, 3, 3), C : (B, 3) camera-to-world pose of each band
         vehicle_M_per_band : per band, the vehicle-to-world (4, 4) matrices at its time
         """
-        D_all = np.asarray(depth, np.float32).ravel()[self.nearest].astype(np.float64)
+        D = np.asarray(depth, np.float32).ravel()[self.nearest].astype(np.float64)
         n = self.w * self.h
         ids = np.zeros(n, np.int64)
-        world = np.zeros((n, 3))
-        sky = np.zeros(n, bool)
-        T = self._transforms(vehicle_M_per_band)
-        for b, idx in enumerate(self.band_pixels):
+        Z = np.full(n, np.inf)
+        for b, (idx, take) in enumerate(self.band_pixels):
             if not idx.size:
                 continue
-            Rb, Cb = R[b], C[b]
-            d = self.rays[idx]
-            Db = D_all[idx]
             # ground z = 0: Z = C_z / (g . d), g = R^T (0, 0, -1) the world's down in camera axes
-            gd = d @ (-Rb[2, :])
+            gd = self.rays[take] @ (-R[b][2, :])
             Zg = np.full(idx.size, np.inf)
-            np.divide(Cb[2], gd, out=Zg, where=gd > 0)
-            Z = np.where(np.abs(Db - Zg) <= SURFACE_TOL_REL * Db + SURFACE_TOL_ABS_M, Zg, Db)
-            Z[Db <= 0] = np.inf
-            best_err = np.full(idx.size, np.inf)
+            np.divide(C[b][2], gd, out=Zg, where=gd > 0)
+            Db = D[take]
+            Z[take] = np.where(np.abs(Db - Zg) <= SURFACE_TOL_REL * Db + SURFACE_TOL_ABS_M, Zg, Db)
+        Z[D <= 0] = np.inf
+        best_err = np.full(n, np.inf)
+        for b, (idx, _) in enumerate(self.band_pixels):
+            if not idx.size:
+                continue
             for vid, (boxes, M) in enumerate(zip(self.vehicle_boxes, vehicle_M_per_band[b]), start=1):
-                (x0, y0, x1, y1), _ = self.corner_truth.vehicle_bboxes(Rb, Cb, [M])[0]
-                if not np.isfinite(x0):
+                cand = self._window(R[b], C[b], M, b)
+                if cand is None:
                     continue
-                xn0, xn1 = (x0 - 1 - self.cx) / self.fx, (x1 + 1 - self.cx) / self.fx
-                yn0, yn1 = (y0 - 1 - self.cy) / self.fy, (y1 + 1 - self.cy) / self.fy
-                near = np.nonzero((d[:, 0] >= xn0) & (d[:, 0] <= xn1) & (d[:, 1] >= yn0) & (d[:, 1] <= yn1))[0]
-                if not near.size:
-                    continue
-                Zv = ray_boxes_depth(Rb, Cb, M, boxes, d[near, 0], d[near, 1])
-                Dn = Db[near]
+                Zv = ray_boxes_depth(R[b], C[b], M, boxes, self.rays[cand, 0], self.rays[cand, 1])
+                Dn = D[cand]
                 err = np.abs(Dn - Zv)
-                hit = (err <= SURFACE_TOL_REL * Dn + SURFACE_TOL_ABS_M) & (Dn > 0) & (err < best_err[near])
-                ids[idx[near[hit]]] = vid
-                Z[near[hit]] = Zv[hit]
-                best_err[near[hit]] = err[hit]
-            seen = np.isfinite(Z)
-            sky[idx[~seen]] = True
-            world[idx[seen]] = Cb + (Z[seen, None] * d[seen]) @ Rb.T  # X_w = C + R (Z d)
+                # where two vehicles claim a pixel, the one whose surface agrees better with the render wins
+                hit = (err <= SURFACE_TOL_REL * Dn + SURFACE_TOL_ABS_M) & (Dn > 0) & (err < best_err[cand])
+                ids[cand[hit]] = vid
+                Z[cand[hit]] = Zv[hit]
+                best_err[cand[hit]] = err[hit]
+        sky = ~np.isfinite(Z)
+        Z[sky] = 0.0
+        world = np.empty((n, 3))
+        for b, (idx, take) in enumerate(self.band_pixels):
+            if idx.size:
+                world[take] = C[b] + (Z[take, None] * self.rays[take]) @ R[b].T  # X_w = C + R (Z d)
+        T = self._transforms(vehicle_M_per_band)
         points = world.copy()
         for vid in np.unique(ids[ids > 0]):
             sel = np.nonzero(ids == vid)[0]
@@ -430,6 +433,27 @@ class BandedGroundTruth:
         return BandedSurface(instances=ids.reshape(self.h, self.w).astype(np.uint16), points=points,
                              world_points=world, ids=ids, band=self.band.copy(), sky=sky,
                              depth=np.asarray(depth, np.float32), RT=RT, C=np.asarray(C, np.float64), T=T)
+
+    def _window(self, R: np.ndarray, C: np.ndarray, M: np.ndarray, band: int) -> np.ndarray | None:
+        """Output pixels of ``band`` that may see the vehicle at ``M``: its projected box, distorted."""
+        (x0, y0, x1, y1), _ = self.corner_truth.vehicle_bboxes(R, C, [M])[0]
+        if not np.isfinite(x0):
+            return None
+        x0, y0, x1, y1 = x0 - 1, y0 - 1, x1 + 1, y1 + 1
+        if self.lens is not None:
+            # a radial distortion maps the box's outline around the image of the box
+            t = np.linspace(0.0, 1.0, 16)
+            bx = np.concatenate([x0 + (x1 - x0) * t, np.full(16, x1), x1 - (x1 - x0) * t, np.full(16, x0)])
+            by = np.concatenate([np.full(16, y0), y0 + (y1 - y0) * t, np.full(16, y1), y1 - (y1 - y0) * t])
+            bx, by = self.lens.distort_canvas_px(bx, by)
+            x0, x1, y0, y1 = bx.min() - 1, bx.max() + 1, by.min() - 1, by.max() + 1
+        c0, c1 = max(0, int(np.floor(x0))), min(self.w, int(np.ceil(x1)) + 1)
+        r0, r1 = max(0, int(np.floor(y0))), min(self.h, int(np.ceil(y1)) + 1)
+        if c0 >= c1 or r0 >= r1:
+            return None
+        cand = (np.arange(r0, r1)[:, None] * self.w + np.arange(c0, c1)[None, :]).ravel()
+        cand = cand[self.band[cand] == band]
+        return cand if cand.size else None
 
     def project(self, points: np.ndarray, ids: np.ndarray, s: BandedSurface,
                 band_init: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -445,15 +469,23 @@ class BandedGroundTruth:
         ok = np.zeros(n, bool)
         b = np.asarray(band_init, np.int64).copy()
         todo = np.arange(n)
+        static = not np.any(ids)
+        # X_c = R^T (X_w - C) = [R^T | -R^T C] (X_w, 1), one (3, 4) matrix per band
+        P = np.concatenate([s.RT, -np.einsum("bij,bj->bi", s.RT, s.C)[:, :, None]], axis=2).reshape(-1, 12)
         for _ in range(MAX_BAND_ITERATIONS):
             bt = b[todo]
-            Tm = s.T[ids[todo], bt]
-            W = np.einsum("nij,nj->ni", Tm[:, :, :3], points[todo]) + Tm[:, :, 3]
-            Xc = np.einsum("nij,nj->ni", s.RT[bt], W - s.C[bt])  # X_c = R^T (X_w - C)
-            zz = Xc[:, 2]
+            if static:  # the world does not move: X_w = points
+                W = points if todo.size == n else points[todo]
+            else:
+                Tm = s.T[ids[todo], bt]
+                W = np.einsum("nij,nj->ni", Tm[:, :, :3], points[todo]) + Tm[:, :, 3]
+            Pb = P[bt]
+            Xc = [Pb[:, 4 * k] * W[:, 0] + Pb[:, 4 * k + 1] * W[:, 1] + Pb[:, 4 * k + 2] * W[:, 2]
+                  + Pb[:, 4 * k + 3] for k in range(3)]
+            zz = Xc[2]
             with np.errstate(divide="ignore", invalid="ignore"):
-                xx = self.fx * Xc[:, 0] / zz + self.cx
-                yy = self.fy * Xc[:, 1] / zz + self.cy
+                xx = self.fx * Xc[0] / zz + self.cx
+                yy = self.fy * Xc[1] / zz + self.cy
             x[todo], y[todo], z[todo] = xx, yy, zz
             new = band_of_rows(np.where(zz > 0, yy, 0.0), self.edges)
             same = new == bt
