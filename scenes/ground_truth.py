@@ -479,7 +479,7 @@ class BandedGroundTruth:
             else:
                 Tm = s.T[ids[todo], bt]
                 W = np.einsum("nij,nj->ni", Tm[:, :, :3], points[todo]) + Tm[:, :, 3]
-            Pb = P[bt]
+            Pb = P[bt] if len(P) > 1 else P  # one band (a lens, no rolling shutter): no gather
             Xc = [Pb[:, 4 * k] * W[:, 0] + Pb[:, 4 * k + 1] * W[:, 1] + Pb[:, 4 * k + 2] * W[:, 2]
                   + Pb[:, 4 * k + 3] for k in range(3)]
             zz = Xc[2]
