@@ -19,6 +19,13 @@ For a point ``X0 = Z d`` in camera t coordinates, with camera-to-world poses
 
 A pixel is valid when ``(x1, y1)`` lies in frame t+1 and the point is not
 behind what frame t+1 rendered there (z-buffer test with a relative tolerance).
+
+:class:`GroundTruth` is the pinhole, global-shutter case (one pose per frame, rays
+affine in the pixel). :class:`BandedGroundTruth` is the general one the sensor needs
+(see :mod:`scenes.sensor`): a rolling shutter gives each band of rows its own pose
+and time, a distorting lens bends each pixel's ray to ``U(p)``; the same equations
+are solved per pixel ray, the band a point lands in at t+1 by a fixed point over
+bands, and flow, valid and instances are given on the distorted grid.
 """
 
 from __future__ import annotations

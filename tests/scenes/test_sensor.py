@@ -407,3 +407,17 @@ def test_sequence_records_the_sensor_for_readers(tmp_path):
     assert meta["k1"] == -0.1 and meta["k2"] == 0.02 and meta["line_delay_s"] == 0.0
     assert meta["exposure_s"] == 0.02 and meta["subframes"] == 5
     assert (seq.camera.k1 == -0.1).all() and (seq.camera.k2 == 0.02).all()
+
+
+def test_realistic_preset_has_every_effect_and_sweep_sensor_sweeps_each():
+    from harness.suites import expand, load_suite
+
+    sensor = load_scene_spec("realistic").sensor
+    defaults = type(sensor)()
+    for group in type(sensor).model_fields:
+        assert getattr(sensor, group) != getattr(defaults, group), f"realistic leaves sensor.{group} off"
+    swept = {c.variant.sweep_param for c in expand(load_suite("sweep-sensor"))}
+    for effect in ("motion_blur.exposure_s", "rolling_shutter.line_delay_s", "lens.k1", "haze.extinction_per_km",
+                   "noise.full_well_e", "compression.jpeg_quality", "compression.h264_crf"):
+        assert f"sensor.{effect}" in swept, effect
+    assert load_scene_spec("noisy").sensor.noise.gaussian_std > 0
