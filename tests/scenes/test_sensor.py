@@ -417,7 +417,8 @@ def test_realistic_preset_has_every_effect_and_sweep_sensor_sweeps_each():
     for group in type(sensor).model_fields:
         assert getattr(sensor, group) != getattr(defaults, group), f"realistic leaves sensor.{group} off"
     swept = {c.variant.sweep_param for c in expand(load_suite("sweep-sensor"))}
-    for effect in ("motion_blur.exposure_s", "rolling_shutter.line_delay_s", "lens.k1", "haze.extinction_per_km",
+    for effect in ("motion_blur.exposure_s", "rolling_shutter.line_delay_s", "lens.k1", "lens.blur_sigma_px",
+                   "haze.extinction_per_km",
                    "noise.full_well_e", "compression.jpeg_quality", "compression.h264_crf"):
         assert f"sensor.{effect}" in swept, effect
     assert load_scene_spec("noisy").sensor.noise.gaussian_std > 0
