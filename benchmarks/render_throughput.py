@@ -1,16 +1,20 @@
-"""Render throughput of the scene generator: frames/s for render alone, render + ground truth, and file writing.
+"""Render throughput of the scene generator: one row per sensor effect, against flat nominal in the same run.
 
 Run single-threaded, as one worker of a process pool would run:
 
-    cd /work/main && LP_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
-        /work/venv/bin/python benchmarks/render_throughput.py [--preset nominal] [--frames 40] [--runs 3]
+    cd /work/main && /work/main/.venv/bin/python benchmarks/render_throughput.py \\
+        [--preset nominal] [--frames 20] [--runs 3] [--only flat,blur,...]
 
-(The script sets these variables itself before numpy, cv2 and llvmpipe load,
-and calls cv2.setNumThreads(1).) Figures are medians over ``--runs`` runs of
-the same sequence on the process's one renderer; the world (texture, meshes)
-is built once per run and not counted. CPU-second rates (process time) are
-given beside wall-clock rates because a loaded shared machine slows the wall
-clock; both are medians.
+(The script sets LP_NUM_THREADS, OMP_NUM_THREADS, ... to 1 itself before numpy, cv2
+and llvmpipe load, and calls cv2.setNumThreads(1).) Each row streams
+``SceneGenerator(spec).frames()`` of the preset with one sensor effect switched on:
+render, sensor and ground truth, no file writing. The world (texture, meshes) is
+built before the clock starts. Figures are frames per CPU-second (process time: a
+loaded shared machine slows the wall clock, not the CPU time) and wall frames/s,
+medians over ``--runs`` runs; the runs of all rows are interleaved, so every row
+meets the same load, and the ratio to the flat row is the median of the per-run
+ratios. The last two rows are the whole ``render_sequence`` (files, preview,
+manifest) of flat nominal and the render alone, for the file-writing cost.
 """
 
 from __future__ import annotations
@@ -36,52 +40,93 @@ from scenes.generate import SceneGenerator  # noqa: E402
 from scenes.sequence import render_sequence  # noqa: E402
 from scenes.spec import load_scene_spec  # noqa: E402
 
+# name -> (overrides, what the row shows)
+EFFECTS: dict[str, tuple[dict, str]] = {
+    "flat": ({}, "flat nominal, no sensor effect"),
+    "blur": ({"sensor.motion_blur.exposure_s": 0.02, "sensor.motion_blur.subframes": 5},
+             "motion blur, 5 sub-frame renders"),
+    "rolling": ({"sensor.rolling_shutter.line_delay_s": 3e-5, "sensor.rolling_shutter.band_rows": 16},
+                "rolling shutter, bands of 16 rows"),
+    "lens": ({"sensor.lens.k1": -0.1, "sensor.lens.k2": 0.01}, "lens distortion k1 -0.1, k2 0.01"),
+    "optics": ({"sensor.lens.blur_sigma_px": 0.7}, "optics blur 0.7 px"),
+    "haze": ({"sensor.haze.extinction_per_km": 2.0}, "haze 2 per km"),
+    "noise": ({"sensor.noise.gaussian_std": 2.0, "sensor.noise.full_well_e": 4000.0}, "shot + read noise"),
+    "jpeg": ({"sensor.compression.codec": "jpeg", "sensor.compression.jpeg_quality": 75}, "JPEG quality 75"),
+    "h264": ({"sensor.compression.codec": "h264", "sensor.compression.h264_crf": 23}, "H.264 crf 23 (libx264)"),
+    "realistic": (None, "the realistic preset's sensor (all of the above)"),
+}
+
+
+def _spec(preset: str, frames: int, name: str):
+    overrides, _ = EFFECTS[name]
+    if overrides is None:  # the realistic preset's sensor section on this preset's scene
+        sensor = load_scene_spec("realistic").sensor.model_dump()
+        base = load_scene_spec(preset, {"image.n_frames": frames})
+        return load_scene_spec({**base.model_dump(mode="json"), "sensor": sensor})
+    return load_scene_spec(preset, {"image.n_frames": frames, **overrides})
+
+
+def _stream(spec) -> tuple[float, float]:
+    """(wall s, CPU s) of generating every frame with its truth; world built before the clock."""
+    gen = SceneGenerator(spec)
+    gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))  # texture upload
+    t0, c0 = time.perf_counter(), time.process_time()
+    for _fo in gen.frames():
+        pass
+    return time.perf_counter() - t0, time.process_time() - c0
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="nominal")
-    ap.add_argument("--frames", type=int, default=40)
+    ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--only", default=",".join(EFFECTS), help=f"comma-separated rows of: {', '.join(EFFECTS)}")
     args = ap.parse_args()
+    names = [n.strip() for n in args.only.split(",") if n.strip()]
+    unknown = sorted(set(names) - set(EFFECTS))
+    if unknown:
+        ap.error(f"--only: unknown rows {unknown}; valid: {', '.join(EFFECTS)}")
+    if "flat" not in names:
+        names.insert(0, "flat")
     cv2.setNumThreads(1)
-    spec = load_scene_spec(args.preset, {"image.n_frames": args.frames})
-    n = spec.image.n_frames
-    wall = {k: [] for k in ("render", "truth", "write", "total")}
-    cpu = {k: [] for k in ("render", "truth")}
+    specs = {n: _spec(args.preset, args.frames, n) for n in names}
+    n = args.frames
+    cpu = {k: [] for k in names}
+    wall = {k: [] for k in names}
+    ratio = {k: [] for k in names}
+    files_wall, render_cpu = [], []
+    load_before = os.getloadavg()[0]
     for _ in range(args.runs):
-        gen = SceneGenerator(spec)
-        gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))  # texture upload
-        t0, c0 = time.perf_counter(), time.process_time()
+        for name in names:
+            w, c = _stream(specs[name])
+            wall[name].append(n / w)
+            cpu[name].append(n / c)
+        for name in names:
+            ratio[name].append(cpu[name][-1] / cpu["flat"][-1])
+        gen = SceneGenerator(specs["flat"])
+        gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))
+        c0 = time.process_time()
         for i in range(n):
             gen.renderer.render(gen.path.R[i], gen.path.C[i], gen.vehicle_matrices(float(gen.path.t_s[i])))
-        wall["render"].append(n / (time.perf_counter() - t0))
-        cpu["render"].append(n / (time.process_time() - c0))
-
-        gen = SceneGenerator(spec)
-        gen.renderer.render(gen.path.R[0], gen.path.C[0], gen.vehicle_matrices(0.0))
-        t0, c0 = time.perf_counter(), time.process_time()
-        for _fo in gen.frames():
-            pass
-        wall["truth"].append(n / (time.perf_counter() - t0))
-        cpu["truth"].append(n / (time.process_time() - c0))
-
+        render_cpu.append(n / (time.process_time() - c0))
         with tempfile.TemporaryDirectory() as tmp:
             timings: dict = {}
-            render_sequence(spec, Path(tmp) / "seq", timings=timings)
-            wall["total"].append(n / (timings["render_truth_s"] + timings["write_s"]))
-            wall["write"].append(n / timings["write_s"])
-    med = {k: statistics.median(v) for k, v in wall.items()}
-    med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
-    print(f"preset {args.preset!r}, {spec.image.width_px}x{spec.image.height_px}, {n} frames, "
-          f"lighting {spec.photometry.lighting}, median of {args.runs} runs, one thread (LP_NUM_THREADS=1, "
-          f"OMP/OPENBLAS=1, cv2.setNumThreads(1)); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    print("                           wall frames/s   frames per CPU-second")
-    print(f"  render alone             {med['render']:10.1f}   {med_cpu['render']:10.1f}")
-    print(f"  render + ground truth    {med['truth']:10.1f}   {med_cpu['truth']:10.1f}")
-    print(f"  file writing alone       {med['write']:10.1f}")
-    print(f"  render_sequence total    {med['total']:10.1f}   (world build, truth, files, preview, manifest)")
-    print(f"  ground truth costs {med['render'] / med['truth']:.2f}x render alone (wall), "
-          f"{med_cpu['render'] / med_cpu['truth']:.2f}x (CPU)")
+            render_sequence(specs["flat"], Path(tmp) / "seq", timings=timings)
+            files_wall.append(n / (timings["render_truth_s"] + timings["write_s"]))
+    flat = specs["flat"]
+    print(f"preset {args.preset!r}, {flat.image.width_px}x{flat.image.height_px}, {n} frames, "
+          f"median of {args.runs} interleaved runs, one thread (LP_NUM_THREADS=1, OMP/OPENBLAS=1, "
+          f"cv2.setNumThreads(1)); load average {load_before:.1f} -> {os.getloadavg()[0]:.1f} "
+          f"on {os.cpu_count()} cores")
+    print(f"  {'row':<11} {'frames/CPU-s':>12} {'wall frames/s':>14} {'x flat':>7}   what")
+    for name in names:
+        print(f"  {name:<11} {statistics.median(cpu[name]):12.2f} {statistics.median(wall[name]):14.2f} "
+              f"{statistics.median(ratio[name]):7.3f}   {EFFECTS[name][1]} (render + sensor + truth)")
+    print(f"  {'render':<11} {statistics.median(render_cpu):12.2f} {'':>14} "
+          f"{statistics.median(render_cpu) / statistics.median(cpu['flat']):7.3f}   flat nominal, render alone")
+    print(f"  {'files':<11} {'':>12} {statistics.median(files_wall):14.2f} {'':>7}   flat nominal, whole "
+          "render_sequence (truth, PNG/.flo, preview, manifest)")
 
 
 if __name__ == "__main__":

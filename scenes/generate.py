@@ -3,6 +3,12 @@
 :class:`SceneGenerator` streams: it holds at most two frames' surfaces, so long
 sequences stay within a few frames of memory. :mod:`scenes.sequence` writes
 what it yields.
+
+The sensor (:mod:`scenes.sensor`) shapes how a frame is rendered: without a rolling
+shutter or lens distortion one render (or the mean of the motion-blur sub-frame renders)
+of the image, with the pinhole truth of :class:`GroundTruth`; with either, the
+undistorted canvas is rendered band by band, each band at its own time, and
+:class:`BandedGroundTruth` gives the truth per band and on the distorted grid.
 """
 
 from __future__ import annotations
@@ -13,16 +19,27 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from scenes.ground_truth import FrameSurface, GroundTruth, PairTruth
+from scenes.ground_truth import BandedGroundTruth, FrameSurface, GroundTruth, PairTruth
 from scenes.motion import camera_path
 from scenes.render import SceneRenderer
+from scenes.sensor import (
+    Compressor,
+    LensGeometry,
+    add_noise,
+    apply_haze,
+    band_edges,
+    band_times_s,
+    pose_at,
+    subframe_offsets_s,
+)
 from scenes.spec import SceneSpec
 from scenes.world import build_world, place_vehicles, vehicle_boxes
 
 __all__ = ["SceneGenerator", "FrameOutput", "CAMERA_COLUMNS", "TRACK_COLUMNS"]
 
 CAMERA_COLUMNS = ["frame", "t_s", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz", "fx_px", "fy_px", "cx_px",
-                  "cy_px", "jitter_x_px", "jitter_y_px", "global_dx_px", "global_dy_px"]
+                  "cy_px", "jitter_x_px", "jitter_y_px", "global_dx_px", "global_dy_px", "k1", "k2",
+                  "line_delay_s", "exposure_s"]
 TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
                  "bbox_y1_px", "visible", "speed_mps", "parked"]
 
@@ -54,7 +71,7 @@ class FrameOutput:
     """One generated frame, and the truth of the pair that ends at it (None for frame 0)."""
 
     index: int
-    rgb: np.ndarray  # (H, W, 3) uint8, after photometry
+    rgb: np.ndarray  # (H, W, 3) uint8, after the sensor
     instances: np.ndarray  # (H, W) uint16
     pair_index: int | None  # i - 1 when `pair` is the truth of (i - 1) -> i
     pair: PairTruth | None
@@ -82,56 +99,163 @@ class SceneGenerator:
         lowest_m = float(self.path.C[:, 2].min())
         znear = max(0.1, 0.5 * (lowest_m - max(top_m, spec.vehicles.height_m)))
         zfar = 20.0 * float(self.path.C[:, 2].max()) + 10.0
-        self.renderer = SceneRenderer(spec, self.world, self.vehicles, self.path.K, znear_m=znear, zfar_m=zfar)
-        self.truth = GroundTruth(self.path.K, img.width_px, img.height_px,
-                                 [vehicle_boxes(*v.size_m) for v in self.vehicles])
+        sensor = spec.sensor
+        boxes = [vehicle_boxes(*v.size_m) for v in self.vehicles]
+        self.truth = GroundTruth(self.path.K, img.width_px, img.height_px, boxes)
+        self.lens = (LensGeometry.build(self.path.K, img.width_px, img.height_px, k1=sensor.lens.k1,
+                                        k2=sensor.lens.k2) if sensor.lens.k1 or sensor.lens.k2 else None)
+        self.rolling = sensor.rolling_shutter.line_delay_s > 0
+        self.banded = self.rolling or self.lens is not None
+        self.subframe_offsets_s = subframe_offsets_s(sensor.motion_blur.exposure_s, sensor.motion_blur.subframes)
+        view = None
+        if self.banded:
+            self.canvas_K = self.lens.canvas_K if self.lens is not None else self.path.K
+            canvas_w, canvas_h = self.lens.canvas_size_px if self.lens is not None else (img.width_px,
+                                                                                        img.height_px)
+            rows = sensor.rolling_shutter.band_rows if self.rolling else canvas_h
+            self.edges = band_edges(canvas_h, min(rows, canvas_h))
+            view = (canvas_w, int(np.diff(self.edges).max()))
+            self.banded_truth = BandedGroundTruth(self.canvas_K, img.width_px, img.height_px, self.edges, boxes,
+                                                  lens=self.lens)
+        self.renderer = SceneRenderer(spec, self.world, self.vehicles, self.path.K, znear_m=znear, zfar_m=zfar,
+                                      view_size_px=view)
         self.global_shift_px = np.full((img.n_frames, 2), np.nan)
         self.track_rows: list[tuple] = []
 
     def vehicle_matrices(self, t_s: float) -> list[np.ndarray]:
         return [v.matrix(t_s) for v in self.vehicles]
 
-    def _photometry(self, rgb: np.ndarray, t_s: float) -> np.ndarray:
-        ph = self.spec.photometry
-        if ph.blur_sigma_px == 0 and ph.noise_std == 0 and ph.brightness_drift_per_s == 0:
+    def pose_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Camera pose (R camera-to-world, C) at any time (the frame poses at frame times)."""
+        return pose_at(self.path.t_s, self.path.R, self.path.C, t_s)
+
+    def _exposure_times_s(self, i: int) -> np.ndarray:
+        """Read time of each band of frame i (one band, the frame time, without a rolling shutter)."""
+        t = float(self.path.t_s[i])
+        if not self.rolling:
+            return np.full(len(self.edges) - 1 if self.banded else 1, t)
+        return band_times_s(t, self.edges, cy_px=float(self.canvas_K[1, 2]),
+                            line_delay_s=self.spec.sensor.rolling_shutter.line_delay_s)
+
+    def _expose(self, render, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]:
+        """Light collected over the exposure centred on ``t_s``: the mean of the sub-frame renders.
+
+        Returns rgb (uint8 for one render, float32 for a mean), the depth and pose of the
+        middle render (at ``t_s``: the truth's instant) and the vehicle matrices then.
+        """
+        acc = None
+        for offset in self.subframe_offsets_s:
+            t = t_s + float(offset)
+            R, C = self.pose_at(t)
+            Ms = self.vehicle_matrices(t)
+            rgb, depth = render(R, C, Ms)
+            if offset == 0:
+                mid = (depth, R, C, Ms)
+            if len(self.subframe_offsets_s) == 1:
+                return (rgb, *mid)
+            acc = rgb.astype(np.float32) if acc is None else acc + rgb
+        return (acc * np.float32(1.0 / len(self.subframe_offsets_s)), *mid)
+
+    def _light(self, rgb: np.ndarray, depth: np.ndarray, t_s: float, K: np.ndarray) -> np.ndarray:
+        """Illumination gain and haze on the (canvas) render; float32 out, or the input when both are off."""
+        light, haze = self.spec.photometry, self.spec.sensor.haze
+        if light.brightness_drift_per_s == 0 and haze.extinction_per_km == 0:
             return rgb
         img = rgb.astype(np.float32)
-        if ph.blur_sigma_px > 0:
-            img = cv2.GaussianBlur(img, (0, 0), ph.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
-        if ph.brightness_drift_per_s != 0:
-            img *= 1.0 + ph.brightness_drift_per_s * t_s
-        if ph.noise_std > 0:
-            img += self.rng_noise.standard_normal(img.shape, dtype=np.float32) * np.float32(ph.noise_std)
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        if light.brightness_drift_per_s != 0:
+            img *= np.float32(1.0 + light.brightness_drift_per_s * t_s)
+        if haze.extinction_per_km > 0:
+            h, w = depth.shape
+            xn = (np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])
+            yn = (np.arange(h, dtype=np.float32) - np.float32(K[1, 2])) / np.float32(K[1, 1])
+            # distance along the line of sight = z depth * |(xn, yn, 1)|; nothing rendered = infinitely far
+            distance = np.where(depth > 0, depth, np.float32(np.inf)) * np.sqrt(
+                np.float32(1.0) + xn[None, :] ** 2 + yn[:, None] ** 2)
+            apply_haze(img, distance, extinction_per_km=haze.extinction_per_km, airlight=haze.airlight)
+        return img
+
+    def _lens_and_sensor(self, img: np.ndarray) -> np.ndarray:
+        """Distortion, optics blur, noise, 8 bits, compression: the frame as stored."""
+        sensor = self.spec.sensor
+        if self.lens is not None:
+            img = self.lens.resample(img)
+        if sensor.lens.blur_sigma_px > 0:
+            img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), sensor.lens.blur_sigma_px,
+                                   borderType=cv2.BORDER_REFLECT)
+        noise = sensor.noise
+        if noise.gaussian_std > 0 or noise.full_well_e > 0:
+            img = add_noise(img.astype(np.float32), self.rng_noise, gaussian_std=noise.gaussian_std,
+                            full_well_e=noise.full_well_e)
+        if img.dtype != np.uint8:
+            img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        if self.compressor is not None:
+            img = self.compressor(img)
+        return img
 
     def render_frame(self, i: int) -> tuple[np.ndarray, FrameSurface]:
-        """Render frame i: clean rgb (before photometry) and its surface analysis."""
+        """Render frame i with the pinhole global shutter: light (before lens and sensor) and its surfaces."""
+        if self.banded:
+            raise RuntimeError("render_frame: this spec has a rolling shutter or lens distortion; use frames()")
         t = float(self.path.t_s[i])
-        Ms = self.vehicle_matrices(t)
-        R, C = self.path.R[i], self.path.C[i]
-        rgb, depth = self.renderer.render(R, C, Ms)
-        return rgb, self.truth.surface(depth, R, C, Ms)
+        rgb, depth, R, C, Ms = self._expose(self.renderer.render, t)
+        surf = self.truth.surface(depth, R, C, Ms)
+        return self._light(rgb, depth, t, self.path.K), surf
 
-    def _tracks(self, i: int, surf: FrameSurface) -> None:
+    def render_banded_frame(self, i: int):
+        """Render frame i band by band on the canvas: light (before lens and sensor) and its :class:`BandedSurface`."""
+        K = self.canvas_K
+        times = self._exposure_times_s(i)
+        canvas_h = int(self.edges[-1])
+        rgb = depth = None
+        Rs, Cs, Ms_per_band = [], [], []
+        for b, t_b in enumerate(times):
+            r0, r1 = int(self.edges[b]), int(self.edges[b + 1])
+
+            def render(R, C, Ms, r0=r0):
+                return self.renderer.render_view(R, C, Ms, cx_px=float(K[0, 2]), cy_px=float(K[1, 2]) - r0)
+
+            band_rgb, band_depth, R, C, Ms = self._expose(render, float(t_b))
+            if rgb is None:
+                rgb = np.empty((canvas_h, band_rgb.shape[1], 3), band_rgb.dtype)
+                depth = np.empty((canvas_h, band_depth.shape[1]), np.float32)
+            rgb[r0:r1] = band_rgb[:r1 - r0]
+            depth[r0:r1] = band_depth[:r1 - r0]
+            Rs.append(R)
+            Cs.append(C)
+            Ms_per_band.append(Ms)
+        surf = self.banded_truth.surface(depth, np.asarray(Rs), np.asarray(Cs), Ms_per_band)
+        return self._light(rgb, depth, float(self.path.t_s[i]), K), surf
+
+    def _tracks(self, i: int, surf) -> None:
         t = float(self.path.t_s[i])
         counts = np.bincount(surf.instances.ravel(), minlength=len(self.vehicles) + 1)
-        boxes = self.truth.vehicle_bboxes(surf.R, surf.C, surf.vehicle_M)
+        if self.banded:
+            boxes = self.banded_truth.vehicle_bboxes(surf)
+        else:
+            boxes = self.truth.vehicle_bboxes(surf.R, surf.C, surf.vehicle_M)
         for vid, (v, (bbox, centre)) in enumerate(zip(self.vehicles, boxes), start=1):
             self.track_rows.append((i, vid, centre[0], centre[1], *bbox, int(counts[vid] > 0),
                                     v.speed(t), int(v.parked)))
 
     def frames(self) -> Iterator[FrameOutput]:
         """Yield every frame in order, each with the truth of the pair ending at it."""
+        img, comp = self.spec.image, self.spec.sensor.compression
+        self.compressor = None
+        if comp.codec != "none":
+            self.compressor = Compressor(comp.codec, width_px=img.width_px, height_px=img.height_px, fps=img.fps,
+                                         jpeg_quality=comp.jpeg_quality, h264_crf=comp.h264_crf,
+                                         h264_gop=comp.h264_gop)
+        truth = self.banded_truth if self.banded else self.truth
         prev = None
-        for i in range(self.spec.image.n_frames):
-            rgb, surf = self.render_frame(i)
+        for i in range(img.n_frames):
+            light, surf = self.render_banded_frame(i) if self.banded else self.render_frame(i)
             self._tracks(i, surf)
             pair = None
             if prev is not None:
-                pair, shift = self.truth.pair(prev, surf)
+                pair, shift = truth.pair(prev, surf)
                 self.global_shift_px[i - 1] = shift
-            yield FrameOutput(index=i, rgb=self._photometry(rgb, float(self.path.t_s[i])),
-                              instances=surf.instances, pair_index=None if prev is None else i - 1, pair=pair)
+            yield FrameOutput(index=i, rgb=self._lens_and_sensor(light), instances=surf.instances,
+                              pair_index=None if prev is None else i - 1, pair=pair)
             prev = surf
 
     def camera_rows(self) -> list[dict]:
@@ -149,8 +273,24 @@ class SceneGenerator:
                          "cy_px": float(K[1, 2]), "jitter_x_px": float(self.path.jitter_px[i, 0]),
                          "jitter_y_px": float(self.path.jitter_px[i, 1]),
                          "global_dx_px": None if last else float(self.global_shift_px[i, 0]),
-                         "global_dy_px": None if last else float(self.global_shift_px[i, 1])})
+                         "global_dy_px": None if last else float(self.global_shift_px[i, 1]),
+                         **self._sensor_columns()})
         return rows
+
+    def _sensor_columns(self) -> dict:
+        s = self.spec.sensor
+        return {"k1": s.lens.k1, "k2": s.lens.k2, "line_delay_s": s.rolling_shutter.line_delay_s,
+                "exposure_s": s.motion_blur.exposure_s}
+
+    def sensor_meta(self) -> dict:
+        """What a reader needs to use the frames' geometry: distortion, readout and exposure (meta.json)."""
+        s = self.spec.sensor
+        return {**self._sensor_columns(),
+                "band_rows": s.rolling_shutter.band_rows if self.rolling else None,
+                "subframes": len(self.subframe_offsets_s),
+                "distortion_model": "brown-conrady radial: x_d = x_n (1 + k1 r^2 + k2 r^4), normalised by K",
+                "row_time": "t_frame + (y - cy) * line_delay_s, y the undistorted row, in bands of band_rows",
+                "truth_time": "frame time (mid-exposure) to frame time; per band under a rolling shutter"}
 
     def track_table(self) -> list[dict]:
         return [dict(zip(TRACK_COLUMNS, r)) for r in self.track_rows]

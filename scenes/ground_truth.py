@@ -19,6 +19,13 @@ For a point ``X0 = Z d`` in camera t coordinates, with camera-to-world poses
 
 A pixel is valid when ``(x1, y1)`` lies in frame t+1 and the point is not
 behind what frame t+1 rendered there (z-buffer test with a relative tolerance).
+
+:class:`GroundTruth` is the pinhole, global-shutter case (one pose per frame, rays
+affine in the pixel). :class:`BandedGroundTruth` is the general one the sensor needs
+(see :mod:`scenes.sensor`): a rolling shutter gives each band of rows its own pose
+and time, a distorting lens bends each pixel's ray to ``U(p)``; the same equations
+are solved per pixel ray, the band a point lands in at t+1 by a fixed point over
+bands, and flow, valid and instances are given on the distorted grid.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import numpy as np
 from scenes.motion import project
 from scenes.world import Box
 
-__all__ = ["PairTruth", "FrameSurface", "GroundTruth"]
+__all__ = ["PairTruth", "FrameSurface", "GroundTruth", "BandedSurface", "BandedGroundTruth", "ray_boxes_depth"]
 
 # depth agreement between the render and an analytic surface, relative + absolute (metres)
 SURFACE_TOL_REL = 2e-3
@@ -80,6 +87,34 @@ class FrameSurface:
     C: np.ndarray
     vehicle_M: list
     vehicle_pixels: list
+
+
+def ray_boxes_depth(R: np.ndarray, C: np.ndarray, M: np.ndarray, boxes: list[Box], xn: np.ndarray,
+                    yn: np.ndarray) -> np.ndarray:
+    """Depth Z of the nearest hit of the rays ``d = (xn, yn, 1)`` with boxes given in a vehicle's frame.
+
+    Slab method. ``R, C``: camera-to-world rotation (3, 3) and centre (3,); ``M``: vehicle-to-world
+    (4, 4); ``xn, yn``: broadcastable arrays of normalised ray components (camera axes).
+    Returns float64 of their broadcast shape, inf where no box is hit.
+    """
+    Minv_R = M[:3, :3].T
+    o = Minv_R @ (C - M[:3, 3])  # camera centre in the vehicle frame
+    A = Minv_R @ R  # camera axes -> vehicle axes
+    r = [A[k, 0] * xn + A[k, 1] * yn + A[k, 2] for k in range(3)]  # ray directions, local
+    best = np.full(np.broadcast_shapes(np.shape(xn), np.shape(yn)), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for b in boxes:
+            c, hs = np.asarray(b.centre), np.asarray(b.size) / 2
+            t_near = np.full_like(best, -np.inf)
+            t_far = np.full_like(best, np.inf)
+            for k in range(3):
+                ta = (c[k] - hs[k] - o[k]) / r[k]
+                tb = (c[k] + hs[k] - o[k]) / r[k]
+                t_near = np.maximum(t_near, np.minimum(ta, tb))
+                t_far = np.minimum(t_far, np.maximum(ta, tb))
+            hit = (t_near <= t_far) & (t_near > 0)
+            best = np.where(hit & (t_near < best), t_near, best)
+    return best
 
 
 class GroundTruth:
@@ -178,26 +213,7 @@ class GroundTruth:
 
     def _ray_boxes(self, R, C, M, boxes, r0, r1, c0, c1) -> np.ndarray:
         """Depth of the nearest hit of each pixel ray in the window with the vehicle's boxes (slab method)."""
-        Minv_R = M[:3, :3].T
-        o = Minv_R @ (C - M[:3, 3])  # camera centre in the vehicle frame
-        A = Minv_R @ R  # camera axes -> vehicle axes
-        xn = self.xn[c0:c1][None, :]
-        yn = self.yn[r0:r1][:, None]
-        r = [A[k, 0] * xn + A[k, 1] * yn + A[k, 2] for k in range(3)]  # ray directions, local
-        best = np.full((r1 - r0, c1 - c0), np.inf)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for b in boxes:
-                c, hs = np.asarray(b.centre), np.asarray(b.size) / 2
-                t_near = np.full_like(best, -np.inf)
-                t_far = np.full_like(best, np.inf)
-                for k in range(3):
-                    ta = (c[k] - hs[k] - o[k]) / r[k]
-                    tb = (c[k] + hs[k] - o[k]) / r[k]
-                    t_near = np.maximum(t_near, np.minimum(ta, tb))
-                    t_far = np.minimum(t_far, np.maximum(ta, tb))
-                hit = (t_near <= t_far) & (t_near > 0)
-                best = np.where(hit & (t_near < best), t_near, best)
-        return best
+        return ray_boxes_depth(R, C, M, boxes, self.xn[c0:c1][None, :], self.yn[r0:r1][:, None])
 
     # -- per pair -----------------------------------------------------------------------
     def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows=None, cols=None):
@@ -269,3 +285,276 @@ class GroundTruth:
             shift = (float("nan"), float("nan"))
         truth = PairTruth(flow=flow, flow_camera=flow_cam, valid=valid, instances=s0.instances)
         return truth, shift
+
+
+# -- rolling shutter and lens distortion: per-band poses, bent rays ----------------------------
+
+# fixed-point iterations for the band a point lands in (rolling shutter); 2-3 suffice when a
+# band moves less than its height between frames
+MAX_BAND_ITERATIONS = 8
+
+
+@dataclass
+class BandedSurface:
+    """What each output pixel sees when every band of rows has its own pose and rays may be bent.
+
+    Attributes
+    ----------
+    instances : (H, W) uint16, vehicle id (0 = static world)
+    points : (H*W, 3) float64, the seen point in its owner's frame: world (static) or vehicle (id > 0)
+    world_points : (H*W, 3) float64, the seen point in the world at the pixel's time (0 where sky)
+    ids : (H*W,) int64, ``instances`` flattened
+    band : (H*W,) int64, the band each pixel was exposed in
+    sky : (H*W,) bool, nothing rendered
+    depth : (Hc, Wc) float32, the stitched render depth of the canvas (0 = nothing)
+    RT : (B, 3, 3) world-to-camera rotation of each band; C : (B, 3) camera centres
+    T : (V + 1, B, 3, 4) object-to-world transform of each object at each band's time (0: identity)
+    """
+
+    instances: np.ndarray
+    points: np.ndarray
+    world_points: np.ndarray
+    ids: np.ndarray
+    band: np.ndarray
+    sky: np.ndarray
+    depth: np.ndarray
+    RT: np.ndarray
+    C: np.ndarray
+    T: np.ndarray
+
+
+class BandedGroundTruth:
+    """Exact truth for a rolling shutter (one pose per band of rows) and a distorting lens.
+
+    The renders form an undistorted *canvas* (the image itself without distortion); band
+    ``b`` covers canvas rows ``edges[b] .. edges[b+1]`` and was rendered at one pose. Output
+    pixel ``p`` looks along the canvas ray at ``U(p)`` (``lens.canvas_x/y``; the pixel grid
+    itself without a lens) from the pose of the band of its nearest canvas row. A point seen
+    in frame t lands in frame t+1 where its projection with band ``b``'s pose falls in band
+    ``b`` (fixed-point iteration over bands; no consistent band = not visible, invalid), and
+    its flow is ``D(x_{t+1}) - p``.
+
+    Parameters
+    ----------
+    K : (3, 3) intrinsics of the canvas
+    width_px, height_px : output image size
+    edges : (B + 1,) first canvas row of each band, then the canvas height
+    vehicle_boxes : per vehicle, its boxes in its own frame
+    lens : :class:`scenes.sensor.LensGeometry` or None (no distortion: canvas = image)
+    """
+
+    def __init__(self, K: np.ndarray, width_px: int, height_px: int, edges: np.ndarray,
+                 vehicle_boxes: list[list[Box]], lens=None):
+        from scenes.sensor import band_of_rows
+
+        self.K = np.asarray(K, np.float64)
+        self.fx, self.fy, self.cx, self.cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        self.w, self.h = int(width_px), int(height_px)
+        self.edges = np.asarray(edges, np.int64)
+        self.n_bands = len(self.edges) - 1
+        self.lens = lens
+        self.vehicle_boxes = vehicle_boxes
+        self.corner_truth = GroundTruth(K, width_px, height_px, vehicle_boxes)  # vehicle corners
+        ys, xs = np.mgrid[0:self.h, 0:self.w].astype(np.float64)
+        self.px, self.py = xs.ravel(), ys.ravel()
+        if lens is None:
+            cxs, cys = self.px, self.py
+            self.canvas_w, self.canvas_h = self.w, self.h
+        else:
+            cxs, cys = lens.canvas_x.ravel().astype(np.float64), lens.canvas_y.ravel().astype(np.float64)
+            self.canvas_w, self.canvas_h = lens.canvas_size_px
+        self.rays = np.stack([(cxs - self.cx) / self.fx, (cys - self.cy) / self.fy, np.ones_like(cxs)], axis=1)
+        self.ray_len = np.linalg.norm(self.rays, axis=1)
+        self.nearest = (np.clip(np.rint(cys), 0, self.canvas_h - 1).astype(np.int64) * self.canvas_w
+                        + np.clip(np.rint(cxs), 0, self.canvas_w - 1).astype(np.int64))
+        self.band = band_of_rows(cys, self.edges)
+        self.band_pixels = []  # per band: (its pixel indices, the same as a slice when contiguous)
+        for b in range(self.n_bands):
+            idx = np.nonzero(self.band == b)[0]
+            contiguous = idx.size and idx[-1] - idx[0] + 1 == idx.size
+            self.band_pixels.append((idx, slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx))
+
+    def _transforms(self, vehicle_M_per_band: list[list[np.ndarray]]) -> np.ndarray:
+        n_v = len(self.vehicle_boxes)
+        T = np.zeros((n_v + 1, self.n_bands, 3, 4))
+        T[0, :, :, :3] = np.eye(3)
+        for b, Ms in enumerate(vehicle_M_per_band):
+            for v, M in enumerate(Ms, start=1):
+                T[v, b] = M[:3, :]
+        return T
+
+    def surface(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray,
+                vehicle_M_per_band: list[list[np.ndarray]]) -> BandedSurface:
+        """Classify every output pixel and find its point.
+
+        Parameters
+        ----------
+        depth : (Hc, Wc) float32, the canvas depth stitched from the band renders (0 = nothing)
+        R : (B, 3, 3), C : (B, 3) camera-to-world pose of each band
+        vehicle_M_per_band : per band, the vehicle-to-world (4, 4) matrices at its time
+        """
+        D = np.asarray(depth, np.float32).ravel()[self.nearest].astype(np.float64)
+        n = self.w * self.h
+        ids = np.zeros(n, np.int64)
+        Z = np.full(n, np.inf)
+        for b, (idx, take) in enumerate(self.band_pixels):
+            if not idx.size:
+                continue
+            # ground z = 0: Z = C_z / (g . d), g = R^T (0, 0, -1) the world's down in camera axes
+            gd = self.rays[take] @ (-R[b][2, :])
+            Zg = np.full(idx.size, np.inf)
+            np.divide(C[b][2], gd, out=Zg, where=gd > 0)
+            Db = D[take]
+            Z[take] = np.where(np.abs(Db - Zg) <= SURFACE_TOL_REL * Db + SURFACE_TOL_ABS_M, Zg, Db)
+        Z[D <= 0] = np.inf
+        best_err = np.full(n, np.inf)
+        for b, (idx, _) in enumerate(self.band_pixels):
+            if not idx.size:
+                continue
+            for vid, (boxes, M) in enumerate(zip(self.vehicle_boxes, vehicle_M_per_band[b]), start=1):
+                cand = self._window(R[b], C[b], M, b)
+                if cand is None:
+                    continue
+                Zv = ray_boxes_depth(R[b], C[b], M, boxes, self.rays[cand, 0], self.rays[cand, 1])
+                Dn = D[cand]
+                err = np.abs(Dn - Zv)
+                # where two vehicles claim a pixel, the one whose surface agrees better with the render wins
+                hit = (err <= SURFACE_TOL_REL * Dn + SURFACE_TOL_ABS_M) & (Dn > 0) & (err < best_err[cand])
+                ids[cand[hit]] = vid
+                Z[cand[hit]] = Zv[hit]
+                best_err[cand[hit]] = err[hit]
+        sky = ~np.isfinite(Z)
+        Z[sky] = 0.0
+        world = np.empty((n, 3))
+        for b, (idx, take) in enumerate(self.band_pixels):
+            if idx.size:
+                world[take] = C[b] + (Z[take, None] * self.rays[take]) @ R[b].T  # X_w = C + R (Z d)
+        T = self._transforms(vehicle_M_per_band)
+        points = world.copy()
+        for vid in np.unique(ids[ids > 0]):
+            sel = np.nonzero(ids == vid)[0]
+            Tb = T[vid, self.band[sel]]  # (m, 3, 4) at each pixel's band time
+            # X_local = M_R^T (X_w - M_t)
+            points[sel] = np.einsum("nji,nj->ni", Tb[:, :, :3], world[sel] - Tb[:, :, 3])
+        RT = np.transpose(np.asarray(R, np.float64), (0, 2, 1))
+        return BandedSurface(instances=ids.reshape(self.h, self.w).astype(np.uint16), points=points,
+                             world_points=world, ids=ids, band=self.band.copy(), sky=sky,
+                             depth=np.asarray(depth, np.float32), RT=RT, C=np.asarray(C, np.float64), T=T)
+
+    def _window(self, R: np.ndarray, C: np.ndarray, M: np.ndarray, band: int) -> np.ndarray | None:
+        """Output pixels of ``band`` that may see the vehicle at ``M``: its projected box, distorted."""
+        (x0, y0, x1, y1), _ = self.corner_truth.vehicle_bboxes(R, C, [M])[0]
+        if not np.isfinite(x0):
+            return None
+        x0, y0, x1, y1 = x0 - 1, y0 - 1, x1 + 1, y1 + 1
+        if self.lens is not None:
+            # a radial distortion maps the box's outline around the image of the box
+            t = np.linspace(0.0, 1.0, 16)
+            bx = np.concatenate([x0 + (x1 - x0) * t, np.full(16, x1), x1 - (x1 - x0) * t, np.full(16, x0)])
+            by = np.concatenate([np.full(16, y0), y0 + (y1 - y0) * t, np.full(16, y1), y1 - (y1 - y0) * t])
+            bx, by = self.lens.distort_canvas_px(bx, by)
+            x0, x1, y0, y1 = bx.min() - 1, bx.max() + 1, by.min() - 1, by.max() + 1
+        c0, c1 = max(0, int(np.floor(x0))), min(self.w, int(np.ceil(x1)) + 1)
+        r0, r1 = max(0, int(np.floor(y0))), min(self.h, int(np.ceil(y1)) + 1)
+        if c0 >= c1 or r0 >= r1:
+            return None
+        cand = (np.arange(r0, r1)[:, None] * self.w + np.arange(c0, c1)[None, :]).ravel()
+        cand = cand[self.band[cand] == band]
+        return cand if cand.size else None
+
+    def project(self, points: np.ndarray, ids: np.ndarray, s: BandedSurface,
+                band_init: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Where object points appear in the canvas of frame ``s``: the band whose pose sees them in it.
+
+        Returns canvas ``x, y``, depth ``z`` along the band camera's axis (float64) and
+        ``converged`` (bool): the point's projection with band b's pose lies in band b.
+        """
+        from scenes.sensor import band_of_rows
+
+        n = len(points)
+        x, y, z = np.empty(n), np.empty(n), np.empty(n)
+        ok = np.zeros(n, bool)
+        b = np.asarray(band_init, np.int64).copy()
+        todo = np.arange(n)
+        static = not np.any(ids)
+        # X_c = R^T (X_w - C) = [R^T | -R^T C] (X_w, 1), one (3, 4) matrix per band
+        P = np.concatenate([s.RT, -np.einsum("bij,bj->bi", s.RT, s.C)[:, :, None]], axis=2).reshape(-1, 12)
+        for _ in range(MAX_BAND_ITERATIONS):
+            bt = b[todo]
+            if static:  # the world does not move: X_w = points
+                W = points if todo.size == n else points[todo]
+            else:
+                Tm = s.T[ids[todo], bt]
+                W = np.einsum("nij,nj->ni", Tm[:, :, :3], points[todo]) + Tm[:, :, 3]
+            Pb = P[bt] if len(P) > 1 else P  # one band (a lens, no rolling shutter): no gather
+            Xc = [Pb[:, 4 * k] * W[:, 0] + Pb[:, 4 * k + 1] * W[:, 1] + Pb[:, 4 * k + 2] * W[:, 2]
+                  + Pb[:, 4 * k + 3] for k in range(3)]
+            zz = Xc[2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                xx = self.fx * Xc[0] / zz + self.cx
+                yy = self.fy * Xc[1] / zz + self.cy
+            x[todo], y[todo], z[todo] = xx, yy, zz
+            new = band_of_rows(np.where(zz > 0, yy, 0.0), self.edges)
+            same = new == bt
+            ok[todo[same]] = True
+            b[todo[~same]] = new[~same]
+            todo = todo[~same]
+            if not todo.size:
+                break
+        return x, y, z, ok
+
+    def _to_output(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.lens is None:
+            return x, y
+        return self.lens.distort_canvas_px(x, y)
+
+    def pair(self, s0: BandedSurface, s1: BandedSurface) -> tuple[PairTruth, tuple[float, float]]:
+        """Ground truth of the pair (s0 -> s1) on the output grid, and the global shift (NaN if none)."""
+        statics = np.zeros_like(s0.ids)
+        x, y, z, ok = self.project(s0.world_points, statics, s1, s0.band)
+        moving = np.nonzero(s0.ids > 0)[0]
+        xv, yv, zv, okv = self.project(s0.points[moving], s0.ids[moving], s1, s0.band[moving])
+        xd_cam, yd_cam = self._to_output(x, y)
+        flow_cam = np.stack([xd_cam - self.px, yd_cam - self.py], axis=1)
+        x[moving], y[moving], z[moving], ok[moving] = xv, yv, zv, okv
+        xd, yd = self._to_output(x, y)
+        flow = np.stack([xd - self.px, yd - self.py], axis=1)
+        with np.errstate(invalid="ignore"):
+            inside = (xd >= 0) & (xd <= self.w - 1) & (yd >= 0) & (yd <= self.h - 1) & (z > 0) & ok & ~s0.sky
+        xs = np.where(inside, x, -1).astype(np.float32).reshape(self.h, self.w)
+        ys = np.where(inside, y, -1).astype(np.float32).reshape(self.h, self.w)
+        D1 = cv2.remap(s1.depth, xs, ys, interpolation=cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE).ravel().astype(np.float64)
+        # not occluded: the point is not behind what frame t+1 rendered where it lands
+        valid = inside & (D1 > 0) & (z <= D1 * (1 + OCCLUSION_TOL_REL) + OCCLUSION_TOL_ABS_M)
+        flow[s0.sky] = 0.0
+        flow_cam[s0.sky] = 0.0
+        flow = flow.astype(np.float32).reshape(self.h, self.w, 2)
+        flow_cam = flow_cam.astype(np.float32).reshape(self.h, self.w, 2)
+        valid = valid.reshape(self.h, self.w)
+        static = valid & (s0.instances == 0)
+        if static.any():
+            m = cv2.mean(flow_cam, mask=static.view(np.uint8))
+            shift = (float(m[0]), float(m[1]))
+        else:
+            shift = (float("nan"), float("nan"))
+        return PairTruth(flow=flow, flow_camera=flow_cam, valid=valid, instances=s0.instances), shift
+
+    def vehicle_bboxes(self, s: BandedSurface) -> list:
+        """Bbox (x0, y0, x1, y1) and centre (x, y) of each vehicle in the output image, as exposed.
+
+        The box corners and the centre are placed by the same band fixed point as the flow
+        (the last iterate where a point has no consistent band), then distorted; NaN when
+        behind the camera.
+        """
+        mid = np.full(1, self.n_bands // 2)
+        out = []
+        for vid, corners in enumerate(self.corner_truth.vehicle_corners, start=1):
+            pts = np.vstack([corners, corners.mean(axis=0)])
+            x, y, z, _ = self.project(pts, np.full(len(pts), vid), s, np.repeat(mid, len(pts)))
+            if (z <= 0).any():
+                out.append(((np.nan,) * 4, (np.nan, np.nan)))
+                continue
+            xd, yd = self._to_output(x, y)
+            out.append(((xd[:-1].min(), yd[:-1].min(), xd[:-1].max(), yd[:-1].max()), (xd[-1], yd[-1])))
+        return out

@@ -170,11 +170,14 @@ class SceneRenderer:
     world : World
     vehicles : list of VehiclePath
     K : (3, 3) intrinsics with pixel centres at integer coordinates
+    view_size_px : (width, height) of the renders when not the image's (a band of rows of a
+        rolling shutter, a canvas larger than the image for lens distortion); see :meth:`render_view`
     """
 
-    def __init__(self, spec, world: World, vehicles, K: np.ndarray, *, znear_m: float, zfar_m: float):
+    def __init__(self, spec, world: World, vehicles, K: np.ndarray, *, znear_m: float, zfar_m: float,
+                 view_size_px: tuple[int, int] | None = None):
         pyrender = _pyrender()
-        self.width_px, self.height_px = spec.image.width_px, spec.image.height_px
+        self.width_px, self.height_px = view_size_px or (spec.image.width_px, spec.image.height_px)
         self.renderer = get_renderer(self.width_px, self.height_px)
         self.flat = spec.photometry.lighting == "flat"
         ambient = (1.0, 1.0, 1.0) if self.flat else (0.35, 0.35, 0.35)
@@ -233,3 +236,14 @@ class SceneRenderer:
             self.scene.set_pose(node, M)
         rgb, depth = self.renderer.render(self.scene, flags=self.flags)
         return np.ascontiguousarray(rgb[..., :3]), depth
+
+    def render_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
+                    cx_px: float, cy_px: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`render` with the principal point at ``(cx_px, cy_px)`` (integer pixel centres).
+
+        An off-axis view: a band of rows ``r0..`` of a taller image is the same camera with
+        ``cy - r0``; a canvas with a border of m pixels has ``cx + m, cy + m``.
+        """
+        cam = self.camera_node.camera
+        cam.cx, cam.cy = cx_px + 0.5, cy_px + 0.5  # pyrender's pixel centres are at half-integers
+        return self.render(R_wc, C_w, vehicle_poses)

@@ -367,7 +367,7 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
                 "spec_hash": spec_hash(spec), "seed": spec.seed, "name": spec.name,
                 "gsd_m": spec.gsd_m(), "texel_m": gen.world.texel_m, "n_vehicles": len(gen.vehicles),
                 "n_buildings": len(gen.world.buildings), "flow_format": flow_format,
-                "layout": SEQUENCE_LAYOUT, **gl_info()}
+                "layout": SEQUENCE_LAYOUT, "sensor": gen.sensor_meta(), **gl_info()}
         out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
         sheet = preview.sheet(tracks)
         if sheet is not None:

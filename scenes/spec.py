@@ -1,8 +1,8 @@
 """Scene specs: validated descriptions of an aerial sequence, from YAML files or presets.
 
 A :class:`SceneSpec` says everything the generator needs (image, camera and its
-drift and jitter, world, vehicles, photometry, seed); nothing else influences
-the frames. Models forbid unknown keys and refuse NaN and infinity; errors are
+drift and jitter, world, vehicles, lighting, the sensor, seed); nothing else
+influences the frames. Models forbid unknown keys and refuse NaN and infinity; errors are
 :class:`SceneSpecError` (a ``ValueError``) naming the source (file or preset)
 and the dotted field.
 """
@@ -16,6 +16,7 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -31,6 +32,14 @@ __all__ = [
     "WorldSpec",
     "VehiclesSpec",
     "PhotometrySpec",
+    "MotionBlurSpec",
+    "RollingShutterSpec",
+    "LensSpec",
+    "HazeSpec",
+    "NoiseSpec",
+    "CompressionSpec",
+    "SensorSpec",
+    "MOVED_KEYS",
     "SceneSpec",
     "PRESET_DIR",
     "list_presets",
@@ -166,12 +175,12 @@ class VehiclesSpec(_Model):
 
 
 class PhotometrySpec(_Model):
+    """Lighting (the sensor effects that lived here moved to :class:`SensorSpec`)."""
+
     lighting: Literal["flat", "sun"] = "flat"
     sun_elevation_deg: float = Field(50.0, gt=0, le=90)
     sun_azimuth_deg: float = Field(135.0, ge=-360, le=360)
     shadows: bool = False
-    noise_std: float = Field(0.0, ge=0, le=50, description="Gaussian sensor noise, gray levels")
-    blur_sigma_px: float = Field(0.0, ge=0, le=10)
     brightness_drift_per_s: float = Field(0.0, ge=-0.5, le=0.5, description="relative gain change per second")
 
     @model_validator(mode="after")
@@ -179,6 +188,90 @@ class PhotometrySpec(_Model):
         if self.shadows and self.lighting != "sun":
             raise ValueError("shadows: need lighting 'sun', got lighting 'flat'")
         return self
+
+
+# -- the sensor: applied to the rendered light in the order of scenes/sensor.py -------------
+
+class MotionBlurSpec(_Model):
+    """Motion blur: the mean of ``subframes`` renders spread evenly over the exposure, centred on the frame time."""
+
+    exposure_s: float = Field(0.0, ge=0, le=1, description="shutter open time, seconds; 0 = off (instantaneous)")
+    subframes: int = Field(5, ge=3, le=63,
+                           description="renders averaged over the exposure; odd, so the middle one is at the "
+                                       "frame time (ground truth stays frame time to frame time)")
+
+    @model_validator(mode="after")
+    def _odd(self) -> "MotionBlurSpec":
+        if self.subframes % 2 == 0:
+            raise ValueError(f"subframes: expected an odd number (the middle render is at the frame time), "
+                             f"got {self.subframes}")
+        return self
+
+
+class RollingShutterSpec(_Model):
+    """Rolling shutter: row y is read ``(y - cy) * line_delay_s`` after the frame time (cy the centre row).
+
+    Rows are rendered in bands of ``band_rows``: every row of a band is exposed at the
+    band's centre time, so the timing error is at most ``band_rows / 2 * line_delay_s``;
+    the ground truth is exact for the image so rendered (per band pose).
+    """
+
+    line_delay_s: float = Field(0.0, ge=0, le=1e-3,
+                                description="readout time from one row to the next, seconds; 0 = global shutter")
+    band_rows: int = Field(8, ge=1, le=4096,
+                           description="rows rendered at one instant: the readout time is quantised to bands "
+                                       "(error <= band_rows / 2 * line_delay_s)")
+
+
+class LensSpec(_Model):
+    """Brown-Conrady radial distortion on normalised coordinates, and the optics' blur."""
+
+    k1: float = Field(0.0, ge=-1, le=1, description="radial coefficient of r^2 (< 0 barrel, > 0 pincushion)")
+    k2: float = Field(0.0, ge=-1, le=1, description="radial coefficient of r^4")
+    blur_sigma_px: float = Field(0.0, ge=0, le=10, description="Gaussian point spread of the optics, px")
+
+
+class HazeSpec(_Model):
+    """Atmospheric contrast loss (Koschmieder): ``I = J t + A (1 - t)``, ``t = exp(-beta distance)``."""
+
+    extinction_per_km: float = Field(0.0, ge=0, le=100, description="beta, per km of line of sight; 0 = off")
+    airlight: float = Field(200.0, ge=0, le=255, description="A, the gray level of the haze itself")
+
+
+class NoiseSpec(_Model):
+    """Sensor noise: Poisson shot noise on the photo-electrons, then Gaussian read noise."""
+
+    gaussian_std: float = Field(0.0, ge=0, le=50, description="read noise, gray levels")
+    full_well_e: float = Field(0.0, ge=0, le=1e6,
+                               description="photo-electrons at gray level 255 for shot noise (fewer = noisier); "
+                                           "0 = no shot noise")
+
+
+class CompressionSpec(_Model):
+    """Lossy coding of the frames through a real encoder (JPEG by OpenCV, H.264 by libx264 through PyAV)."""
+
+    codec: Literal["none", "jpeg", "h264"] = "none"
+    jpeg_quality: int = Field(75, ge=1, le=100, description="JPEG quality (100 best)")
+    h264_crf: int = Field(23, ge=0, le=51, description="x264 constant rate factor (0 lossless, 51 worst)")
+    h264_gop: int = Field(30, ge=1, le=1000, description="frames between H.264 key frames")
+
+
+class SensorSpec(_Model):
+    """What the camera does to the rendered light; the order is fixed (README, scenes/sensor.py)."""
+
+    motion_blur: MotionBlurSpec = Field(default_factory=MotionBlurSpec)
+    rolling_shutter: RollingShutterSpec = Field(default_factory=RollingShutterSpec)
+    lens: LensSpec = Field(default_factory=LensSpec)
+    haze: HazeSpec = Field(default_factory=HazeSpec)
+    noise: NoiseSpec = Field(default_factory=NoiseSpec)
+    compression: CompressionSpec = Field(default_factory=CompressionSpec)
+
+
+# keys that moved to another section: old dotted key -> new dotted key
+MOVED_KEYS = {
+    "photometry.noise_std": "sensor.noise.gaussian_std",
+    "photometry.blur_sigma_px": "sensor.lens.blur_sigma_px",
+}
 
 
 class SceneSpec(_Model):
@@ -190,6 +283,23 @@ class SceneSpec(_Model):
     world: WorldSpec = Field(default_factory=WorldSpec)
     vehicles: VehiclesSpec = Field(default_factory=VehiclesSpec)
     photometry: PhotometrySpec = Field(default_factory=PhotometrySpec)
+    sensor: SensorSpec = Field(default_factory=SensorSpec)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _moved_keys(cls, data: Any) -> Any:
+        """An old key names its new home instead of a bare 'unknown key'."""
+        if not isinstance(data, dict) or "photometry" not in data:
+            return data
+        old = data["photometry"]
+        if "photometry" not in cls.model_fields:
+            raise ValueError("photometry: this section was split: noise and blur are in sensor: "
+                             f"({', '.join(f'{k} -> {v}' for k, v in MOVED_KEYS.items())}), lighting in light:")
+        moved = [f"{k} -> {MOVED_KEYS[k]}" for k in (f"photometry.{name}" for name in old)
+                 if k in MOVED_KEYS] if isinstance(old, dict) else []
+        if moved:
+            raise ValueError(f"moved to the sensor: section: {', '.join(moved)}")
+        return data
 
     # -- derived quantities used by the generator and the checks ------------------------
     def focal_px(self) -> float:
@@ -226,8 +336,32 @@ class SceneSpec(_Model):
                 f"camera.ground_speed_mps: {cam.ground_speed_mps} m/s moves the ground {cam_step_px:.1f} px "
                 f"per frame; expected <= {MAX_CAMERA_STEP_FRACTION * side_px:.1f} px "
                 f"({MAX_CAMERA_STEP_FRACTION:g} of the image's smaller side)")
+        sensor = self.sensor
+        frame_s = 1.0 / img.fps
+        if sensor.motion_blur.exposure_s > frame_s:
+            raise ValueError(
+                f"sensor.motion_blur.exposure_s: {sensor.motion_blur.exposure_s:g} s is longer than the frame "
+                f"interval {frame_s:g} s at {img.fps:g} fps; expected <= {frame_s:g}")
+        readout_s = sensor.rolling_shutter.line_delay_s * (img.height_px - 1)
+        if readout_s > frame_s:
+            raise ValueError(
+                f"sensor.rolling_shutter.line_delay_s: reading {img.height_px} rows takes {readout_s:g} s, longer "
+                f"than the frame interval {frame_s:g} s; expected line_delay_s <= {frame_s / (img.height_px - 1):g}")
+        lens = sensor.lens
+        if lens.k1 or lens.k2:
+            corner = math.hypot(img.width_px / 2.0, img.height_px / 2.0) / f_px
+            if not _distortion_invertible(lens.k1, lens.k2, corner):
+                raise ValueError(
+                    f"sensor.lens: k1 {lens.k1:g}, k2 {lens.k2:g} fold the image back on itself before the "
+                    f"corner (normalised radius {corner:.3f}); expected r (1 + k1 r^2 + k2 r^4) to grow with r "
+                    "up to the corner")
+        if sensor.compression.codec == "h264" and (img.width_px % 2 or img.height_px % 2):
+            raise ValueError(
+                f"sensor.compression.codec: h264 (4:2:0) needs an even image size, got "
+                f"{img.width_px}x{img.height_px}")
         v = self.vehicles
         if v.count:
+
             top_mps = v.speed_range_mps[1]  # accelerating vehicles stop accelerating there
             step_px = top_mps / img.fps / gsd
             limit_px = MAX_VEHICLE_STEP_FRACTION * side_px
@@ -237,6 +371,18 @@ class SceneSpec(_Model):
                     f"frame at {img.fps:g} fps and {gsd:.3f} m/px; expected <= {limit_px:.1f} px "
                     f"({MAX_VEHICLE_STEP_FRACTION:g} of the image's smaller side): too fast for the scene")
         return self
+
+
+def _distortion_invertible(k1: float, k2: float, r_corner: float) -> bool:
+    """Whether ``r_d = r (1 + k1 r^2 + k2 r^4)`` grows with r until it passes ``r_corner``.
+
+    Then every distorted radius up to the image corner has exactly one undistorted radius.
+    """
+    r = np.linspace(0.0, 4.0 * r_corner, 4001)
+    r_d = r * (1 + k1 * r**2 + k2 * r**4)
+    slope = 1 + 3 * k1 * r**2 + 5 * k2 * r**4  # d r_d / d r
+    past = np.nonzero(r_d >= r_corner)[0]
+    return bool(past.size) and bool((slope[:past[0] + 1] > 0).all())
 
 
 # -- loading ----------------------------------------------------------------------------

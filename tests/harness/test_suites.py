@@ -40,7 +40,7 @@ def test_smoke_covers_lk_hs_and_a_reference_on_tiny_scenes():
 
 def test_sweep_suites_vary_their_axis():
     for name, key in (("sweep-jitter", "camera.jitter"), ("sweep-speed", "vehicles.speed"),
-                      ("sweep-noise", "photometry.noise")):
+                      ("sweep-noise", "sensor.noise")):
         cells = expand(load_suite(name))
         assert all(c.variant.sweep_param.startswith(key) for c in cells), name
         assert len({str(c.variant.sweep_value) for c in cells}) >= 4, name
@@ -51,27 +51,27 @@ def test_sweep_suites_vary_their_axis():
 
 def test_sweep_expands_to_the_grid_with_values_applied():
     data = _suite(scenes=[{"preset": "tiny", "overrides": {"image.n_frames": 3},
-                           "sweep": {"photometry.noise_std": [0.0, 2.0, 4.0],
+                           "sweep": {"sensor.noise.gaussian_std": [0.0, 2.0, 4.0],
                                      "camera.altitude_m": [60.0, 90.0]}}],
                   seeds=[1, 2])
     cells = expand(parse_suite(data))
     assert len(cells) == 3 * 2 * 2 * 2  # noise x altitude x seeds x pipelines
     for c in cells:
         noise, altitude = (float(x) for x in c.variant.sweep_value.split(","))
-        assert c.variant.spec.photometry.noise_std == noise
+        assert c.variant.spec.sensor.noise.gaussian_std == noise
         assert c.variant.spec.camera.altitude_m == altitude
         assert c.variant.spec.seed == c.variant.seed
         assert c.variant.spec.image.n_frames == 3
-        assert c.variant.sweep_param == "photometry.noise_std,camera.altitude_m"
+        assert c.variant.sweep_param == "sensor.noise.gaussian_std,camera.altitude_m"
     assert len({c.cell_id for c in cells}) == len(cells)
     assert len({c.variant.scene_hash for c in cells}) == 3 * 2 * 2
 
 
 def test_single_key_sweep_keeps_the_value():
-    data = _suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_std": [1.5, 3.0]}}])
+    data = _suite(scenes=[{"preset": "tiny", "sweep": {"sensor.noise.gaussian_std": [1.5, 3.0]}}])
     cells = expand(parse_suite(data))
     assert sorted({c.variant.sweep_value for c in cells}) == [1.5, 3.0]
-    assert {c.variant.label for c in cells} == {"tiny[photometry.noise_std=1.5]", "tiny[photometry.noise_std=3]"}
+    assert {c.variant.label for c in cells} == {"tiny[sensor.noise.gaussian_std=1.5]", "tiny[sensor.noise.gaussian_std=3]"}
 
 
 def test_cell_ids_are_stable_and_follow_the_config():
@@ -109,10 +109,10 @@ def test_unknown_top_level_key_is_named(write_suite):
 
 
 def test_nan_is_refused(write_suite):
-    text = "name: x\nscenes:\n  - preset: tiny\n    overrides: {photometry.noise_std: .nan}\nseeds: [1]\npipelines: [dis]\n"
-    with pytest.raises(SuiteError, match=r"scenes\[0\]\.overrides: .*photometry.noise_std: nan is not a finite"):
+    text = "name: x\nscenes:\n  - preset: tiny\n    overrides: {sensor.noise.gaussian_std: .nan}\nseeds: [1]\npipelines: [dis]\n"
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.overrides: .*sensor.noise.gaussian_std: nan is not a finite"):
         load_suite(write_suite(text))
-    text = "name: x\nscenes:\n  - preset: tiny\n    sweep: {photometry.noise_std: [1.0, .inf]}\nseeds: [1]\npipelines: [dis]\n"
+    text = "name: x\nscenes:\n  - preset: tiny\n    sweep: {sensor.noise.gaussian_std: [1.0, .inf]}\nseeds: [1]\npipelines: [dis]\n"
     with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: .*inf is not a finite"):
         load_suite(write_suite(text))
 
@@ -135,13 +135,13 @@ def test_unknown_metric_lists_the_valid_ones(write_suite):
 def test_empty_sweep_is_an_error(write_suite):
     with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: an empty sweep"):
         load_suite(write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {}}])))
-    with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: an empty sweep: 'photometry.noise_std' has no values"):
-        load_suite(write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_std": []}}])))
+    with pytest.raises(SuiteError, match=r"scenes\[0\]\.sweep: an empty sweep: 'sensor.noise.gaussian_std' has no values"):
+        load_suite(write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"sensor.noise.gaussian_std": []}}])))
 
 
 def test_bad_scene_parameter_names_the_scene_and_field(write_suite):
-    path = write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"photometry.noise_sd": [1.0]}}]))
-    with pytest.raises(SuiteError, match=r"scenes\[0\] .*noise_sd"):
+    path = write_suite(_suite(scenes=[{"preset": "tiny", "sweep": {"sensor.noise.gaussian_sd": [1.0]}}]))
+    with pytest.raises(SuiteError, match=r"scenes\[0\] .*gaussian_sd"):
         expand(load_suite(path), source=str(path))
 
 

@@ -21,7 +21,8 @@ from scenes.generate import SceneGenerator
 pytestmark = pytest.mark.gl
 
 CAMERA_COLUMNS = ["frame", "t_s", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz", "fx_px", "fy_px", "cx_px",
-                  "cy_px", "jitter_x_px", "jitter_y_px", "global_dx_px", "global_dy_px"]
+                  "cy_px", "jitter_x_px", "jitter_y_px", "global_dx_px", "global_dy_px", "k1", "k2",
+                  "line_delay_s", "exposure_s"]
 TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
                  "bbox_y1_px", "visible", "speed_mps", "parked"]
 
@@ -75,7 +76,7 @@ def test_same_spec_renders_bit_identical_folders(tiny_sequence, tmp_path):
 
 
 def test_noise_is_seeded_and_changes_frames_not_truth(tmp_path):
-    noisy = load_scene_spec("tiny", overrides={"photometry.noise_std": 3.0, "image.n_frames": 2})
+    noisy = load_scene_spec("tiny", overrides={"sensor.noise.gaussian_std": 3.0, "image.n_frames": 2})
     a = render_sequence(noisy, tmp_path / "a")
     b = render_sequence(noisy, tmp_path / "b")
     assert _manifest_files(a) == _manifest_files(b)
