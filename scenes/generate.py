@@ -78,7 +78,7 @@ class SceneGenerator:
         self.path = camera_path(spec, rng_jitter)
         self.world = build_world(spec, self.path, rng_world)
         self.vehicles = place_vehicles(spec, self.world, self.path, rng_vehicles)
-        top_m = max([b.size[2] for b in self.world.buildings], default=0.0)
+        top_m = self.world.top_m
         lowest_m = float(self.path.C[:, 2].min())
         znear = max(0.1, 0.5 * (lowest_m - max(top_m, spec.vehicles.height_m)))
         zfar = 20.0 * float(self.path.C[:, 2].max()) + 10.0
@@ -92,14 +92,14 @@ class SceneGenerator:
         return [v.matrix(t_s) for v in self.vehicles]
 
     def _photometry(self, rgb: np.ndarray, t_s: float) -> np.ndarray:
-        ph = self.spec.photometry
-        if ph.blur_sigma_px == 0 and ph.noise_std == 0 and ph.brightness_drift_per_s == 0:
+        ph, drift = self.spec.photometry, self.spec.light.illumination_drift_per_s
+        if ph.blur_sigma_px == 0 and ph.noise_std == 0 and drift == 0:
             return rgb
         img = rgb.astype(np.float32)
         if ph.blur_sigma_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), ph.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
-        if ph.brightness_drift_per_s != 0:
-            img *= 1.0 + ph.brightness_drift_per_s * t_s
+        if drift != 0:
+            img *= 1.0 + drift * t_s
         if ph.noise_std > 0:
             img += self.rng_noise.standard_normal(img.shape, dtype=np.float32) * np.float32(ph.noise_std)
         return np.clip(np.rint(img), 0, 255).astype(np.uint8)

@@ -13,7 +13,9 @@ import os
 
 import numpy as np
 
-from scenes.world import MAX_TEXTURE_PX, World, box_mesh, vehicle_boxes
+import trimesh
+
+from scenes.world import MAX_TEXTURE_PX, Box, World, box_mesh, sun_direction, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -129,9 +131,8 @@ def _textured_material(pyrender, image: np.ndarray, *, repeat: bool):
     return pyrender.MetallicRoughnessMaterial(baseColorTexture=tex, metallicFactor=0.0, roughnessFactor=1.0)
 
 
-def _colour_primitive(pyrender, mesh: dict, rgb: tuple[int, int, int]):
-    n = mesh["positions"].shape[0]
-    col = np.tile(np.array([[rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0]], np.float32), (n, 1))
+def _colour_primitive(pyrender, mesh: dict, rgb: tuple[int, int, int], *, flat: bool):
+    col = _face_colours(mesh, rgb, flat=flat)
     mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0)
     return pyrender.Primitive(positions=mesh["positions"], normals=mesh["normals"], color_0=col,
                               indices=mesh["indices"], material=mat)
@@ -161,8 +162,115 @@ def _ground_tiles(pyrender, world: World) -> list:
     return prims
 
 
+# flat light has no shading: faces are darkened by these factors instead, as a sun high in the
+# south-east would (top faces full, walls less); sun light shades them itself
+FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
+SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+
+
+def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
+    """Per-vertex RGBA (n, 4) float32: ``rgb`` darkened on walls under flat light (by the face normal)."""
+    col = np.tile(np.array([[rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0]], np.float32),
+                  (mesh["positions"].shape[0], 1))
+    if flat:
+        up = mesh["normals"][:, 2]
+        col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
+    return col
+
+
+def _merge(meshes: list[dict]) -> dict:
+    out, base = {k: [] for k in meshes[0]}, 0
+    for m in meshes:
+        for k, v in m.items():
+            out[k].append(v + base if k == "indices" else v)
+        base += m["positions"].shape[0]
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def _placed(mesh: dict, yaw: float, at_xy) -> dict:
+    c, s = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], np.float32)
+    out = dict(mesh)
+    out["positions"] = mesh["positions"] @ Rz.T + np.array([at_xy[0], at_xy[1], 0.0], np.float32)
+    out["normals"] = mesh["normals"] @ Rz.T
+    return out
+
+
+def _building_prims(pyrender, world: World, *, flat: bool) -> list:
+    """All buildings as one primitive per material: walls, roofs, parapets and roof units."""
+    wall_k = FLAT_FACE_SHADE["side"] if flat else 1.0
+    groups: dict[tuple[str, int], list[dict]] = {}
+    for n, b in enumerate(world.buildings):
+        for p, part in enumerate(b.parts):
+            m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
+            tri = m["indices"]
+            if p == 0:  # the block: walls (faces 0-3) and roof (face 5); its floor is never seen
+                groups.setdefault(("wall", n % len(world.wall_textures)), []).append({**m, "indices": tri[:8]})
+                groups.setdefault(("roof", b.roof_variant), []).append({**m, "indices": tri[10:12]})
+            else:  # parapet and units: roof material of another shade, walls and top
+                groups.setdefault(("roof", (b.roof_variant + p) % len(world.roof_textures)), []).append(
+                    {**m, "indices": np.concatenate([tri[:8], tri[10:12]])})
+    prims = []
+    for (kind, v), ms in sorted(groups.items()):
+        tex = world.wall_textures[v] if kind == "wall" else world.roof_textures[v]
+        if kind == "wall" and wall_k != 1.0:
+            tex = np.rint(tex * np.float32(wall_k)).astype(np.uint8)
+        m = _merge(ms)
+        prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"],
+                                        indices=m["indices"], material=_textured_material(pyrender, tex,
+                                                                                          repeat=True)))
+    return prims
+
+
+def _unit_crown() -> dict:
+    """A unit sphere (80 triangles) with top-down UVs: crowns are instances of it, scaled."""
+    ico = trimesh.creation.icosphere(subdivisions=1)
+    v = np.asarray(ico.vertices, np.float32)
+    return {"positions": v, "normals": v / np.linalg.norm(v, axis=1, keepdims=True),
+            "indices": np.asarray(ico.faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
+
+
+def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
+    """Crowns instanced per colour variant (one draw each), trunks instanced once."""
+    crown = _unit_crown()
+    if flat:  # baked sun shading: lit side light, far side and underside darker
+        lit = np.clip(crown["normals"] @ sun, 0.0, 1.0)
+        k = (0.55 + 0.45 * lit).astype(np.float32)
+        col = np.column_stack([k, k, k, np.ones_like(k)])
+    else:
+        col = np.ones((crown["positions"].shape[0], 4), np.float32)
+    meshes = []
+    for v, tex in enumerate(world.crown_textures):
+        trees = [t for t in world.trees if t.variant == v]
+        if not trees:
+            continue
+        poses = np.zeros((len(trees), 4, 4), np.float32)
+        for n, t in enumerate(trees):
+            poses[n] = np.diag([t.crown_radius_m, t.crown_radius_m, t.crown_half_height_m, 1.0])
+            poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
+        mat = _textured_material(pyrender, tex, repeat=False)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
+                                                        texcoord_0=crown["texcoords"], color_0=col,
+                                                        indices=crown["indices"], material=mat, poses=poses)]))
+    trunks = [t for t in world.trees if not t.bush]
+    if trunks:
+        unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
+        poses = np.zeros((len(trunks), 4, 4), np.float32)
+        for n, t in enumerate(trunks):
+            h = t.height_m - 2 * t.crown_half_height_m + 0.3 * t.crown_half_height_m
+            w = max(0.25, 0.08 * t.crown_radius_m)
+            poses[n] = np.diag([w, w, h, 1.0])
+            poses[n, :3, 3] = (t.x_m, t.y_m, h / 2)
+        col = _face_colours(unit, (92, 74, 56), flat=flat)
+        mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=unit["positions"], normals=unit["normals"],
+                                                        color_0=col, indices=unit["indices"], material=mat,
+                                                        poses=poses)]))
+    return meshes
+
+
 class SceneRenderer:
-    """A pyrender scene for one sequence: ground, buildings, vehicles and a camera.
+    """A pyrender scene for one sequence: ground, buildings, trees, vehicles (and their shadows), a camera.
 
     Parameters
     ----------
@@ -176,33 +284,45 @@ class SceneRenderer:
         pyrender = _pyrender()
         self.width_px, self.height_px = spec.image.width_px, spec.image.height_px
         self.renderer = get_renderer(self.width_px, self.height_px)
-        self.flat = spec.photometry.lighting == "flat"
-        ambient = (1.0, 1.0, 1.0) if self.flat else (0.35, 0.35, 0.35)
+        light = spec.light
+        self.flat = light.mode == "flat"
+        sun = sun_direction(light.sun_elevation_deg, light.sun_azimuth_deg)
+        # sun light: pyrender mixes in linear light and writes sRGB, so sky light ``ambient`` (the
+        # brightness of shadow relative to sunlit ground, as seen in the image) is ambient^2.2 linear
+        amb_lin = light.ambient ** 2.2
+        ambient = (1.0, 1.0, 1.0) if self.flat else (amb_lin,) * 3
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
-
         if world.buildings:
-            roof_mat = _textured_material(pyrender, world.building_texture, repeat=True)
-            # walls darker than roofs, so that flat shading still shows the building's edges
-            wall_tex = (world.building_texture.astype(np.float32) * 0.6).astype(np.uint8)
-            wall_mat = _textured_material(pyrender, wall_tex, repeat=True)
-            scale_m = world.building_texture.shape[0] * world.texel_m
-            prims = []
-            for b in world.buildings:
-                m = box_mesh(b, uv_scale_m=scale_m)
-                # box_mesh's triangles: 8 walls (+-x, +-y), 2 bottom, 2 top
-                for tris, mat in ((m["indices"][:8], wall_mat), (m["indices"][10:12], roof_mat)):
-                    prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"],
-                                                    texcoord_0=m["texcoords"], indices=tris, material=mat))
-            self.scene.add(pyrender.Mesh(prims))
+            self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
+        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
+            self.scene.add(mesh)
 
         self.vehicle_nodes = []
         for v in vehicles:
-            body, cabin = vehicle_boxes(*v.size_m)
-            prims = [_colour_primitive(pyrender, box_mesh(body), v.body_rgb),
-                     _colour_primitive(pyrender, box_mesh(cabin), v.cabin_rgb)]
+            body, cabin, roof = vehicle_boxes(*v.size_m)
+            prims = [_colour_primitive(pyrender, box_mesh(b), rgb, flat=self.flat)
+                     for b, rgb in ((body, v.body_rgb), (cabin, v.cabin_rgb), (roof, v.body_rgb))]
             self.vehicle_nodes.append(self.scene.add(pyrender.Mesh(prims), pose=np.eye(4)))
+
+        # flat light: each vehicle drags a translucent dark quad, its footprint moved away from the
+        # sun by the shadow of its middle height. The quad is (within the truth's tolerance) ground:
+        # ground truth is the motion field of surfaces, not the apparent motion of a shadow.
+        self.shadow_nodes = []
+        self.shadow_offset = np.zeros(3)
+        if self.flat and light.shadows and vehicles:
+            away = -sun[:2] / max(1e-9, sun[2])
+            self.shadow_offset = np.array([*(away * 0.6 * spec.vehicles.height_m), SHADOW_QUAD_LIFT_M])
+            L, W = spec.vehicles.length_m + 0.2, spec.vehicles.width_m + 0.2
+            pos = np.array([[-L / 2, -W / 2, 0], [L / 2, -W / 2, 0], [L / 2, W / 2, 0], [-L / 2, W / 2, 0]], np.float32)
+            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0, alphaMode="BLEND",
+                                                     baseColorFactor=(0.0, 0.0, 0.0, 1.0 - light.ambient))
+            quad = pyrender.Mesh([pyrender.Primitive(positions=pos, normals=np.tile([[0, 0, 1.0]], (4, 1)),
+                                                     indices=np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+                                                     material=mat)])
+            for _ in vehicles:
+                self.shadow_nodes.append(self.scene.add(quad, pose=np.eye(4)))
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
@@ -210,17 +330,16 @@ class SceneRenderer:
         self.camera_node = self.scene.add(cam, pose=np.eye(4))
         self.flags = pyrender.RenderFlags.FLAT if self.flat else pyrender.RenderFlags.NONE
         if not self.flat:
-            ph = spec.photometry
-            el, az = math.radians(ph.sun_elevation_deg), math.radians(ph.sun_azimuth_deg)
-            to_sun = np.array([math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)])
-            z = to_sun  # a light shines along its -z
+            z = sun  # a light shines along its -z
             x = np.cross([0.0, 0.0, 1.0], z)
             x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0, 0])
             y = np.cross(z, x)
             pose = np.eye(4)
             pose[:3, :3] = np.stack([x, y, z], axis=1)
-            self.scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=pose)
-            if ph.shadows:
+            # sunlit flat ground = its base colour: (I sin(el) / pi) + ambient = 1 in linear light
+            intensity = (1.0 - amb_lin) * np.pi / max(0.05, sun[2])
+            self.scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=intensity), pose=pose)
+            if light.shadows:
                 self.flags |= pyrender.RenderFlags.SHADOWS_DIRECTIONAL
 
     def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -231,5 +350,9 @@ class SceneRenderer:
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
         for node, M in zip(self.vehicle_nodes, vehicle_poses):
             self.scene.set_pose(node, M)
+        for node, M in zip(self.shadow_nodes, vehicle_poses):
+            S = M.copy()
+            S[:3, 3] += self.shadow_offset
+            self.scene.set_pose(node, S)
         rgb, depth = self.renderer.render(self.scene, flags=self.flags)
         return np.ascontiguousarray(rgb[..., :3]), depth
