@@ -73,7 +73,7 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in wall.items()}
     med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
     print(f"preset {args.preset!r}, {spec.image.width_px}x{spec.image.height_px}, {n} frames, "
-          f"lighting {spec.photometry.lighting}, median of {args.runs} runs, one thread (LP_NUM_THREADS=1, "
+          f"light {spec.light.mode}, median of {args.runs} runs, one thread (LP_NUM_THREADS=1, "
           f"OMP/OPENBLAS=1, cv2.setNumThreads(1)); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print("                           wall frames/s   frames per CPU-second")
     print(f"  render alone             {med['render']:10.1f}   {med_cpu['render']:10.1f}")

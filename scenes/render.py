@@ -13,9 +13,7 @@ import os
 
 import numpy as np
 
-import trimesh
-
-from scenes.world import MAX_TEXTURE_PX, Box, World, box_mesh, sun_direction, vehicle_boxes
+from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -131,13 +129,6 @@ def _textured_material(pyrender, image: np.ndarray, *, repeat: bool):
     return pyrender.MetallicRoughnessMaterial(baseColorTexture=tex, metallicFactor=0.0, roughnessFactor=1.0)
 
 
-def _colour_primitive(pyrender, mesh: dict, rgb: tuple[int, int, int], *, flat: bool):
-    col = _face_colours(mesh, rgb, flat=flat)
-    mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0)
-    return pyrender.Primitive(positions=mesh["positions"], normals=mesh["normals"], color_0=col,
-                              indices=mesh["indices"], material=mat)
-
-
 def _ground_tiles(pyrender, world: World) -> list:
     """The ground as quads of at most MAX_TEXTURE_PX texels a side, one texture each."""
     tex = world.ground_texture
@@ -165,6 +156,7 @@ def _ground_tiles(pyrender, world: World) -> list:
 # flat light has no shading: faces are darkened by these factors instead, as a sun high in the
 # south-east would (top faces full, walls less); sun light shades them itself
 FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
+CROWN_SEGMENTS = 10
 SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
 
 
@@ -172,6 +164,7 @@ def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
     """Per-vertex RGBA (n, 4) float32: ``rgb`` darkened on walls under flat light (by the face normal)."""
     col = np.tile(np.array([[rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0]], np.float32),
                   (mesh["positions"].shape[0], 1))
+    col[:, :3] = np.minimum(col[:, :3], 1.0)
     if flat:
         up = mesh["normals"][:, 2]
         col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
@@ -197,45 +190,56 @@ def _placed(mesh: dict, yaw: float, at_xy) -> dict:
 
 
 def _building_prims(pyrender, world: World, *, flat: bool) -> list:
-    """All buildings as one primitive per material: walls, roofs, parapets and roof units."""
-    wall_k = FLAT_FACE_SHADE["side"] if flat else 1.0
-    groups: dict[tuple[str, int], list[dict]] = {}
-    for n, b in enumerate(world.buildings):
+    """All buildings in two draws: walls, and roofs with their parapets and roof units (tinted per building).
+
+    Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
+    walls, roofs = [], []
+    for b in world.buildings:
+        tint = np.asarray(ROOF_TINTS[b.roof_variant])
         for p, part in enumerate(b.parts):
             m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
             tri = m["indices"]
             if p == 0:  # the block: walls (faces 0-3) and roof (face 5); its floor is never seen
-                groups.setdefault(("wall", n % len(world.wall_textures)), []).append({**m, "indices": tri[:8]})
-                groups.setdefault(("roof", b.roof_variant), []).append({**m, "indices": tri[10:12]})
-            else:  # parapet and units: roof material of another shade, walls and top
-                groups.setdefault(("roof", (b.roof_variant + p) % len(world.roof_textures)), []).append(
-                    {**m, "indices": np.concatenate([tri[:8], tri[10:12]])})
+                walls.append({**m, "indices": tri[:8], "colours": _face_colours(m, (255, 255, 255), flat=flat)})
+                roofs.append({**m, "indices": tri[10:12], "colours": _face_colours(m, 255 * tint, flat=flat)})
+            else:  # parapet (darker) and roof units (lighter): their sides and tops
+                k = 0.85 if p <= 4 else 1.2
+                roofs.append({**m, "indices": np.concatenate([tri[:8], tri[10:12]]),
+                              "colours": _face_colours(m, np.minimum(255, 255 * k * tint), flat=flat)})
     prims = []
-    for (kind, v), ms in sorted(groups.items()):
-        tex = world.wall_textures[v] if kind == "wall" else world.roof_textures[v]
-        if kind == "wall" and wall_k != 1.0:
-            tex = np.rint(tex * np.float32(wall_k)).astype(np.uint8)
-        m = _merge(ms)
+    for parts, tex in ((walls, world.wall_textures[0]), (roofs, world.roof_textures[0])):
+        m = _merge(parts)
         prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"],
-                                        indices=m["indices"], material=_textured_material(pyrender, tex,
-                                                                                          repeat=True)))
+                                        color_0=m["colours"], indices=m["indices"],
+                                        material=_textured_material(pyrender, tex, repeat=True)))
     return prims
 
 
 def _unit_crown() -> dict:
-    """A unit sphere (80 triangles) with top-down UVs: crowns are instances of it, scaled."""
-    ico = trimesh.creation.icosphere(subdivisions=1)
-    v = np.asarray(ico.vertices, np.float32)
+    """A unit crown, instanced and scaled per tree: a top, a ring of CROWN_SEGMENTS at 50 deg, a ring at the
+    equator and a bottom (4 x CROWN_SEGMENTS triangles; an icosphere would cost twice as many and llvmpipe
+    pays per vertex of every instance), with top-down UVs."""
+    n = CROWN_SEGMENTS
+    a = 2 * np.pi * np.arange(n) / n
+    upper = np.column_stack([0.64 * np.cos(a + np.pi / n), 0.64 * np.sin(a + np.pi / n), np.full(n, 0.77)])
+    equator = np.column_stack([np.cos(a), np.sin(a), np.zeros(n)])
+    v = np.vstack([[0, 0, 1.0], upper, equator, [0, 0, -1.0]]).astype(np.float32)
+    top, bottom = 0, 2 * n + 1
+    faces = []
+    for k in range(n):
+        u0, u1 = 1 + k, 1 + (k + 1) % n
+        e0, e1 = 1 + n + k, 1 + n + (k + 1) % n
+        faces += [(top, u0, u1), (u0, e0, e1), (u0, e1, u1), (bottom, e1, e0)]
     return {"positions": v, "normals": v / np.linalg.norm(v, axis=1, keepdims=True),
-            "indices": np.asarray(ico.faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
+            "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
 
 
 def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
     """Crowns instanced per colour variant (one draw each), trunks instanced once."""
     crown = _unit_crown()
-    if flat:  # baked sun shading: lit side light, far side and underside darker
-        lit = np.clip(crown["normals"] @ sun, 0.0, 1.0)
-        k = (0.55 + 0.45 * lit).astype(np.float32)
+    if flat:  # baked sky shading: tops light, flanks and undersides darker (the same from every side,
+        # since hedge bushes are turned along their rows; painted shadows give the sun's direction)
+        k = (0.5 + 0.5 * np.clip(0.3 + 0.8 * crown["normals"][:, 2], 0.0, 1.0)).astype(np.float32)
         col = np.column_stack([k, k, k, np.ones_like(k)])
     else:
         col = np.ones((crown["positions"].shape[0], 4), np.float32)
@@ -246,8 +250,11 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list
             continue
         poses = np.zeros((len(trees), 4, 4), np.float32)
         for n, t in enumerate(trees):
-            poses[n] = np.diag([t.crown_radius_m, t.crown_radius_m, t.crown_half_height_m, 1.0])
+            c, s_ = np.cos(t.yaw_rad), np.sin(t.yaw_rad)
+            Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+            poses[n, :3, :3] = Rz @ np.diag([t.crown_radius_m * t.stretch, t.crown_radius_m, t.crown_half_height_m])
             poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
+            poses[n, 3, 3] = 1.0
         mat = _textured_material(pyrender, tex, repeat=False)
         meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
                                                         texcoord_0=crown["texcoords"], color_0=col,
@@ -299,30 +306,37 @@ class SceneRenderer:
         for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
             self.scene.add(mesh)
 
+        # Each vehicle is one draw: body, glass cabin and roof merged, with vertex colours. Under flat
+        # light it also carries its shadow: a translucent dark quad (vertex alpha, blended), its
+        # footprint moved away from the sun by the shadow of the car's middle height, turned into the
+        # vehicle frame at mid-sequence (on a curve the shadow turns a little with the car). The quad
+        # lies SHADOW_QUAD_LIFT_M above the ground, within the truth's depth tolerance: it is ground.
+        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow.
         self.vehicle_nodes = []
+        shadow = self.flat and light.shadows
+        away = -sun[:2] / max(1e-9, sun[2])
+        t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
         for v in vehicles:
-            body, cabin, roof = vehicle_boxes(*v.size_m)
-            prims = [_colour_primitive(pyrender, box_mesh(b), rgb, flat=self.flat)
-                     for b, rgb in ((body, v.body_rgb), (cabin, v.cabin_rgb), (roof, v.body_rgb))]
-            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh(prims), pose=np.eye(4)))
-
-        # flat light: each vehicle drags a translucent dark quad, its footprint moved away from the
-        # sun by the shadow of its middle height. The quad is (within the truth's tolerance) ground:
-        # ground truth is the motion field of surfaces, not the apparent motion of a shadow.
-        self.shadow_nodes = []
-        self.shadow_offset = np.zeros(3)
-        if self.flat and light.shadows and vehicles:
-            away = -sun[:2] / max(1e-9, sun[2])
-            self.shadow_offset = np.array([*(away * 0.6 * spec.vehicles.height_m), SHADOW_QUAD_LIFT_M])
-            L, W = spec.vehicles.length_m + 0.2, spec.vehicles.width_m + 0.2
-            pos = np.array([[-L / 2, -W / 2, 0], [L / 2, -W / 2, 0], [L / 2, W / 2, 0], [-L / 2, W / 2, 0]], np.float32)
-            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0, alphaMode="BLEND",
-                                                     baseColorFactor=(0.0, 0.0, 0.0, 1.0 - light.ambient))
-            quad = pyrender.Mesh([pyrender.Primitive(positions=pos, normals=np.tile([[0, 0, 1.0]], (4, 1)),
-                                                     indices=np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
-                                                     material=mat)])
-            for _ in vehicles:
-                self.shadow_nodes.append(self.scene.add(quad, pose=np.eye(4)))
+            parts = []
+            if shadow:
+                th = v.pose(t_mid_s)[2]
+                c, s_ = np.cos(th), np.sin(th)
+                off = np.array([[c, s_], [-s_, c]]) @ (away * 0.6 * v.size_m[2])
+                L, W = v.size_m[0] + 0.2, v.size_m[1] + 0.2
+                pos = np.array([[-L / 2, -W / 2, 0], [L / 2, -W / 2, 0], [L / 2, W / 2, 0], [-L / 2, W / 2, 0]],
+                               np.float32) + np.array([off[0], off[1], SHADOW_QUAD_LIFT_M], np.float32)
+                parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
+                              "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+                              "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
+            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
+                m = box_mesh(b)
+                parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
+            m = _merge(parts)
+            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
+                                                     alphaMode="BLEND" if shadow else "OPAQUE")
+            prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
+                                      indices=m["indices"], material=mat)
+            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh([prim]), pose=np.eye(4)))
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
@@ -350,9 +364,5 @@ class SceneRenderer:
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
         for node, M in zip(self.vehicle_nodes, vehicle_poses):
             self.scene.set_pose(node, M)
-        for node, M in zip(self.shadow_nodes, vehicle_poses):
-            S = M.copy()
-            S[:3, 3] += self.shadow_offset
-            self.scene.set_pose(node, S)
         rgb, depth = self.renderer.render(self.scene, flags=self.flags)
         return np.ascontiguousarray(rgb[..., :3]), depth

@@ -140,7 +140,7 @@ class TreesSpec(_Model):
     """Trees (single, and dense in woods) and hedges: static instanced meshes standing above the ground."""
 
     density_per_ha: float = Field(6.0, ge=0, le=400, description="single trees per hectare of grass and yards")
-    wood_density_per_ha: float = Field(420.0, ge=0, le=1000, description="trees per hectare of wood blocks")
+    wood_density_per_ha: float = Field(250.0, ge=0, le=1000, description="trees per hectare of wood blocks")
     hedge_fraction: float = Field(0.35, ge=0, le=1, description="share of field and grass block sides with a hedge")
     crown_diameter_range_m: tuple[float, float] = (3.5, 8.0)
     height_range_m: tuple[float, float] = (5.0, 14.0)

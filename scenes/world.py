@@ -44,6 +44,7 @@ __all__ = [
     "rects_overlap",
     "point_rect_distance",
     "sun_direction",
+    "field_rows",
 ]
 
 # texel = GSD / TEXELS_PER_PIXEL: a little finer than a pixel, so the texture never looks blurred
@@ -56,6 +57,9 @@ MARK_RGB = (212, 212, 204)
 CAR_COLOURS = [(225, 225, 222), (232, 232, 228), (30, 30, 34), (45, 47, 52), (150, 152, 156), (175, 176, 180),
                (160, 40, 38), (40, 62, 130), (52, 84, 60), (200, 170, 60), (110, 80, 60), (200, 110, 40)]
 GLASS_RGB = (38, 44, 52)
+# every building shares one facade and one roof texture (one draw each); roofs differ by a tint
+ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92))
+N_CROWN_VARIANTS = 2  # crown colours: each one instanced draw
 ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
 ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
 BUILDING_GAP_M = 1.5  # between two buildings' footprints
@@ -111,6 +115,13 @@ class Tree:
     crown_half_height_m: float
     variant: int
     bush: bool = False
+    yaw_rad: float = 0.0  # hedge bushes are stretched along their row
+    stretch: float = 1.0  # radius along the row / crown_radius_m
+
+    @property
+    def reach_m(self) -> float:
+        """The crown's largest horizontal radius."""
+        return self.crown_radius_m * max(1.0, self.stretch)
 
 
 @dataclass
@@ -563,6 +574,18 @@ class _RoadIndex:
         return bool(np.all(d > self.half + margin_m))
 
 
+def field_rows(rng: np.random.Generator, base: np.ndarray, along_rad: float) -> _Rows:
+    """A field's row pattern: rows 1.6-3.2 m apart roughly along or across ``along_rad``, 2-5 gray
+    levels deep (none in a third of the fields), bent by three waves 25-60 m long and 1.2-3 rad deep."""
+    ang = along_rad + rng.uniform(-0.15, 0.15) + rng.choice([0.0, 0.5 * math.pi])
+    beta, k = rng.uniform(0, 2 * math.pi, 3), 2 * math.pi / rng.uniform(25, 60, 3)
+    waves = np.column_stack([k * np.cos(beta), k * np.sin(beta), rng.uniform(0, 2 * math.pi, 3),
+                             rng.uniform(1.2, 3.0, 3)])
+    period = float(rng.uniform(1.6, 3.2))
+    amp = float(rng.uniform(2.0, 5.0) * (rng.uniform() < 0.67))
+    return _Rows(np.asarray(base, np.float64), period, float(ang), amp, waves)
+
+
 LAND = {
     "wheat": (160, 148, 106), "crop": (104, 120, 72), "young": (126, 132, 88), "ploughed": (116, 98, 80),
     "grass": (94, 110, 72), "meadow": (112, 118, 80), "soil": (128, 110, 88), "wood": (64, 74, 50),
@@ -624,12 +647,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
         if kind == "field":
             crop = ["wheat", "crop", "young", "ploughed"][int(rng.integers(0, 4))]
             e = poly[np.argmax(np.hypot(*(poly - poly[0]).T))] - poly[0]
-            ang = math.atan2(e[1], e[0]) + rng.uniform(-0.15, 0.15) + rng.choice([0.0, 0.5 * math.pi])
-            waves = np.column_stack([rng.uniform(-1, 1, (3, 2)) * 2 * math.pi / rng.uniform(25, 90, (3, 1)),
-                                     rng.uniform(0, 2 * math.pi, 3), rng.uniform(0.8, 2.5, 3)])
-            canvas.polygon([poly], _Rows(np.asarray(LAND[crop]) * jitter, float(rng.uniform(1.6, 3.2)), float(ang),
-                                         # a third of the fields show no rows at all
-                                         float(rng.uniform(2.0, 5.0) * (rng.uniform() < 0.67)), waves))
+            canvas.polygon([poly], field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0])))
         elif kind == "parking":
             canvas.polygon([poly], np.asarray(LAND["concrete"]) * jitter)
             yaw = math.atan2(*(poly[1] - poly[0])[::-1])
@@ -695,7 +713,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     del shade
 
     wall_textures, roof_textures = _building_textures(rng, texel)
-    crown_textures = [_crown_texture(rng, base) for base in ((58, 84, 44), (74, 96, 52), (88, 98, 58))]
+    crown_textures = [_crown_texture(rng, base) for base in ((58, 82, 44), (82, 98, 56))]
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
                  wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures)
@@ -757,7 +775,7 @@ def _place_buildings(bs, cells, kinds, seen, road_index: _RoadIndex, phi: float,
                 continue
             out.append(Building(centre=(float(cx), float(cy), h / 2), size=(float(sx), float(sy), h),
                                 yaw_rad=float(yaw), parts=_building_parts(sx, sy, h, rng),
-                                roof_variant=int(rng.integers(0, 3))))
+                                roof_variant=int(rng.integers(0, len(ROOF_TINTS)))))
             break
     return out
 
@@ -787,7 +805,7 @@ def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: lis
     grass block sides. Each trunk keeps clear of roads and buildings by the crown's radius."""
     ts = ws.trees
     x0, y0, x1, y1 = extent
-    cand: list[tuple[float, float, float, float, float, int, bool]] = []
+    cand: list[tuple] = []  # x, y, height, radius, half height, variant, bush, yaw, stretch
     for key, kind in kinds.items():
         poly, ks = cells[key]
         area_ha = abs(cv2.contourArea(poly.astype(np.float32))) / 1e4
@@ -795,13 +813,15 @@ def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: lis
                    "yard": ts.density_per_ha}.get(kind, 0.0)
         n = int(rng.poisson(density * area_ha))
         lo, hi = poly.min(axis=0), poly.max(axis=0)
-        variant_base = int(rng.integers(0, 3))
+        variant_base = int(rng.integers(0, N_CROWN_VARIANTS))
         for _ in range(n):
             x, y = rng.uniform(lo, hi)
             d = float(rng.uniform(*ts.crown_diameter_range_m))
             h = float(rng.uniform(max(ts.height_range_m[0], 0.6 * d), max(ts.height_range_m[1], 0.6 * d)))
-            v = variant_base if kind == "wood" and rng.uniform() < 0.7 else int(rng.integers(0, 3))
-            cand.append((x, y, h, d / 2, min(max(0.5 * d, 0.36 * h), 0.45 * h), v, False))
+            v = variant_base if kind == "wood" and rng.uniform() < 0.7 else int(rng.integers(0, N_CROWN_VARIANTS))
+            if kind == "wood":  # a closed canopy of big crowns
+                d *= 1.3
+            cand.append((x, y, h, d / 2, min(max(0.5 * d, 0.36 * h), 0.45 * h), v, False, 0.0, 1.0))
         if kind in ("field", "grass", "meadow"):
             for side in range(4):
                 if rng.uniform() >= ts.hedge_fraction:
@@ -813,21 +833,24 @@ def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: lis
                 s = polyline_arc_lengths(row)
                 if s[-1] < 5:
                     continue
-                at = np.arange(0.0, s[-1], 1.0)
+                # bushes 1.6-2.4 m wide, stretched to 2.2x along the row, 2.4 m apart: a closed hedge
+                at = np.arange(0.0, s[-1], 2.4)
                 hx, hy = np.interp(at, s, row[:, 0]), np.interp(at, s, row[:, 1])
-                for x, y in zip(hx, hy):
+                tx, ty = np.gradient(hx), np.gradient(hy)
+                for x, y, dx, dy in zip(hx, hy, tx, ty):
                     d = float(rng.uniform(1.6, 2.4))
                     h = float(rng.uniform(1.6, 2.6))
-                    cand.append((float(x), float(y), h, d / 2, 0.45 * h, 1 + int(rng.integers(0, 2)), True))
+                    cand.append((float(x), float(y), h, d / 2, 0.45 * h, int(rng.integers(0, N_CROWN_VARIANTS)), True,
+                                 math.atan2(dy, dx), 2.2))
     if not cand:
         return []
-    arr = np.array([c[:4] for c in cand])
+    arr = np.array([(c[0], c[1], c[2], c[3] * max(1.0, c[8])) for c in cand])
     inside = (arr[:, 0] > x0) & (arr[:, 0] < x1) & (arr[:, 1] > y0) & (arr[:, 1] < y1)
     ok = inside & (road_index.clearance(arr[:, :2]) > arr[:, 3] + 0.5)
     for b in buildings:
         ok &= point_rect_distance(arr[:, :2], b.corners_xy()) > arr[:, 3] + 0.5
     return [Tree(x_m=c[0], y_m=c[1], height_m=c[2], crown_radius_m=c[3], crown_half_height_m=c[4], variant=c[5],
-                 bush=c[6]) for c, keep in zip(cand, ok) if keep]
+                 bush=c[6], yaw_rad=c[7], stretch=c[8]) for c, keep in zip(cand, ok) if keep]
 
 
 def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree], light) -> None:
@@ -846,30 +869,32 @@ def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree]
         centres = np.array([[t.x_m, t.y_m] for t in trees]) + np.array(
             [away * (t.height_m - t.crown_half_height_m) for t in trees])
         stretch = min(2.5, 1.0 / max(0.3, to_sun[2]))
-        axes = np.array([[t.crown_radius_m * stretch * 0.9, t.crown_radius_m * 0.95] for t in trees])
         ang = math.degrees(math.atan2(away[1], away[0])) if np.hypot(*away) > 1e-6 else 0.0
-        canvas.ellipses(centres, axes, np.full(len(trees), ang), k, mode="mul")
+        round_ = np.array([not t.bush for t in trees])
+        axes = np.array([[t.crown_radius_m * stretch * 0.9, t.crown_radius_m * 0.95] for t in trees])
+        canvas.ellipses(centres[round_], axes[round_], np.full(int(round_.sum()), ang), k, mode="mul")
+        # a hedge bush's shadow: its own ellipse, along its row, moved away from the sun
+        bushes = [t for t in trees if t.bush]
+        canvas.ellipses(centres[~round_], np.array([[t.reach_m, t.crown_radius_m * 1.2] for t in bushes]),
+                        np.array([math.degrees(t.yaw_rad) for t in bushes]), k, mode="mul")
 
 
 def _building_textures(rng: np.random.Generator, texel: float):
-    """Facades (floors 3 m apart with irregular windows) and roofs (membrane, gravel), 128 x 128, 0.1 m."""
+    """A facade (floors 3 m apart with irregular windows) and a roof (membrane with stains), 128 x 128 texels
+    of 0.1 m, repeated."""
     n = 128
-    walls, roofs = [], []
-    for base in ((170, 162, 150), (150, 140, 128)):
-        g = 1.0 + 0.25 * _multiscale_noise(rng, (n, n), 0.1)
-        tex = np.ones((n, n, 3), np.float32) * np.asarray(base, np.float32)
-        for row in range(6, n, 30):  # one floor per 3 m; windows 1.2 m high, varied widths
-            col = int(rng.integers(2, 8))
-            while col < n - 8:
-                w = int(rng.integers(8, 16))
-                tex[row:row + 12, col:col + w] = (60, 66, 74) if rng.uniform() < 0.8 else (110, 112, 110)
-                col += w + int(rng.integers(6, 14))
-        walls.append(np.clip(np.rint(tex * g[..., None]), 0, 255).astype(np.uint8))
-    for base in ((150, 148, 144), (112, 108, 104), (168, 160, 146)):
-        g = 1.0 + 0.5 * _multiscale_noise(rng, (n, n), 0.1)
-        tex = np.ones((n, n, 3), np.float32) * np.asarray(base, np.float32) * g[..., None]
-        roofs.append(np.clip(np.rint(tex), 0, 255).astype(np.uint8))
-    return walls, roofs
+    g = 1.0 + 0.25 * _multiscale_noise(rng, (n, n), 0.1)
+    tex = np.ones((n, n, 3), np.float32) * np.asarray((168, 160, 148), np.float32)
+    for row in range(6, n, 30):  # one floor per 3 m; windows 1.2 m high, varied widths
+        col = int(rng.integers(2, 8))
+        while col < n - 8:
+            w = int(rng.integers(8, 16))
+            tex[row:row + 12, col:col + w] = (60, 66, 74) if rng.uniform() < 0.8 else (110, 112, 110)
+            col += w + int(rng.integers(6, 14))
+    wall = np.clip(np.rint(tex * g[..., None]), 0, 255).astype(np.uint8)
+    g = 1.0 + 0.5 * _multiscale_noise(rng, (n, n), 0.1)
+    roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
+    return [wall], [roof]
 
 
 def _crown_texture(rng: np.random.Generator, base) -> np.ndarray:
