@@ -116,7 +116,7 @@ def main() -> None:
             files_wall.append(n / (timings["render_truth_s"] + timings["write_s"]))
     flat = specs["flat"]
     print(f"preset {args.preset!r}, {flat.image.width_px}x{flat.image.height_px}, {n} frames, "
-          f"median of {args.runs} interleaved runs, one thread (LP_NUM_THREADS=1, OMP/OPENBLAS=1, "
+          f"light {flat.light.mode}, median of {args.runs} interleaved runs, one thread (LP_NUM_THREADS=1, OMP/OPENBLAS=1, "
           f"cv2.setNumThreads(1)); load average {load_before:.1f} -> {os.getloadavg()[0]:.1f} "
           f"on {os.cpu_count()} cores")
     print(f"  {'row':<11} {'frames/CPU-s':>12} {'wall frames/s':>14} {'x flat':>7}   what")

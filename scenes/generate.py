@@ -95,7 +95,7 @@ class SceneGenerator:
         self.path = camera_path(spec, rng_jitter)
         self.world = build_world(spec, self.path, rng_world)
         self.vehicles = place_vehicles(spec, self.world, self.path, rng_vehicles)
-        top_m = max([b.size[2] for b in self.world.buildings], default=0.0)
+        top_m = self.world.top_m
         lowest_m = float(self.path.C[:, 2].min())
         znear = max(0.1, 0.5 * (lowest_m - max(top_m, spec.vehicles.height_m)))
         zfar = 20.0 * float(self.path.C[:, 2].max()) + 10.0
@@ -158,12 +158,12 @@ class SceneGenerator:
 
     def _light(self, rgb: np.ndarray, depth: np.ndarray, t_s: float, K: np.ndarray) -> np.ndarray:
         """Illumination gain and haze on the (canvas) render; float32 out, or the input when both are off."""
-        light, haze = self.spec.photometry, self.spec.sensor.haze
-        if light.brightness_drift_per_s == 0 and haze.extinction_per_km == 0:
+        drift, haze = self.spec.light.illumination_drift_per_s, self.spec.sensor.haze
+        if drift == 0 and haze.extinction_per_km == 0:
             return rgb
         img = rgb.astype(np.float32)
-        if light.brightness_drift_per_s != 0:
-            img *= np.float32(1.0 + light.brightness_drift_per_s * t_s)
+        if drift != 0:
+            img *= np.float32(1.0 + drift * t_s)
         if haze.extinction_per_km > 0:
             h, w = depth.shape
             xn = (np.arange(w, dtype=np.float32) - np.float32(K[0, 2])) / np.float32(K[0, 0])

@@ -22,6 +22,7 @@ __all__ = [
     "project",
     "VehiclePath",
     "vehicle_pose_matrix",
+    "polyline_arc_lengths",
 ]
 
 
@@ -166,28 +167,50 @@ def vehicle_pose_matrix(x_m: float, y_m: float, theta_rad: float) -> np.ndarray:
     return M
 
 
+def polyline_arc_lengths(points_m: np.ndarray) -> np.ndarray:
+    """Cumulative arc length (M,) float64 of a polyline (M, 2), starting at 0."""
+    seg = np.hypot(*np.diff(np.asarray(points_m, np.float64), axis=0).T)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
 @dataclass
 class VehiclePath:
-    """A vehicle's path on the ground: straight, optionally one 90-degree turn, with a speed profile.
+    """A vehicle driving along ``route_m``, a polyline on a road (curves, turns at junctions), with a speed profile.
 
-    ``kind`` is one of ``parked``, ``constant``, ``accelerating``, ``stopping``;
-    ``turn`` is 0 (straight), +1 (left) or -1 (right), taken after ``s_turn_m``.
+    ``kind`` is one of ``parked``, ``constant``, ``accelerating``, ``stopping``. At time
+    ``t`` the vehicle is at arc length ``s0_m + distance(t)`` along the route, heading along
+    the route's tangent (interpolated between the vertices' tangents, so it turns smoothly).
+    Beyond either end of the route it continues straight.
     """
 
     vehicle_id: int
     kind: str
-    p0: np.ndarray  # (2,) start position, metres
-    d0: np.ndarray  # (2,) unit direction at the start
+    route_m: np.ndarray  # (M, 2) polyline, metres, M >= 2, in driving order
+    s0_m: float  # arc length along the route at t = 0
     v0_mps: float
     v_max_mps: float = 0.0
     accel_mps2: float = 0.0
     t_stop_start_s: float = 0.0
-    turn: int = 0
-    s_turn_m: float = 0.0
-    radius_m: float = 8.0
+    turning: bool = False  # drawn as a vehicle that turns at junctions (its route was chosen so)
     size_m: tuple[float, float, float] = (4.5, 1.9, 1.5)
     body_rgb: tuple[int, int, int] = (200, 30, 30)
     cabin_rgb: tuple[int, int, int] = (60, 60, 60)
+    _s: np.ndarray = field(init=False, repr=False)
+    _heading: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        route = np.asarray(self.route_m, np.float64)
+        if route.ndim != 2 or route.shape[1] != 2 or route.shape[0] < 2:
+            raise ValueError(f"route_m: expected (M, 2) with M >= 2, got {route.shape}")
+        s = polyline_arc_lengths(route)
+        keep = np.concatenate([[True], np.diff(s) > 1e-9])  # repeated points have no direction
+        self.route_m, s = route[keep], s[keep]
+        d = np.diff(self.route_m, axis=0)
+        seg_heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+        # a vertex's heading: the mean of its two segments' (ends: their one segment)
+        mid = 0.5 * (seg_heading[:-1] + seg_heading[1:])
+        self._heading = np.concatenate([[seg_heading[0]], mid, [seg_heading[-1]]])
+        self._s = s
 
     @property
     def parked(self) -> bool:
@@ -221,28 +244,29 @@ class VehiclePath:
             return v0 * ts + v0 * tb - 0.5 * a * tb * tb
         return v0 * t_s
 
+    def at_arc_length(self, s_m: float) -> tuple[float, float, float]:
+        """(x_m, y_m, theta_rad) at arc length ``s_m`` along the route (straight on beyond its ends)."""
+        s, P, H = self._s, self.route_m, self._heading
+        if s_m <= s[0]:
+            th = H[0]
+            return float(P[0, 0] + (s_m - s[0]) * math.cos(th)), float(P[0, 1] + (s_m - s[0]) * math.sin(th)), float(th)
+        if s_m >= s[-1]:
+            th = H[-1]
+            return (float(P[-1, 0] + (s_m - s[-1]) * math.cos(th)), float(P[-1, 1] + (s_m - s[-1]) * math.sin(th)),
+                    float(th))
+        k = int(np.searchsorted(s, s_m, side="right")) - 1
+        w = (s_m - s[k]) / (s[k + 1] - s[k])
+        p = (1 - w) * P[k] + w * P[k + 1]
+        return float(p[0]), float(p[1]), float((1 - w) * H[k] + w * H[k + 1])
+
     def pose(self, t_s: float) -> tuple[float, float, float]:
         """(x_m, y_m, theta_rad) at time ``t_s``; theta is the direction of travel from +x, anticlockwise."""
-        s = self.distance(t_s)
-        d0 = self.d0
-        if self.turn == 0 or s <= self.s_turn_m:
-            p = self.p0 + s * d0
-            return float(p[0]), float(p[1]), math.atan2(d0[1], d0[0])
-        left = np.array([-d0[1], d0[0]])
-        sign = float(self.turn)
-        start = self.p0 + self.s_turn_m * d0
-        centre = start + sign * self.radius_m * left
-        arc = 0.5 * math.pi * self.radius_m
-        phi = min(s - self.s_turn_m, arc) / self.radius_m  # angle turned
-        # position on the arc: rotate (start - centre) by sign * phi
-        r0 = start - centre
-        c, si = math.cos(sign * phi), math.sin(sign * phi)
-        p = centre + np.array([c * r0[0] - si * r0[1], si * r0[0] + c * r0[1]])
-        theta = math.atan2(d0[1], d0[0]) + sign * phi
-        if s > self.s_turn_m + arc:
-            d1 = np.array([math.cos(theta), math.sin(theta)])
-            p = p + (s - self.s_turn_m - arc) * d1
-        return float(p[0]), float(p[1]), theta
+        return self.at_arc_length(self.s0_m + self.distance(t_s))
+
+    def direction(self, t_s: float) -> np.ndarray:
+        """Unit vector (2,) of the direction of travel at ``t_s``."""
+        th = self.pose(t_s)[2]
+        return np.array([math.cos(th), math.sin(th)])
 
     def matrix(self, t_s: float) -> np.ndarray:
         return vehicle_pose_matrix(*self.pose(t_s))

@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from scenes.world import MAX_TEXTURE_PX, World, box_mesh, vehicle_boxes
+from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -129,14 +129,6 @@ def _textured_material(pyrender, image: np.ndarray, *, repeat: bool):
     return pyrender.MetallicRoughnessMaterial(baseColorTexture=tex, metallicFactor=0.0, roughnessFactor=1.0)
 
 
-def _colour_primitive(pyrender, mesh: dict, rgb: tuple[int, int, int]):
-    n = mesh["positions"].shape[0]
-    col = np.tile(np.array([[rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0]], np.float32), (n, 1))
-    mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0)
-    return pyrender.Primitive(positions=mesh["positions"], normals=mesh["normals"], color_0=col,
-                              indices=mesh["indices"], material=mat)
-
-
 def _ground_tiles(pyrender, world: World) -> list:
     """The ground as quads of at most MAX_TEXTURE_PX texels a side, one texture each."""
     tex = world.ground_texture
@@ -161,8 +153,131 @@ def _ground_tiles(pyrender, world: World) -> list:
     return prims
 
 
+# flat light has no shading: faces are darkened by these factors instead, as a sun high in the
+# south-east would (top faces full, walls less); sun light shades them itself
+FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
+CROWN_SEGMENTS = 10
+SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+
+
+def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
+    """Per-vertex RGBA (n, 4) float32: ``rgb`` darkened on walls under flat light (by the face normal)."""
+    col = np.tile(np.array([[rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, 1.0]], np.float32),
+                  (mesh["positions"].shape[0], 1))
+    col[:, :3] = np.minimum(col[:, :3], 1.0)
+    if flat:
+        up = mesh["normals"][:, 2]
+        col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
+    return col
+
+
+def _merge(meshes: list[dict]) -> dict:
+    out, base = {k: [] for k in meshes[0]}, 0
+    for m in meshes:
+        for k, v in m.items():
+            out[k].append(v + base if k == "indices" else v)
+        base += m["positions"].shape[0]
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def _placed(mesh: dict, yaw: float, at_xy) -> dict:
+    c, s = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], np.float32)
+    out = dict(mesh)
+    out["positions"] = mesh["positions"] @ Rz.T + np.array([at_xy[0], at_xy[1], 0.0], np.float32)
+    out["normals"] = mesh["normals"] @ Rz.T
+    return out
+
+
+def _building_prims(pyrender, world: World, *, flat: bool) -> list:
+    """All buildings in two draws: walls, and roofs with their parapets and roof units (tinted per building).
+
+    Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
+    walls, roofs = [], []
+    for b in world.buildings:
+        tint = np.asarray(ROOF_TINTS[b.roof_variant])
+        for p, part in enumerate(b.parts):
+            m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
+            tri = m["indices"]
+            if p == 0:  # the block: walls (faces 0-3) and roof (face 5); its floor is never seen
+                walls.append({**m, "indices": tri[:8], "colours": _face_colours(m, (255, 255, 255), flat=flat)})
+                roofs.append({**m, "indices": tri[10:12], "colours": _face_colours(m, 255 * tint, flat=flat)})
+            else:  # parapet (darker) and roof units (lighter): their sides and tops
+                k = 0.85 if p <= 4 else 1.2
+                roofs.append({**m, "indices": np.concatenate([tri[:8], tri[10:12]]),
+                              "colours": _face_colours(m, np.minimum(255, 255 * k * tint), flat=flat)})
+    prims = []
+    for parts, tex in ((walls, world.wall_textures[0]), (roofs, world.roof_textures[0])):
+        m = _merge(parts)
+        prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"],
+                                        color_0=m["colours"], indices=m["indices"],
+                                        material=_textured_material(pyrender, tex, repeat=True)))
+    return prims
+
+
+def _unit_crown() -> dict:
+    """A unit crown, instanced and scaled per tree: a top, a ring of CROWN_SEGMENTS at 50 deg, a ring at the
+    equator and a bottom (4 x CROWN_SEGMENTS triangles; an icosphere would cost twice as many and llvmpipe
+    pays per vertex of every instance), with top-down UVs."""
+    n = CROWN_SEGMENTS
+    a = 2 * np.pi * np.arange(n) / n
+    upper = np.column_stack([0.64 * np.cos(a + np.pi / n), 0.64 * np.sin(a + np.pi / n), np.full(n, 0.77)])
+    equator = np.column_stack([np.cos(a), np.sin(a), np.zeros(n)])
+    v = np.vstack([[0, 0, 1.0], upper, equator, [0, 0, -1.0]]).astype(np.float32)
+    top, bottom = 0, 2 * n + 1
+    faces = []
+    for k in range(n):
+        u0, u1 = 1 + k, 1 + (k + 1) % n
+        e0, e1 = 1 + n + k, 1 + n + (k + 1) % n
+        faces += [(top, u0, u1), (u0, e0, e1), (u0, e1, u1), (bottom, e1, e0)]
+    return {"positions": v, "normals": v / np.linalg.norm(v, axis=1, keepdims=True),
+            "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
+
+
+def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
+    """Crowns instanced per colour variant (one draw each), trunks instanced once."""
+    crown = _unit_crown()
+    if flat:  # baked sky shading: tops light, flanks and undersides darker (the same from every side,
+        # since hedge bushes are turned along their rows; painted shadows give the sun's direction)
+        k = (0.5 + 0.5 * np.clip(0.3 + 0.8 * crown["normals"][:, 2], 0.0, 1.0)).astype(np.float32)
+        col = np.column_stack([k, k, k, np.ones_like(k)])
+    else:
+        col = np.ones((crown["positions"].shape[0], 4), np.float32)
+    meshes = []
+    for v, tex in enumerate(world.crown_textures):
+        trees = [t for t in world.trees if t.variant == v]
+        if not trees:
+            continue
+        poses = np.zeros((len(trees), 4, 4), np.float32)
+        for n, t in enumerate(trees):
+            c, s_ = np.cos(t.yaw_rad), np.sin(t.yaw_rad)
+            Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+            poses[n, :3, :3] = Rz @ np.diag([t.crown_radius_m * t.stretch, t.crown_radius_m, t.crown_half_height_m])
+            poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
+            poses[n, 3, 3] = 1.0
+        mat = _textured_material(pyrender, tex, repeat=False)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
+                                                        texcoord_0=crown["texcoords"], color_0=col,
+                                                        indices=crown["indices"], material=mat, poses=poses)]))
+    trunks = [t for t in world.trees if not t.bush]
+    if trunks:
+        unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
+        poses = np.zeros((len(trunks), 4, 4), np.float32)
+        for n, t in enumerate(trunks):
+            h = t.height_m - 2 * t.crown_half_height_m + 0.3 * t.crown_half_height_m
+            w = max(0.25, 0.08 * t.crown_radius_m)
+            poses[n] = np.diag([w, w, h, 1.0])
+            poses[n, :3, 3] = (t.x_m, t.y_m, h / 2)
+        col = _face_colours(unit, (92, 74, 56), flat=flat)
+        mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=unit["positions"], normals=unit["normals"],
+                                                        color_0=col, indices=unit["indices"], material=mat,
+                                                        poses=poses)]))
+    return meshes
+
+
 class SceneRenderer:
-    """A pyrender scene for one sequence: ground, buildings, vehicles and a camera.
+    """A pyrender scene for one sequence: ground, buildings, trees, vehicles (and their shadows), a camera.
 
     Parameters
     ----------
@@ -179,33 +294,52 @@ class SceneRenderer:
         pyrender = _pyrender()
         self.width_px, self.height_px = view_size_px or (spec.image.width_px, spec.image.height_px)
         self.renderer = get_renderer(self.width_px, self.height_px)
-        self.flat = spec.photometry.lighting == "flat"
-        ambient = (1.0, 1.0, 1.0) if self.flat else (0.35, 0.35, 0.35)
+        light = spec.light
+        self.flat = light.mode == "flat"
+        sun = sun_direction(light.sun_elevation_deg, light.sun_azimuth_deg)
+        # sun light: pyrender mixes in linear light and writes sRGB, so sky light ``ambient`` (the
+        # brightness of shadow relative to sunlit ground, as seen in the image) is ambient^2.2 linear
+        amb_lin = light.ambient ** 2.2
+        ambient = (1.0, 1.0, 1.0) if self.flat else (amb_lin,) * 3
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
-
         if world.buildings:
-            roof_mat = _textured_material(pyrender, world.building_texture, repeat=True)
-            # walls darker than roofs, so that flat shading still shows the building's edges
-            wall_tex = (world.building_texture.astype(np.float32) * 0.6).astype(np.uint8)
-            wall_mat = _textured_material(pyrender, wall_tex, repeat=True)
-            scale_m = world.building_texture.shape[0] * world.texel_m
-            prims = []
-            for b in world.buildings:
-                m = box_mesh(b, uv_scale_m=scale_m)
-                # box_mesh's triangles: 8 walls (+-x, +-y), 2 bottom, 2 top
-                for tris, mat in ((m["indices"][:8], wall_mat), (m["indices"][10:12], roof_mat)):
-                    prims.append(pyrender.Primitive(positions=m["positions"], normals=m["normals"],
-                                                    texcoord_0=m["texcoords"], indices=tris, material=mat))
-            self.scene.add(pyrender.Mesh(prims))
+            self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
+        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
+            self.scene.add(mesh)
 
+        # Each vehicle is one draw: body, glass cabin and roof merged, with vertex colours. Under flat
+        # light it also carries its shadow: a translucent dark quad (vertex alpha, blended), its
+        # footprint moved away from the sun by the shadow of the car's middle height, turned into the
+        # vehicle frame at mid-sequence (on a curve the shadow turns a little with the car). The quad
+        # lies SHADOW_QUAD_LIFT_M above the ground, within the truth's depth tolerance: it is ground.
+        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow.
         self.vehicle_nodes = []
+        shadow = self.flat and light.shadows
+        away = -sun[:2] / max(1e-9, sun[2])
+        t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
         for v in vehicles:
-            body, cabin = vehicle_boxes(*v.size_m)
-            prims = [_colour_primitive(pyrender, box_mesh(body), v.body_rgb),
-                     _colour_primitive(pyrender, box_mesh(cabin), v.cabin_rgb)]
-            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh(prims), pose=np.eye(4)))
+            parts = []
+            if shadow:
+                th = v.pose(t_mid_s)[2]
+                c, s_ = np.cos(th), np.sin(th)
+                off = np.array([[c, s_], [-s_, c]]) @ (away * 0.6 * v.size_m[2])
+                L, W = v.size_m[0] + 0.2, v.size_m[1] + 0.2
+                pos = np.array([[-L / 2, -W / 2, 0], [L / 2, -W / 2, 0], [L / 2, W / 2, 0], [-L / 2, W / 2, 0]],
+                               np.float32) + np.array([off[0], off[1], SHADOW_QUAD_LIFT_M], np.float32)
+                parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
+                              "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+                              "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
+            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
+                m = box_mesh(b)
+                parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
+            m = _merge(parts)
+            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
+                                                     alphaMode="BLEND" if shadow else "OPAQUE")
+            prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
+                                      indices=m["indices"], material=mat)
+            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh([prim]), pose=np.eye(4)))
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
@@ -213,17 +347,16 @@ class SceneRenderer:
         self.camera_node = self.scene.add(cam, pose=np.eye(4))
         self.flags = pyrender.RenderFlags.FLAT if self.flat else pyrender.RenderFlags.NONE
         if not self.flat:
-            ph = spec.photometry
-            el, az = math.radians(ph.sun_elevation_deg), math.radians(ph.sun_azimuth_deg)
-            to_sun = np.array([math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)])
-            z = to_sun  # a light shines along its -z
+            z = sun  # a light shines along its -z
             x = np.cross([0.0, 0.0, 1.0], z)
             x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0, 0])
             y = np.cross(z, x)
             pose = np.eye(4)
             pose[:3, :3] = np.stack([x, y, z], axis=1)
-            self.scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=2.5), pose=pose)
-            if ph.shadows:
+            # sunlit flat ground = its base colour: (I sin(el) / pi) + ambient = 1 in linear light
+            intensity = (1.0 - amb_lin) * np.pi / max(0.05, sun[2])
+            self.scene.add(pyrender.DirectionalLight(color=np.ones(3), intensity=intensity), pose=pose)
+            if light.shadows:
                 self.flags |= pyrender.RenderFlags.SHADOWS_DIRECTIONAL
 
     def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

@@ -29,9 +29,10 @@ __all__ = [
     "JitterSpec",
     "CameraSpec",
     "BuildingsSpec",
+    "TreesSpec",
     "WorldSpec",
     "VehiclesSpec",
-    "PhotometrySpec",
+    "LightSpec",
     "MotionBlurSpec",
     "RollingShutterSpec",
     "LensSpec",
@@ -49,7 +50,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "1.1.0"
+GENERATOR_VERSION = "2.0.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -128,7 +129,9 @@ class CameraSpec(_Model):
 
 
 class BuildingsSpec(_Model):
-    count: int = Field(0, ge=0, le=2000)
+    """Flat-roofed buildings with parapets and roof units, on built-up blocks, clear of roads and each other."""
+
+    count: int = Field(0, ge=0, le=2000, description="buildings wanted; fewer when the built-up blocks are full")
     height_range_m: tuple[float, float] = (6.0, 30.0)
     footprint_range_m: tuple[float, float] = (8.0, 25.0)
 
@@ -141,12 +144,47 @@ class BuildingsSpec(_Model):
         return self
 
 
+class TreesSpec(_Model):
+    """Trees (single, and dense in woods) and hedges: static instanced meshes standing above the ground."""
+
+    density_per_ha: float = Field(6.0, ge=0, le=400, description="single trees per hectare of grass and yards")
+    wood_density_per_ha: float = Field(250.0, ge=0, le=1000, description="trees per hectare of wood blocks")
+    hedge_fraction: float = Field(0.35, ge=0, le=1, description="share of field and grass block sides with a hedge")
+    crown_diameter_range_m: tuple[float, float] = (3.5, 8.0)
+    height_range_m: tuple[float, float] = (5.0, 14.0)
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "TreesSpec":
+        for name in ("crown_diameter_range_m", "height_range_m"):
+            lo, hi = getattr(self, name)
+            if not 0 < lo <= hi:
+                raise ValueError(f"{name}: expected 0 < low <= high, got ({lo}, {hi})")
+        return self
+
+
 class WorldSpec(_Model):
-    road_spacing_m: float = Field(60.0, ge=20, le=2000, description="distance between parallel roads")
-    road_width_m: float = Field(8.0, ge=3, le=40)
-    parking_fraction: float = Field(0.15, ge=0, le=1, description="share of blocks that are parking lots")
-    roof_fraction: float = Field(0.2, ge=0, le=1, description="share of blocks painted as flat roofs")
+    """An irregular road network (a jittered, rotated grid of curved roads with T junctions) and land use."""
+
+    road_spacing_m: float = Field(60.0, ge=20, le=2000, description="mean distance between neighbouring roads")
+    road_width_m: float = Field(8.0, ge=3, le=40, description="width of the main roads (minor roads: 3/4 of it)")
+    road_irregularity: float = Field(0.6, ge=0, le=1,
+                                     description="0 = a straight regular grid; 1 = junctions moved by up to a "
+                                                 "quarter spacing and roads bent by up to 15 % of their length")
+    road_drop_fraction: float = Field(0.25, ge=0, le=0.6,
+                                      description="share of minor road segments left out (T junctions, big blocks)")
+    parking_fraction: float = Field(0.1, ge=0, le=1, description="share of blocks that are parking lots")
+    built_fraction: float = Field(0.2, ge=0, le=1, description="share of blocks that are built-up yards "
+                                                                 "(where buildings stand)")
+    wood_fraction: float = Field(0.1, ge=0, le=1, description="share of blocks that are woods")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
+    trees: TreesSpec = Field(default_factory=TreesSpec)
+
+    @model_validator(mode="after")
+    def _fractions(self) -> "WorldSpec":
+        total = self.parking_fraction + self.built_fraction + self.wood_fraction
+        if total > 1.0 + 1e-9:
+            raise ValueError(f"parking_fraction + built_fraction + wood_fraction: expected <= 1, got {total:g}")
+        return self
 
 
 class VehiclesSpec(_Model):
@@ -174,20 +212,19 @@ class VehiclesSpec(_Model):
         return self
 
 
-class PhotometrySpec(_Model):
-    """Lighting (the sensor effects that lived here moved to :class:`SensorSpec`)."""
+class LightSpec(_Model):
+    """Sun and sky. ``flat`` renders unlit colours (fast; shadows of static things painted on the ground,
+    vehicles carry a translucent shadow quad); ``sun`` lights every surface (about 4x slower) with
+    shadow maps when ``shadows``."""
 
-    lighting: Literal["flat", "sun"] = "flat"
-    sun_elevation_deg: float = Field(50.0, gt=0, le=90)
-    sun_azimuth_deg: float = Field(135.0, ge=-360, le=360)
-    shadows: bool = False
-    brightness_drift_per_s: float = Field(0.0, ge=-0.5, le=0.5, description="relative gain change per second")
-
-    @model_validator(mode="after")
-    def _shadows_need_sun(self) -> "PhotometrySpec":
-        if self.shadows and self.lighting != "sun":
-            raise ValueError("shadows: need lighting 'sun', got lighting 'flat'")
-        return self
+    mode: Literal["flat", "sun"] = "flat"
+    sun_elevation_deg: float = Field(50.0, ge=10, le=90)
+    sun_azimuth_deg: float = Field(135.0, ge=-360, le=360, description="compass direction of the sun, clockwise "
+                                                                      "from north (+y)")
+    shadows: bool = True
+    ambient: float = Field(0.45, ge=0, le=1, description="sky light: the brightness of shadow relative to sunlit "
+                                                         "flat ground")
+    illumination_drift_per_s: float = Field(0.0, ge=-0.5, le=0.5, description="relative gain change per second")
 
 
 # -- the sensor: applied to the rendered light in the order of scenes/sensor.py -------------
@@ -271,6 +308,11 @@ class SensorSpec(_Model):
 MOVED_KEYS = {
     "photometry.noise_std": "sensor.noise.gaussian_std",
     "photometry.blur_sigma_px": "sensor.lens.blur_sigma_px",
+    "photometry.lighting": "light.mode",
+    "photometry.sun_elevation_deg": "light.sun_elevation_deg",
+    "photometry.sun_azimuth_deg": "light.sun_azimuth_deg",
+    "photometry.shadows": "light.shadows",
+    "photometry.brightness_drift_per_s": "light.illumination_drift_per_s",
 }
 
 
@@ -282,7 +324,7 @@ class SceneSpec(_Model):
     camera: CameraSpec = Field(default_factory=CameraSpec)
     world: WorldSpec = Field(default_factory=WorldSpec)
     vehicles: VehiclesSpec = Field(default_factory=VehiclesSpec)
-    photometry: PhotometrySpec = Field(default_factory=PhotometrySpec)
+    light: LightSpec = Field(default_factory=LightSpec)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
 
     @model_validator(mode="before")
@@ -292,14 +334,10 @@ class SceneSpec(_Model):
         if not isinstance(data, dict) or "photometry" not in data:
             return data
         old = data["photometry"]
-        if "photometry" not in cls.model_fields:
-            raise ValueError("photometry: this section was split: noise and blur are in sensor: "
-                             f"({', '.join(f'{k} -> {v}' for k, v in MOVED_KEYS.items())}), lighting in light:")
         moved = [f"{k} -> {MOVED_KEYS[k]}" for k in (f"photometry.{name}" for name in old)
                  if k in MOVED_KEYS] if isinstance(old, dict) else []
-        if moved:
-            raise ValueError(f"moved to the sensor: section: {', '.join(moved)}")
-        return data
+        raise ValueError("photometry: this section was split into sensor: (noise, blur) and light: (lighting, "
+                         f"sun, shadows, drift): {', '.join(moved) if moved else 'see ' + ', '.join(MOVED_KEYS.values())}")
 
     # -- derived quantities used by the generator and the checks ------------------------
     def focal_px(self) -> float:

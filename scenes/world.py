@@ -1,41 +1,68 @@
-"""The world: a textured ground with roads, fields, parking lots and roofs; buildings; vehicles.
+"""The world: an irregular road network, fields, grass, woods, parking lots and yards painted on the
+ground; buildings with roof detail; trees and hedges; vehicles on the roads.
 
 Everything is generated deterministically from ``numpy.random.Generator``s
 derived from the spec seed. The ground texture's texel is finer than the
 camera's ground sampling distance (GSD), so every image pixel sees detail:
 optical flow needs gradients, and a blurry ground would make the benchmark lie.
+No paint is periodic over more than a few metres without irregularity: field
+rows are soft, low in contrast and wander; markings are worn; asphalt is patched.
+
+Roads are the edges of a jittered, rotated grid graph, each a curved polyline
+(a quadratic Bezier), with some minor edges left out (T junctions, larger
+blocks). Vehicles drive along routes through this graph (right-hand lane,
+rounded corners at junctions). Buildings, trees and hedges are placed so that
+they never intersect a road, a building, or each other's trunks; all stand on
+the ground (z >= 0), so their ground truth comes from the rendered depth.
 
 No OpenGL here: meshes are plain arrays that :mod:`scenes.render` uploads.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from scenes.motion import CameraPath, VehiclePath
+from scenes.motion import CameraPath, VehiclePath, polyline_arc_lengths
 
 __all__ = [
     "Box",
+    "Road",
+    "Building",
+    "Tree",
     "World",
     "build_world",
     "place_vehicles",
     "vehicle_boxes",
     "box_mesh",
     "ground_footprint",
+    "distance_to_polyline",
+    "rects_overlap",
+    "point_rect_distance",
+    "sun_direction",
+    "field_rows",
 ]
 
 # texel = GSD / TEXELS_PER_PIXEL: a little finer than a pixel, so the texture never looks blurred
 TEXELS_PER_PIXEL = 1.5
 MAX_TEXTURE_PX = 4096  # per ground tile uploaded to GL
 MAX_GROUND_TEXELS = 60_000_000
-ROAD_RGB = (72, 72, 78)
-MARK_RGB = (235, 235, 228)
-CAR_COLOURS = [(235, 235, 235), (25, 25, 30), (170, 172, 178), (190, 30, 30), (30, 60, 170),
-               (30, 100, 50), (225, 190, 40), (120, 70, 40), (240, 120, 20)]
+ROAD_RGB = (84, 84, 88)
+MARK_RGB = (212, 212, 204)
+# muted colours, as a camera sees them through some air: nothing fully saturated
+CAR_COLOURS = [(225, 225, 222), (232, 232, 228), (30, 30, 34), (45, 47, 52), (150, 152, 156), (175, 176, 180),
+               (160, 40, 38), (40, 62, 130), (52, 84, 60), (200, 170, 60), (110, 80, 60), (200, 110, 40)]
+GLASS_RGB = (38, 44, 52)
+# every building shares one facade and one roof texture (one draw each); roofs differ by a tint
+ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92))
+N_CROWN_VARIANTS = 2  # crown colours: each one instanced draw
+ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
+ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
+BUILDING_GAP_M = 1.5  # between two buildings' footprints
 
 
 @dataclass(frozen=True)
@@ -46,17 +73,91 @@ class Box:
     size: tuple[float, float, float]
 
 
+@dataclass(frozen=True)
+class Road:
+    """A road segment between two junctions: centre line (M, 2) metres, width in metres."""
+
+    centre_m: np.ndarray
+    width_m: float
+    major: bool
+    nodes: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class Building:
+    """A flat-roofed building: footprint centre ``centre[:2]``, ``size`` (length, width, wall height),
+    turned by ``yaw_rad``; ``parts`` are its boxes in the building frame (walls, parapet, roof units)."""
+
+    centre: tuple[float, float, float]  # (x, y, height / 2), as a Box's
+    size: tuple[float, float, float]
+    yaw_rad: float
+    parts: tuple[Box, ...]
+    roof_variant: int
+
+    @property
+    def top_m(self) -> float:
+        return max(b.centre[2] + b.size[2] / 2 for b in self.parts)
+
+    def corners_xy(self) -> np.ndarray:
+        """The footprint's corners (4, 2), anticlockwise."""
+        return _rect_corners(self.centre[0], self.centre[1], self.size[0], self.size[1], self.yaw_rad)
+
+
+@dataclass(frozen=True)
+class Tree:
+    """A tree or hedge bush: crown an ellipsoid of radius ``crown_radius_m`` and vertical semi-axis
+    ``crown_half_height_m`` whose top is at ``height_m``; trunk under it. Always above the ground."""
+
+    x_m: float
+    y_m: float
+    height_m: float
+    crown_radius_m: float
+    crown_half_height_m: float
+    variant: int
+    bush: bool = False
+    yaw_rad: float = 0.0  # hedge bushes are stretched along their row
+    stretch: float = 1.0  # radius along the row / crown_radius_m
+
+    @property
+    def reach_m(self) -> float:
+        """The crown's largest horizontal radius."""
+        return self.crown_radius_m * max(1.0, self.stretch)
+
+
 @dataclass
 class World:
-    extent_m: tuple[float, float, float, float]  # x0, y0, x1, y1
+    extent_m: tuple[float, float, float, float]  # x0, y0, x1, y1 of the ground texture
     texel_m: float
     ground_texture: np.ndarray  # (Ht, Wt, 3) uint8; row r <-> y = y0 + (r + 0.5) * texel
-    road_x_m: np.ndarray  # centre lines of roads running north-south (x = const)
-    road_y_m: np.ndarray  # centre lines of roads running east-west (y = const)
-    road_width_m: float
-    buildings: list[Box] = field(default_factory=list)  # in world coordinates, on the ground
-    building_texture: np.ndarray | None = None
+    roads: list[Road]
+    nodes_m: np.ndarray  # (N, 2) junctions of the road graph
+    road_width_m: float  # of the main roads
+    buildings: list[Building] = field(default_factory=list)
+    trees: list[Tree] = field(default_factory=list)
     stalls: list[tuple[float, float, float]] = field(default_factory=list)  # parking: x, y, theta
+    wall_textures: list[np.ndarray] = field(default_factory=list)
+    roof_textures: list[np.ndarray] = field(default_factory=list)
+    crown_textures: list[np.ndarray] = field(default_factory=list)
+
+    @property
+    def top_m(self) -> float:
+        """Height of the highest static thing (0 for a bare ground)."""
+        return max([b.top_m for b in self.buildings] + [t.height_m for t in self.trees], default=0.0)
+
+    def adjacency(self) -> dict[int, list[tuple[int, int]]]:
+        """node -> [(road index, other node)] over the road graph."""
+        adj: dict[int, list[tuple[int, int]]] = {}
+        for k, r in enumerate(self.roads):
+            a, b = r.nodes
+            adj.setdefault(a, []).append((k, b))
+            adj.setdefault(b, []).append((k, a))
+        return adj
+
+
+def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Unit vector (3,) from the ground toward the sun; azimuth clockwise from north (+y)."""
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)])
 
 
 def ground_footprint(path: CameraPath, width_px: int, height_px: int) -> tuple[float, float, float, float]:
@@ -71,6 +172,75 @@ def ground_footprint(path: CameraPath, width_px: int, height_px: int) -> tuple[f
             float(pts[..., 0].max()), float(pts[..., 1].max()))
 
 
+# -- geometry helpers ---------------------------------------------------------------------
+
+def _rect_corners(cx: float, cy: float, sx: float, sy: float, yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.array([[-sx / 2, -sy / 2], [sx / 2, -sy / 2], [sx / 2, sy / 2], [-sx / 2, sy / 2]])
+    return local @ np.array([[c, s], [-s, c]]) + (cx, cy)
+
+
+def distance_to_polyline(points_m: np.ndarray, line_m: np.ndarray) -> np.ndarray:
+    """Distance (P,) from each point (P, 2) to the polyline (M, 2), metres."""
+    p = np.asarray(points_m, np.float64).reshape(-1, 2)
+    a, b = line_m[:-1], line_m[1:]
+    ab = b - a
+    L2 = np.maximum((ab ** 2).sum(axis=1), 1e-12)
+    t = np.clip(((p[:, None, :] - a[None]) * ab[None]).sum(axis=2) / L2, 0.0, 1.0)
+    q = a[None] + t[..., None] * ab[None]
+    return np.sqrt(((p[:, None, :] - q) ** 2).sum(axis=2)).min(axis=1)
+
+
+def rects_overlap(a: np.ndarray, b: np.ndarray, gap_m: float = 0.0) -> bool:
+    """Whether two convex quads (4, 2) come closer than ``gap_m`` (separating axis test on their edges)."""
+    for poly in (a, b):
+        for k in range(4):
+            e = poly[(k + 1) % 4] - poly[k]
+            n = np.array([-e[1], e[0]]) / max(1e-12, math.hypot(*e))
+            pa, pb = a @ n, b @ n
+            if pa.max() + gap_m <= pb.min() or pb.max() + gap_m <= pa.min():
+                return False
+    return True
+
+
+def point_rect_distance(points_m: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Distance (P,) from points (P, 2) to a rectangle given by its corners (4, 2); 0 inside."""
+    c = corners.mean(axis=0)
+    ex, ey = corners[1] - corners[0], corners[3] - corners[0]
+    sx, sy = math.hypot(*ex), math.hypot(*ey)
+    d = np.asarray(points_m, np.float64).reshape(-1, 2) - c
+    lx, ly = np.abs(d @ (ex / sx)) - sx / 2, np.abs(d @ (ey / sy)) - sy / 2
+    return np.hypot(np.maximum(lx, 0), np.maximum(ly, 0))
+
+
+def _bezier(p0: np.ndarray, ctrl: np.ndarray, p1: np.ndarray, step_m: float) -> np.ndarray:
+    n = max(2, int(math.ceil(np.hypot(*(p1 - p0)) / step_m)) + 1)
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return (1 - t) ** 2 * p0 + 2 * (1 - t) * t * ctrl + t ** 2 * p1
+
+
+def _trim(line: np.ndarray, *, start_m: float = 0.0, end_m: float = 0.0) -> np.ndarray:
+    """The part of a polyline from arc length ``start_m`` to ``length - end_m``."""
+    s = polyline_arc_lengths(line)
+    a, b = start_m, s[-1] - end_m
+    keep = (s > a) & (s < b)
+    pa = np.array([np.interp(a, s, line[:, 0]), np.interp(a, s, line[:, 1])])
+    pb = np.array([np.interp(b, s, line[:, 0]), np.interp(b, s, line[:, 1])])
+    return np.vstack([pa, line[keep], pb])
+
+
+def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
+    """The polyline moved ``offset_m`` to the right of its direction (per vertex or one value)."""
+    t = np.gradient(line, axis=0)
+    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
+    right = np.stack([t[:, 1], -t[:, 0]], axis=1)
+    return line + np.asarray(offset_m, np.float64).reshape(-1, 1) * right
+
+
+# value-noise octaves (cell size in metres, weight) that shade the ground: weak at 40 m (no cloudy
+# blotches: photographs of fields are fairly even), strongest at 1 m and at the pixel (grain to track)
+NOISE_OCTAVES_M = ((40.0, 0.1), (10.0, 0.12), (3.0, 0.12), (1.0, 0.12))
+GRAIN_AMP = 0.1
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
 _DRAW_ROWS = 1024  # noise lattices are drawn this many rows at a time (no float64 copy of a big one)
@@ -106,8 +276,8 @@ def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m:
     total = np.zeros(shape, np.float32)
     # grain at about one image pixel (TEXELS_PER_PIXEL texels): detail at the GSD, yet smooth
     # enough inside a pixel that resampling at another sub-pixel phase changes it little
-    octaves = [(cell_m / texel_m, amp) for cell_m, amp in ((40.0, 0.35), (10.0, 0.25), (3.0, 0.2), (1.0, 0.15))
-               if cell_m / texel_m >= 2] + [(TEXELS_PER_PIXEL, 0.12)]
+    octaves = [(cell_m / texel_m, amp) for cell_m, amp in NOISE_OCTAVES_M
+               if cell_m / texel_m >= 2] + [(TEXELS_PER_PIXEL, GRAIN_AMP)]
     for cell_px, amp in octaves:
         big = _noise_upsampled(rng, shape, cell_px)
         for r0 in range(0, h, STRIP_ROWS):
@@ -119,47 +289,140 @@ def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m:
     return total
 
 
-def _road_lines(rng: np.random.Generator, lo: float, hi: float, spacing: float) -> np.ndarray:
-    offset = rng.uniform(0, spacing)
-    first = math.floor((lo - offset) / spacing)
-    last = math.ceil((hi - offset) / spacing)
-    return np.array([offset + k * spacing for k in range(first, last + 1)], float)
 
+# -- ground paint --------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class _Stripes:
-    """A field's ploughed stripes: ``base + 28 sin(2 pi (x cos(ang) + y sin(ang)) / period)``."""
+class _Rows:
+    """A field's rows: soft, low in contrast, wandering. ``base + amp(X, Y) sin(phase(X, Y))`` where the
+    phase runs across the rows (``period`` metres apart at angle ``ang``) and is bent by a few long,
+    weak waves, and the contrast ``amp`` fades in and out: nothing a flow method could lock on to
+    over more than a few rows."""
 
     base: np.ndarray  # (3,) RGB
     period: float  # metres
     ang: float  # radians
+    amp: float  # gray levels
+    waves: np.ndarray  # (3, 4): kx, ky (rad/m), phase, amplitude (rad) of the bending waves
+
+    def __call__(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        phase = 2 * math.pi * (X * math.cos(self.ang) + Y * math.sin(self.ang)) / self.period
+        for kx, ky, ph, a in self.waves:
+            phase += a * np.sin(kx * X + ky * Y + ph)
+        kx, ky, ph, _ = self.waves[0]
+        amp = self.amp * (0.5 + 0.5 * np.sin(0.7 * ky * X - 0.7 * kx * Y + 2 * ph))
+        return self.base + (amp * np.sin(phase))[..., None]
 
 
 @dataclass(frozen=True)
 class _Paint:
-    """Paint ``value`` on the texels ``[rows, cols]`` (a slice or a boolean mask each, never both masks)."""
+    """Paint ``value`` on the texels ``[rows, cols]`` (slices), through ``alpha`` (uint8 coverage over
+    those texels, or None for all of them). ``mode`` ``set`` blends toward ``value`` (an RGB triple,
+    a grey level, or a pattern ``f(X, Y) -> (h, w, 3)``); ``mul`` multiplies by it (shadows)."""
 
-    rows: slice | np.ndarray
-    cols: slice | np.ndarray
-    value: object  # an RGB triple, a grey level, or _Stripes
+    rows: slice
+    cols: slice
+    value: object
+    alpha: np.ndarray | None = None
+    mode: str = "set"
 
     def apply(self, buf: np.ndarray, r0: int, xs: np.ndarray, ys: np.ndarray) -> None:
         """Paint onto ``buf``, the texture's rows ``r0 .. r0 + len(buf)`` (float32, (n, Wt, 3))."""
         r1 = r0 + buf.shape[0]
-        if isinstance(self.rows, slice):
-            a, b = max(self.rows.start, r0), min(self.rows.stop, r1)
-            if b <= a:
-                return
-            local, rows_g = slice(a - r0, b - r0), slice(a, b)
+        a, b = max(self.rows.start, r0), min(self.rows.stop, r1)
+        if b <= a or self.cols.stop <= self.cols.start:
+            return
+        local = slice(a - r0, b - r0)
+        value = self.value
+        if callable(value):
+            X, Y = np.meshgrid(xs[self.cols], ys[a:b])
+            value = value(X, Y).astype(np.float32)
         else:
-            local = rows_g = self.rows[r0:r1]
-        if isinstance(self.value, _Stripes):
-            st = self.value
-            X, Y = np.meshgrid(xs[self.cols], ys[rows_g])
-            stripes = np.sin(2 * math.pi * (X * math.cos(st.ang) + Y * math.sin(st.ang)) / st.period)
-            buf[local, self.cols] = st.base + 28.0 * stripes[..., None]
+            value = np.asarray(value, np.float32)
+        region = buf[local, self.cols]
+        if self.alpha is None:
+            if self.mode == "mul":
+                region *= value
+            else:
+                region[...] = value
+            return
+        w = self.alpha[a - self.rows.start:b - self.rows.start].astype(np.float32)[..., None]
+        w *= np.float32(1 / 255)
+        if self.mode == "mul":
+            region *= 1 + w * (value - 1)
         else:
-            buf[local, self.cols] = self.value
+            region += w * (value - region)
+
+
+class _Canvas:
+    """Turns shapes in world metres into paint operations on the ground texture (coverage masks drawn
+    with OpenCV, anti-aliased, cropped to each shape's bounding box)."""
+
+    SHIFT = 4  # OpenCV fixed-point bits: sub-texel coordinates
+
+    def __init__(self, x0: float, y0: float, texel: float, wt: int, ht: int):
+        self.x0, self.y0, self.texel, self.wt, self.ht = x0, y0, texel, wt, ht
+        self.ops: list[_Paint] = []
+
+    def _crop(self, pts_m: np.ndarray, pad_m: float):
+        px = (np.asarray(pts_m, np.float64).reshape(-1, 2) - (self.x0, self.y0)) / self.texel - 0.5
+        pad = pad_m / self.texel + 2
+        c0, c1 = max(0, int(math.floor(px[:, 0].min() - pad))), min(self.wt, int(math.ceil(px[:, 0].max() + pad)))
+        r0, r1 = max(0, int(math.floor(px[:, 1].min() - pad))), min(self.ht, int(math.ceil(px[:, 1].max() + pad)))
+        if c1 <= c0 or r1 <= r0:
+            return None
+        return r0, r1, c0, c1
+
+    def _fixed(self, pts_m: np.ndarray, r0: int, c0: int) -> np.ndarray:
+        px = (np.asarray(pts_m, np.float64) - (self.x0, self.y0)) / self.texel - 0.5 - (c0, r0)
+        return np.rint(px * (1 << self.SHIFT)).astype(np.int32)
+
+    def _add(self, crop, mask: np.ndarray, value, mode: str, opacity: float) -> None:
+        r0, r1, c0, c1 = crop
+        if opacity < 1.0:
+            mask = np.rint(mask * opacity).astype(np.uint8)
+        if mask.any():
+            self.ops.append(_Paint(slice(r0, r1), slice(c0, c1), value, mask, mode))
+
+    def polygon(self, polys_m: list[np.ndarray], value, *, mode: str = "set", opacity: float = 1.0) -> None:
+        crop = self._crop(np.vstack(polys_m), 0.0)
+        if crop is None:
+            return
+        r0, r1, c0, c1 = crop
+        mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
+        cv2.fillPoly(mask, [self._fixed(p, r0, c0) for p in polys_m], 255, cv2.LINE_AA, self.SHIFT)
+        self._add(crop, mask, value, mode, opacity)
+
+    def lines(self, lines_m: list[np.ndarray], width_m: float, value, *, mode: str = "set",
+              opacity: float = 1.0) -> None:
+        """Polylines ``width_m`` wide; lines thinner than a texel are drawn one texel wide, fainter."""
+        if not lines_m:
+            return
+        crop = self._crop(np.vstack(lines_m), width_m)
+        if crop is None:
+            return
+        r0, r1, c0, c1 = crop
+        mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
+        thick = width_m / self.texel
+        cv2.polylines(mask, [self._fixed(p, r0, c0) for p in lines_m], False, 255,
+                      max(1, int(round(thick))), cv2.LINE_AA, self.SHIFT)
+        self._add(crop, mask, value, mode, opacity * min(1.0, thick))
+
+    def ellipses(self, centres_m: np.ndarray, axes_m: np.ndarray, angles_deg: np.ndarray, value, *,
+                 mode: str = "set", opacity: float = 1.0) -> None:
+        centres_m = np.asarray(centres_m, np.float64).reshape(-1, 2)
+        if not len(centres_m):
+            return
+        crop = self._crop(centres_m, float(np.max(axes_m)))
+        if crop is None:
+            return
+        r0, r1, c0, c1 = crop
+        mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
+        one = 1 << self.SHIFT
+        for c, ax, an in zip(self._fixed(centres_m, r0, c0), np.asarray(axes_m).reshape(-1, 2), angles_deg):
+            axes = (max(1, int(round(ax[0] / self.texel * one))), max(1, int(round(ax[1] / self.texel * one))))
+            cv2.ellipse(mask, (int(c[0]), int(c[1])), axes, float(an), 0, 360, 255, -1, cv2.LINE_AA, self.SHIFT)
+        self._add(crop, mask, value, mode, opacity)
 
 
 def _paint_ground(paint: list[_Paint], shade: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -184,8 +447,154 @@ def _paint_ground(paint: list[_Paint], shade: np.ndarray, xs: np.ndarray, ys: np
     return ground
 
 
+# -- the road graph ------------------------------------------------------------------------
+
+def _road_graph(ws, region: tuple[float, float, float, float], centre: np.ndarray, rng: np.random.Generator):
+    """Junctions (N, 2), grid index of each (N, 2), and every grid edge as (a, b, curve, is_road, major).
+
+    A grid ``road_spacing_m`` apart, turned by a random angle, junctions moved and edges bent
+    by ``road_irregularity``; one row and one column near ``centre`` are main roads; minor
+    edges are left out with ``road_drop_fraction`` where both ends keep at least two roads.
+    """
+    sp, irr = ws.road_spacing_m, ws.road_irregularity
+    phi = rng.uniform(-0.25 * math.pi, 0.25 * math.pi)
+    c, s = math.cos(phi), math.sin(phi)
+    Rm = np.array([[c, -s], [s, c]])  # grid frame -> world
+    x0, y0, x1, y1 = region
+    corners = (np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]) - centre) @ Rm  # world -> grid frame
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    off = rng.uniform(0, sp, 2)
+    ia = np.arange(math.floor((lo[0] - off[0]) / sp), math.ceil((hi[0] - off[0]) / sp) + 1)
+    ja = np.arange(math.floor((lo[1] - off[1]) / sp), math.ceil((hi[1] - off[1]) / sp) + 1)
+    ni, nj = len(ia), len(ja)
+    gi, gj = np.meshgrid(np.arange(ni), np.arange(nj), indexing="ij")
+    grid = np.stack([off[0] + ia[gi] * sp, off[1] + ja[gj] * sp], axis=-1).reshape(-1, 2)
+    grid += rng.uniform(-1, 1, grid.shape) * 0.25 * irr * sp
+    nodes = grid @ Rm.T + centre
+    index = np.stack([gi.ravel(), gj.ravel()], axis=1)
+
+    def nid(i, j):
+        return i * nj + j
+
+    near = np.argmin(np.hypot(*(nodes - centre).T))
+    i_major = int(index[near, 0] + rng.integers(-1, 2))
+    j_major = int(index[near, 1] + rng.integers(-1, 2))
+    edges = []
+    for i in range(ni):
+        for j in range(nj):
+            for di, dj in ((1, 0), (0, 1)):
+                if i + di >= ni or j + dj >= nj:
+                    continue
+                a, b = nid(i, j), nid(i + di, j + dj)
+                p0, p1 = nodes[a], nodes[b]
+                d = p1 - p0
+                normal = np.array([-d[1], d[0]])
+                ctrl = 0.5 * (p0 + p1) + normal * rng.uniform(-1, 1) * 0.3 * irr
+                major = (di == 0 and i == i_major) or (dj == 0 and j == j_major)
+                edges.append([a, b, _bezier(p0, ctrl, p1, ROAD_SAMPLE_M), True, major])
+    degree = np.zeros(len(nodes), int)
+    for a, b, *_ in edges:
+        degree[a] += 1
+        degree[b] += 1
+    for k in rng.permutation(len(edges)):
+        a, b, _, _, major = edges[k]
+        if not major and degree[a] > 2 and degree[b] > 2 and rng.uniform() < ws.road_drop_fraction:
+            edges[k][3] = False
+            degree[a] -= 1
+            degree[b] -= 1
+    return nodes, index, (ni, nj), edges, phi
+
+
+def _cells(nodes, shape, edges):
+    """Blocks of the grid: (i, j) -> closed polygon (P, 2) along the four bent edges, anticlockwise in the
+    grid frame, and the indices of its four edges."""
+    ni, nj = shape
+    by_pair = {(a, b): k for k, (a, b, *_) in enumerate(edges)}
+    out = {}
+    for i in range(ni - 1):
+        for j in range(nj - 1):
+            n00, n10, n11, n01 = i * nj + j, (i + 1) * nj + j, (i + 1) * nj + j + 1, i * nj + j + 1
+            ks = [by_pair[(n00, n10)], by_pair[(n10, n11)], by_pair[(n01, n11)], by_pair[(n00, n01)]]
+            poly = np.vstack([edges[ks[0]][2], edges[ks[1]][2][1:], edges[ks[2]][2][::-1][1:],
+                              edges[ks[3]][2][::-1][1:-1]])
+            out[(i, j)] = (poly, ks)
+    return out
+
+
+def _inner_rect(poly: np.ndarray, yaw: float, margin_m: float):
+    """A rectangle (cx, cy, sx, sy) at ``yaw`` inside ``poly`` with every corner at least ``margin_m`` from
+    its boundary, shrunk from the polygon's bounding box in the turned frame; None if none is left."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = (poly - poly.mean(axis=0)) @ np.array([[c, -s], [s, c]])
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    contour = poly.astype(np.float32).reshape(-1, 1, 2)
+    for shrink in np.arange(0.0, 0.5 * min(hi - lo), 1.0):
+        a, b = lo + shrink, hi - shrink
+        ctr = poly.mean(axis=0) + (0.5 * (a + b)) @ np.array([[c, s], [-s, c]])
+        corners = _rect_corners(ctr[0], ctr[1], b[0] - a[0], b[1] - a[1], yaw)
+        if all(cv2.pointPolygonTest(contour, (float(p[0]), float(p[1])), True) >= margin_m for p in corners):
+            return float(ctr[0]), float(ctr[1]), float(b[0] - a[0]), float(b[1] - a[1])
+    return None
+
+
+class _RoadIndex:
+    """Road centre-line samples with their half widths, for clearance checks."""
+
+    def __init__(self, roads: list[Road], bbox: tuple[float, float, float, float], pad_m: float):
+        x0, y0, x1, y1 = bbox
+        segs, half = [], []
+        for r in roads:
+            c = r.centre_m
+            if (c[:, 0].max() < x0 - pad_m or c[:, 0].min() > x1 + pad_m
+                    or c[:, 1].max() < y0 - pad_m or c[:, 1].min() > y1 + pad_m):
+                continue
+            segs.append(np.concatenate([c[:-1], c[1:]], axis=1))
+            half.append(np.full(len(c) - 1, r.width_m / 2))
+        self.segs = np.vstack(segs) if segs else np.zeros((0, 4))
+        self.half = np.concatenate(half) if half else np.zeros(0)
+
+    def clearance(self, points_m: np.ndarray) -> np.ndarray:
+        """Distance (P,) from each point to the nearest road's edge (negative on a road)."""
+        p = np.asarray(points_m, np.float64).reshape(-1, 2)
+        if not len(self.segs):
+            return np.full(len(p), np.inf)
+        a, b = self.segs[:, :2], self.segs[:, 2:]
+        ab = b - a
+        L2 = np.maximum((ab ** 2).sum(axis=1), 1e-12)
+        t = np.clip(((p[:, None, :] - a[None]) * ab[None]).sum(axis=2) / L2, 0.0, 1.0)
+        d = np.sqrt(((p[:, None, :] - a[None] - t[..., None] * ab[None]) ** 2).sum(axis=2))
+        return (d - self.half[None]).min(axis=1)
+
+    def rect_clear(self, corners: np.ndarray, margin_m: float) -> bool:
+        """No road centre sample within (half width + margin) of the rectangle, by box distance."""
+        if not len(self.segs):
+            return True
+        pts = self.segs[:, :2]
+        d = point_rect_distance(pts, corners)
+        return bool(np.all(d > self.half + margin_m))
+
+
+def field_rows(rng: np.random.Generator, base: np.ndarray, along_rad: float) -> _Rows:
+    """A field's row pattern: rows 1.6-3.2 m apart roughly along or across ``along_rad``, 2-5 gray
+    levels deep (none in a third of the fields), bent by three waves 25-60 m long and 1.2-3 rad deep."""
+    ang = along_rad + rng.uniform(-0.15, 0.15) + rng.choice([0.0, 0.5 * math.pi])
+    beta, k = rng.uniform(0, 2 * math.pi, 3), 2 * math.pi / rng.uniform(25, 60, 3)
+    waves = np.column_stack([k * np.cos(beta), k * np.sin(beta), rng.uniform(0, 2 * math.pi, 3),
+                             rng.uniform(1.2, 3.0, 3)])
+    period = float(rng.uniform(1.6, 3.2))
+    amp = float(rng.uniform(2.0, 5.0) * (rng.uniform() < 0.67))
+    return _Rows(np.asarray(base, np.float64), period, float(ang), amp, waves)
+
+
+LAND = {
+    "wheat": (160, 148, 106), "crop": (104, 120, 72), "young": (126, 132, 88), "ploughed": (116, 98, 80),
+    "grass": (94, 110, 72), "meadow": (112, 118, 80), "soil": (128, 110, 88), "wood": (64, 74, 50),
+    "concrete": (136, 134, 128), "asphalt": (90, 90, 94),
+}
+
+
 def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
-    """Lay out roads and blocks around the flight footprint and paint the ground texture."""
+    """Lay out roads, blocks, buildings and trees around the flight footprint and paint the ground."""
     img, ws = spec.image, spec.world
     fx0, fy0, fx1, fy1 = ground_footprint(path, img.width_px, img.height_px)
     margin = 0.15 * max(fx1 - fx0, fy1 - fy0) + 20.0
@@ -197,155 +606,323 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     wt, ht = int(math.ceil((x1 - x0) / texel)), int(math.ceil((y1 - y0) / texel))
     wt += -wt % 4  # GL unpacks texture rows at 4-byte alignment: RGB rows must be a multiple of 4 px
     x1, y1 = x0 + wt * texel, y0 + ht * texel
+    extent = (x0, y0, x1, y1)
 
-    sp, rw = ws.road_spacing_m, ws.road_width_m
-    road_x = _road_lines(rng, x0, x1, sp)
-    road_y = _road_lines(rng, y0, y1, sp)
+    # the road graph reaches beyond the texture as far as a vehicle can drive in the sequence
+    duration_s = (img.n_frames - 1) / img.fps
+    reach = spec.vehicles.speed_range_mps[1] * duration_s + 2 * ws.road_spacing_m
+    region = (x0 - reach, y0 - reach, x1 + reach, y1 + reach)
+    centre = np.array([0.5 * (fx0 + fx1), 0.5 * (fy0 + fy1)])
+    nodes, index, shape, edges, phi = _road_graph(ws, region, centre, rng)
+    w_major, w_minor = ws.road_width_m, 0.75 * ws.road_width_m
+    roads = [Road(centre_m=e[2], width_m=w_major if e[4] else w_minor, major=e[4], nodes=(e[0], e[1]))
+             for e in edges if e[3]]
+    road_index = _RoadIndex(roads, extent, 50.0)
+
+    canvas = _Canvas(x0, y0, texel, wt, ht)
+    cells = _cells(nodes, shape, edges)
+    seen = (fx0, fy0, fx1, fy1)
+
+    def overlaps(poly, box):
+        return (poly[:, 0].max() > box[0] and poly[:, 0].min() < box[2]
+                and poly[:, 1].max() > box[1] and poly[:, 1].min() < box[3])
+
+    # -- land use, block by block ------------------------------------------------------------
+    stalls: list[tuple[float, float, float]] = []
+    kinds: dict[tuple[int, int], str] = {}
+    for key, (poly, ks) in cells.items():
+        if not overlaps(poly, extent):
+            continue
+        r = rng.uniform()
+        if r < ws.parking_fraction:
+            kind = "parking"
+        elif r < ws.parking_fraction + ws.built_fraction:
+            kind = "yard"
+        elif r < ws.parking_fraction + ws.built_fraction + ws.wood_fraction:
+            kind = "wood"
+        else:
+            kind = ["field", "field", "field", "grass", "meadow", "soil"][int(rng.integers(0, 6))]
+        kinds[key] = kind
+        jitter = rng.uniform(0.9, 1.1) * (1.0 + rng.uniform(-0.03, 0.03, 3))  # brightness, a hint of hue
+        if kind == "field":
+            crop = ["wheat", "crop", "young", "ploughed"][int(rng.integers(0, 4))]
+            e = poly[np.argmax(np.hypot(*(poly - poly[0]).T))] - poly[0]
+            canvas.polygon([poly], field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0])))
+        elif kind == "parking":
+            canvas.polygon([poly], np.asarray(LAND["concrete"]) * jitter)
+            yaw = math.atan2(*(poly[1] - poly[0])[::-1])
+            rect = _inner_rect(poly, yaw, w_major / 2 + 1.0)
+            if rect is not None:
+                stalls += _parking_lot(canvas, rect, yaw, rng)
+        elif kind == "yard":
+            canvas.polygon([poly], np.asarray(LAND["concrete"]) * jitter)
+            # lawns: irregular blobs, not discs
+            blobs = []
+            for _ in range(int(rng.integers(1, 4))):
+                centre = poly.mean(axis=0) + rng.uniform(-0.3, 0.3, 2) * (poly.max(0) - poly.min(0))
+                ang = np.sort(rng.uniform(0, 2 * math.pi, 9))
+                rad = rng.uniform(4, 12) * rng.uniform(0.6, 1.0, 9)
+                blobs.append(centre + np.column_stack([np.cos(ang), np.sin(ang)]) * rad[:, None])
+            canvas.polygon(blobs, np.asarray(LAND["grass"]) * rng.uniform(0.85, 1.05))
+        else:
+            canvas.polygon([poly], np.asarray(LAND[kind]) * jitter)
+
+    # -- buildings, trees, hedges -------------------------------------------------------------
+    buildings = _place_buildings(ws.buildings, cells, kinds, seen, road_index, phi, rng)
+    trees = _place_trees(ws, cells, kinds, edges, road_index, buildings, extent, rng)
+
+    # -- roads on top: asphalt, patches, worn markings, junctions -------------------------------
+    for r in roads:
+        canvas.lines([r.centre_m], r.width_m, ROAD_RGB)
+    for r in roads:
+        n = int(rng.poisson(polyline_arc_lengths(r.centre_m)[-1] / 40.0))
+        if n:
+            at = r.centre_m[rng.integers(0, len(r.centre_m), n)] + rng.uniform(-1, 1, (n, 2)) * r.width_m / 4
+            canvas.ellipses(at, rng.uniform(0.6, 2.2, (n, 2)), rng.uniform(0, 180, n),
+                            np.asarray(ROAD_RGB) * rng.uniform(0.8, 1.15), opacity=0.8)
+    for r in roads:
+        if not r.major:
+            continue
+        edge = r.width_m / 2 - 0.35
+        canvas.lines([_offset_right(r.centre_m, edge), _offset_right(r.centre_m, -edge)], 0.2, MARK_RGB,
+                     opacity=float(rng.uniform(0.55, 0.8)))
+        s = polyline_arc_lengths(r.centre_m)
+        dashes = []
+        for a in np.arange(rng.uniform(0, 9), s[-1] - 3.0, 9.0):  # 3 m dash, 6 m gap
+            t = np.linspace(a, a + 3.0, 4)
+            dashes.append(np.stack([np.interp(t, s, r.centre_m[:, 0]), np.interp(t, s, r.centre_m[:, 1])], axis=1))
+        canvas.lines(dashes, 0.15, MARK_RGB, opacity=float(rng.uniform(0.5, 0.8)))
+    # junctions: plain asphalt over the ends of the markings
+    deg = np.bincount(np.array([r.nodes for r in roads]).ravel(), minlength=len(nodes)) if roads else []
+    junctions = [k for k in range(len(nodes)) if deg[k] >= 3]
+    if junctions:
+        radius = [0.55 * max(r.width_m for k, r in enumerate(roads) if n in r.nodes) for n in junctions]
+        canvas.ellipses(nodes[junctions], np.repeat(np.array(radius)[:, None], 2, axis=1), np.zeros(len(junctions)),
+                        ROAD_RGB)
+
+    # -- painted shadows of the static world (flat light only: sun light casts real ones) ------
+    light = spec.light
+    if light.mode == "flat" and light.shadows:
+        _paint_shadows(canvas, buildings, trees, light)
 
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
-
-    def cols(a: float, b: float) -> slice:
-        return slice(max(0, int(math.floor((a - x0) / texel))), max(0, min(wt, int(math.ceil((b - x0) / texel)))))
-
-    def rows(a: float, b: float) -> slice:
-        return slice(max(0, int(math.floor((a - y0) / texel))), max(0, min(ht, int(math.ceil((b - y0) / texel)))))
-
-    # The layout is drawn first as a list of paint operations (every random draw in order);
-    # the texture is then painted from that list a strip of rows at a time, so no float copy
-    # of the whole ground is ever in memory.
-    paint: list[_Paint] = []
-
-    # blocks between roads
-    bx = np.concatenate([[x0 - sp], road_x, [x1 + sp]])
-    by = np.concatenate([[y0 - sp], road_y, [y1 + sp]])
-    stalls: list[tuple[float, float, float]] = []
-    block_kinds: list[tuple[str, tuple[float, float, float, float]]] = []
-    for i in range(len(bx) - 1):
-        for j in range(len(by) - 1):
-            bxa, bxb = bx[i] + rw / 2, bx[i + 1] - rw / 2
-            bya, byb = by[j] + rw / 2, by[j + 1] - rw / 2
-            if bxb <= x0 or bxa >= x1 or byb <= y0 or bya >= y1:
-                continue
-            r = rng.uniform()
-            if r < ws.parking_fraction:
-                kind = "parking"
-            elif r < ws.parking_fraction + ws.roof_fraction:
-                kind = "roof"
-            else:
-                kind = "field" if rng.uniform() < 0.6 else "grass"
-            block_kinds.append((kind, (bxa, bya, bxb, byb)))
-            cs, rs = cols(bxa, bxb), rows(bya, byb)
-            if cs.stop <= cs.start or rs.stop <= rs.start:
-                continue
-            if kind == "field":
-                base = np.array([rng.uniform(70, 150), rng.uniform(100, 170), rng.uniform(30, 80)])
-                period = rng.uniform(1.2, 3.5)
-                ang = rng.choice([0.0, 0.5 * math.pi]) + rng.uniform(-0.3, 0.3)
-                paint.append(_Paint(rs, cs, _Stripes(base, period, ang)))
-            elif kind == "grass":
-                paint.append(_Paint(rs, cs, np.array([rng.uniform(50, 90), rng.uniform(90, 130), rng.uniform(40, 70)])))
-            elif kind == "roof":
-                g = rng.uniform(120, 190)
-                paint.append(_Paint(rs, cs, (g, g, g * rng.uniform(0.92, 1.05))))
-                # roof furniture: small boxes of another shade
-                for _ in range(int(rng.integers(3, 12))):
-                    cx, cy = rng.uniform(bxa, bxb), rng.uniform(bya, byb)
-                    hw, hh = rng.uniform(0.5, 2.5), rng.uniform(0.5, 2.5)
-                    paint.append(_Paint(rows(cy - hh, cy + hh), cols(cx - hw, cx + hw), g + rng.choice([-60.0, 50.0])))
-            else:  # parking lot: asphalt, rows of perpendicular stalls 2.7 m x 5 m, 7 m aisles
-                paint.append(_Paint(rs, cs, (95, 95, 100)))
-                stall_w, stall_d, aisle = 2.7, 5.0, 7.0
-                yrow = bya + 1.0
-                while yrow + stall_d <= byb - 1.0:
-                    paint.append(_Paint(rows(yrow - 0.1, yrow + 0.1), cols(bxa + 1, bxb - 1), MARK_RGB))
-                    xl = bxa + 1.0
-                    while xl + stall_w <= bxb - 1.0:
-                        paint.append(_Paint(rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075), MARK_RGB))
-                        stalls.append((xl + stall_w / 2, yrow + stall_d / 2, 0.5 * math.pi))
-                        xl += stall_w
-                    paint.append(_Paint(rows(yrow, yrow + stall_d), cols(xl - 0.075, xl + 0.075), MARK_RGB))
-                    yrow += stall_d + aisle
-
-    # roads on top: asphalt, solid edge lines, dashed centre line (3 m dash, 6 m gap)
-    every_row, every_col = slice(0, ht), slice(0, wt)
-    for rx in road_x:
-        paint.append(_Paint(every_row, cols(rx - rw / 2, rx + rw / 2), ROAD_RGB))
-        for e in (-1, 1):
-            paint.append(_Paint(every_row, cols(rx + e * (rw / 2 - 0.45), rx + e * (rw / 2 - 0.25)), MARK_RGB))
-    for ry in road_y:
-        paint.append(_Paint(rows(ry - rw / 2, ry + rw / 2), every_col, ROAD_RGB))
-        for e in (-1, 1):
-            paint.append(_Paint(rows(ry + e * (rw / 2 - 0.45), ry + e * (rw / 2 - 0.25)), every_col, MARK_RGB))
-    dash = (np.mod(ys, 9.0) < 3.0)
-    for rx in road_x:
-        paint.append(_Paint(dash, cols(rx - 0.12, rx + 0.12), MARK_RGB))
-    dash = (np.mod(xs, 9.0) < 3.0)
-    for ry in road_y:
-        paint.append(_Paint(rows(ry - 0.12, ry + 0.12), dash, MARK_RGB))
-    # intersections: plain asphalt
-    for rx in road_x:
-        for ry in road_y:
-            paint.append(_Paint(rows(ry - rw / 2, ry + rw / 2), cols(rx - rw / 2, rx + rw / 2), ROAD_RGB))
-
     shade = _multiscale_noise(rng, (ht, wt), texel)
     shade += 1.0
-    ground = _paint_ground(paint, shade, xs, ys)
+    ground = _paint_ground(canvas.ops, shade, xs, ys)
     del shade
 
-    buildings = _place_buildings(spec, block_kinds, (fx0, fy0, fx1, fy1), rng)
-    btex = None
-    if buildings:
-        n = 256
-        g = 150 + 40 * _multiscale_noise(rng, (n, n), texel)
-        btex = np.clip(np.rint(np.stack([g, g * 0.97, g * 0.92], axis=-1)), 0, 255).astype(np.uint8)
-    return World(extent_m=(x0, y0, x1, y1), texel_m=texel, ground_texture=ground, road_x_m=road_x,
-                 road_y_m=road_y, road_width_m=rw, buildings=buildings, building_texture=btex, stalls=stalls)
+    wall_textures, roof_textures = _building_textures(rng, texel)
+    crown_textures = [_crown_texture(rng, base) for base in ((58, 82, 44), (82, 98, 56))]
+    return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
+                 road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
+                 wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures)
 
 
-def _place_buildings(spec, block_kinds, footprint, rng: np.random.Generator) -> list[Box]:
-    b = spec.world.buildings
-    if b.count == 0:
+def _parking_lot(canvas: _Canvas, rect, yaw: float, rng: np.random.Generator) -> list[tuple[float, float, float]]:
+    """Asphalt, rows of perpendicular stalls 2.6 m x 5 m either side of 6.5 m aisles, worn lines."""
+    cx, cy, sx, sy = rect
+    canvas.polygon([_rect_corners(cx, cy, sx, sy, yaw)], np.asarray(LAND["asphalt"]) * rng.uniform(0.9, 1.1))
+    c, s = math.cos(yaw), math.sin(yaw)
+    ex, ey = np.array([c, s]), np.array([-s, c])
+    origin = np.array([cx, cy]) - ex * sx / 2 - ey * sy / 2
+    stall_w, stall_d, aisle = 2.6, 5.0, 6.5
+    lines, stalls = [], []
+    v = 0.5
+    while v + stall_d <= sy - 0.5:
+        u = 0.5
+        lines.append(np.array([origin + ex * 0.5 + ey * v, origin + ex * (sx - 0.5) + ey * v]))
+        while u + stall_w <= sx - 0.5:
+            lines.append(np.array([origin + ex * u + ey * v, origin + ex * u + ey * (v + stall_d)]))
+            p = origin + ex * (u + stall_w / 2) + ey * (v + stall_d / 2)
+            stalls.append((float(p[0]), float(p[1]), yaw + 0.5 * math.pi))
+            u += stall_w
+        lines.append(np.array([origin + ex * u + ey * v, origin + ex * u + ey * (v + stall_d)]))
+        v += stall_d + (aisle if len(lines) % 2 else 0.0)
+    canvas.lines(lines, 0.12, MARK_RGB, opacity=float(rng.uniform(0.45, 0.75)))
+    return stalls
+
+
+def _place_buildings(bs, cells, kinds, seen, road_index: _RoadIndex, phi: float,
+                     rng: np.random.Generator) -> list[Building]:
+    """Up to ``bs.count`` buildings on yard blocks (those the camera sees first), each clear of every road
+    by ROAD_CLEARANCE_M and of every other building by BUILDING_GAP_M."""
+    if bs.count == 0:
         return []
-    fx0, fy0, fx1, fy1 = footprint
-    # prefer blocks that the camera sees, so the parallax is on screen
-    seen = [rect for kind, rect in block_kinds if kind != "parking"
-            and rect[2] > fx0 and rect[0] < fx1 and rect[3] > fy0 and rect[1] < fy1]
-    if not seen:
+    yards = [key for key, kind in kinds.items() if kind == "yard"]
+    fx0, fy0, fx1, fy1 = seen
+    in_view = [k for k in yards if (cells[k][0][:, 0].max() > fx0 and cells[k][0][:, 0].min() < fx1
+                                    and cells[k][0][:, 1].max() > fy0 and cells[k][0][:, 1].min() < fy1)]
+    order = [in_view[i] for i in rng.permutation(len(in_view))] + [k for k in yards if k not in in_view]
+    if not order:
         return []
-    out: list[Box] = []
-    order = rng.permutation(len(seen))
-    for k in range(b.count):
-        bxa, bya, bxb, byb = seen[order[k % len(seen)]]
-        margin = 2.0
-        wmax, hmax = bxb - bxa - 2 * margin, byb - bya - 2 * margin
-        if wmax < 2 or hmax < 2:
-            continue
-        for _attempt in range(10):  # buildings must not intersect: coplanar faces would z-fight
-            sx = min(rng.uniform(*b.footprint_range_m), wmax)
-            sy = min(rng.uniform(*b.footprint_range_m), hmax)
-            cx = rng.uniform(bxa + margin + sx / 2, bxb - margin - sx / 2)
-            cy = rng.uniform(bya + margin + sy / 2, byb - margin - sy / 2)
-            h = rng.uniform(*b.height_range_m)
-            if all(abs(cx - o.centre[0]) > (sx + o.size[0]) / 2 + 1.0
-                   or abs(cy - o.centre[1]) > (sy + o.size[1]) / 2 + 1.0 for o in out):
-                out.append(Box(centre=(cx, cy, h / 2), size=(sx, sy, h)))
-                break
+    out: list[Building] = []
+    for k in range(bs.count):
+        poly = cells[order[k % len(order)]][0]
+        contour = poly.astype(np.float32).reshape(-1, 1, 2)
+        lo, hi = poly.min(axis=0), poly.max(axis=0)
+        for _attempt in range(30):
+            sx, sy = rng.uniform(*bs.footprint_range_m, 2)
+            yaw = phi + rng.uniform(-0.08, 0.08) + rng.choice([0.0, 0.5 * math.pi])
+            cx, cy = rng.uniform(lo, hi)
+            h = float(rng.uniform(*bs.height_range_m))
+            corners = _rect_corners(cx, cy, sx, sy, yaw)
+            if not all(cv2.pointPolygonTest(contour, (float(p[0]), float(p[1])), False) > 0 for p in corners):
+                continue
+            if not road_index.rect_clear(corners, ROAD_CLEARANCE_M):
+                continue
+            if any(rects_overlap(corners, o.corners_xy(), BUILDING_GAP_M) for o in out):
+                continue
+            out.append(Building(centre=(float(cx), float(cy), h / 2), size=(float(sx), float(sy), h),
+                                yaw_rad=float(yaw), parts=_building_parts(sx, sy, h, rng),
+                                roof_variant=int(rng.integers(0, len(ROOF_TINTS)))))
+            break
     return out
 
 
+def _building_parts(sx: float, sy: float, h: float, rng: np.random.Generator) -> tuple[Box, ...]:
+    """The building's boxes in its own frame: the block, a parapet round the roof, a few roof units."""
+    parts = [Box(centre=(0.0, 0.0, h / 2), size=(sx, sy, h))]
+    t, ph = 0.3, 0.8  # parapet thickness and height
+    parts += [Box(centre=(0.0, e * (sy / 2 - t / 2), h + ph / 2), size=(sx, t, ph)) for e in (-1, 1)]
+    parts += [Box(centre=(e * (sx / 2 - t / 2), 0.0, h + ph / 2), size=(t, sy - 2 * t, ph)) for e in (-1, 1)]
+    placed: list[np.ndarray] = []
+    for _ in range(int(rng.integers(1, 5))):
+        ux, uy, uh = rng.uniform(1.0, min(4.0, sx / 3)), rng.uniform(1.0, min(4.0, sy / 3)), rng.uniform(0.8, 2.2)
+        cx = rng.uniform(-sx / 2 + t + 0.5 + ux / 2, sx / 2 - t - 0.5 - ux / 2)
+        cy = rng.uniform(-sy / 2 + t + 0.5 + uy / 2, sy / 2 - t - 0.5 - uy / 2)
+        corners = _rect_corners(cx, cy, ux, uy, 0.0)
+        if any(rects_overlap(corners, o, 0.5) for o in placed):
+            continue
+        placed.append(corners)
+        parts.append(Box(centre=(float(cx), float(cy), h + uh / 2), size=(float(ux), float(uy), float(uh))))
+    return tuple(parts)
+
+
+def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: list[Building], extent,
+                 rng: np.random.Generator) -> list[Tree]:
+    """Trees in woods (dense) and on grass and yards (sparse); hedges of bushes along some field and
+    grass block sides. Each trunk keeps clear of roads and buildings by the crown's radius."""
+    ts = ws.trees
+    x0, y0, x1, y1 = extent
+    cand: list[tuple] = []  # x, y, height, radius, half height, variant, bush, yaw, stretch
+    for key, kind in kinds.items():
+        poly, ks = cells[key]
+        area_ha = abs(cv2.contourArea(poly.astype(np.float32))) / 1e4
+        density = {"wood": ts.wood_density_per_ha, "grass": ts.density_per_ha, "meadow": ts.density_per_ha,
+                   "yard": ts.density_per_ha}.get(kind, 0.0)
+        n = int(rng.poisson(density * area_ha))
+        lo, hi = poly.min(axis=0), poly.max(axis=0)
+        variant_base = int(rng.integers(0, N_CROWN_VARIANTS))
+        for _ in range(n):
+            x, y = rng.uniform(lo, hi)
+            d = float(rng.uniform(*ts.crown_diameter_range_m))
+            h = float(rng.uniform(max(ts.height_range_m[0], 0.6 * d), max(ts.height_range_m[1], 0.6 * d)))
+            v = variant_base if kind == "wood" and rng.uniform() < 0.7 else int(rng.integers(0, N_CROWN_VARIANTS))
+            if kind == "wood":  # a closed canopy of big crowns
+                d *= 1.3
+            cand.append((x, y, h, d / 2, min(max(0.5 * d, 0.36 * h), 0.45 * h), v, False, 0.0, 1.0))
+        if kind in ("field", "grass", "meadow"):
+            for side in range(4):
+                if rng.uniform() >= ts.hedge_fraction:
+                    continue
+                line = edges[ks[side]][2]
+                inward = 1.0 if side in (0, 1) else -1.0  # the cell's polygon runs anticlockwise
+                off = ws.road_width_m / 2 + 2.5
+                row = _trim(_offset_right(line, -inward * off), start_m=off + 2, end_m=off + 2)
+                s = polyline_arc_lengths(row)
+                if s[-1] < 5:
+                    continue
+                # bushes 1.6-2.4 m wide, stretched to 2.2x along the row, 2.4 m apart: a closed hedge
+                at = np.arange(0.0, s[-1], 2.4)
+                hx, hy = np.interp(at, s, row[:, 0]), np.interp(at, s, row[:, 1])
+                tx, ty = np.gradient(hx), np.gradient(hy)
+                for x, y, dx, dy in zip(hx, hy, tx, ty):
+                    d = float(rng.uniform(1.6, 2.4))
+                    h = float(rng.uniform(1.6, 2.6))
+                    cand.append((float(x), float(y), h, d / 2, 0.45 * h, int(rng.integers(0, N_CROWN_VARIANTS)), True,
+                                 math.atan2(dy, dx), 2.2))
+    if not cand:
+        return []
+    arr = np.array([(c[0], c[1], c[2], c[3] * max(1.0, c[8])) for c in cand])
+    inside = (arr[:, 0] > x0) & (arr[:, 0] < x1) & (arr[:, 1] > y0) & (arr[:, 1] < y1)
+    ok = inside & (road_index.clearance(arr[:, :2]) > arr[:, 3] + 0.5)
+    for b in buildings:
+        ok &= point_rect_distance(arr[:, :2], b.corners_xy()) > arr[:, 3] + 0.5
+    return [Tree(x_m=c[0], y_m=c[1], height_m=c[2], crown_radius_m=c[3], crown_half_height_m=c[4], variant=c[5],
+                 bush=c[6], yaw_rad=c[7], stretch=c[8]) for c, keep in zip(cand, ok) if keep]
+
+
+def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree], light) -> None:
+    """Darken the ground where the sun's light is blocked by a building or a tree crown (flat light)."""
+    to_sun = sun_direction(light.sun_elevation_deg, light.sun_azimuth_deg)
+    away = -to_sun[:2] / max(1e-9, to_sun[2])  # ground offset of a point's shadow per metre of height
+    k = float(light.ambient)
+    polys = []
+    for b in buildings:
+        c = b.corners_xy()
+        hull = cv2.convexHull(np.vstack([c, c + away * b.size[2]]).astype(np.float32))[:, 0]
+        polys.append(hull.astype(np.float64))
+    if polys:
+        canvas.polygon(polys, k, mode="mul")
+    if trees:
+        centres = np.array([[t.x_m, t.y_m] for t in trees]) + np.array(
+            [away * (t.height_m - t.crown_half_height_m) for t in trees])
+        stretch = min(2.5, 1.0 / max(0.3, to_sun[2]))
+        ang = math.degrees(math.atan2(away[1], away[0])) if np.hypot(*away) > 1e-6 else 0.0
+        round_ = np.array([not t.bush for t in trees])
+        axes = np.array([[t.crown_radius_m * stretch * 0.9, t.crown_radius_m * 0.95] for t in trees])
+        canvas.ellipses(centres[round_], axes[round_], np.full(int(round_.sum()), ang), k, mode="mul")
+        # a hedge bush's shadow: its own ellipse, along its row, moved away from the sun
+        bushes = [t for t in trees if t.bush]
+        canvas.ellipses(centres[~round_], np.array([[t.reach_m, t.crown_radius_m * 1.2] for t in bushes]),
+                        np.array([math.degrees(t.yaw_rad) for t in bushes]), k, mode="mul")
+
+
+def _building_textures(rng: np.random.Generator, texel: float):
+    """A facade (floors 3 m apart with irregular windows) and a roof (membrane with stains), 128 x 128 texels
+    of 0.1 m, repeated."""
+    n = 128
+    g = 1.0 + 0.25 * _multiscale_noise(rng, (n, n), 0.1)
+    tex = np.ones((n, n, 3), np.float32) * np.asarray((168, 160, 148), np.float32)
+    for row in range(6, n, 30):  # one floor per 3 m; windows 1.2 m high, varied widths
+        col = int(rng.integers(2, 8))
+        while col < n - 8:
+            w = int(rng.integers(8, 16))
+            tex[row:row + 12, col:col + w] = (60, 66, 74) if rng.uniform() < 0.8 else (110, 112, 110)
+            col += w + int(rng.integers(6, 14))
+    wall = np.clip(np.rint(tex * g[..., None]), 0, 255).astype(np.uint8)
+    g = 1.0 + 0.5 * _multiscale_noise(rng, (n, n), 0.1)
+    roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
+    return [wall], [roof]
+
+
+def _crown_texture(rng: np.random.Generator, base) -> np.ndarray:
+    """Leafy green noise, 64 x 64, mapped across a crown from above."""
+    n = 64
+    g = 1.0 + 0.9 * _multiscale_noise(rng, (n, n), 0.15)
+    tex = np.asarray(base, np.float32) * np.clip(g, 0.3, 1.8)[..., None]
+    return np.clip(np.rint(tex), 0, 255).astype(np.uint8)
+
+
+# -- vehicles -----------------------------------------------------------------------------
+
 def vehicle_boxes(length_m: float, width_m: float, height_m: float) -> list[Box]:
-    """A car as two boxes in its own frame (x forward, z up): body and a cabin of another shade."""
-    hb, hc = 0.55 * height_m, 0.45 * height_m
+    """A car as three boxes in its own frame (x forward, z up, origin on the ground under its centre):
+    the lower body, the glass cabin, and the roof on the cabin (painted like the body), so that from
+    above one sees bonnet, windscreen, roof, rear window and boot."""
+    hb, hc, hr = 0.5 * height_m, 0.45 * height_m, 0.05 * height_m
+    lc, wc = 0.55 * length_m, 0.88 * width_m
     return [Box(centre=(0.0, 0.0, hb / 2), size=(length_m, width_m, hb)),
-            Box(centre=(-0.08 * length_m, 0.0, hb + hc / 2), size=(0.55 * length_m, 0.88 * width_m, hc))]
+            Box(centre=(-0.06 * length_m, 0.0, hb + hc / 2), size=(lc, wc, hc)),
+            Box(centre=(-0.1 * length_m, 0.0, hb + hc + hr / 2), size=(0.62 * lc, 0.94 * wc, hr))]
 
 
 def box_mesh(box: Box, *, uv_scale_m: float | None = None) -> dict[str, np.ndarray]:
     """Triangles of a box: 24 vertices (4 per face) so each face has its own normal and UVs.
 
-    UVs, when asked, are the face's two in-plane world coordinates / ``uv_scale_m``
-    (a texture repeated at a fixed size in metres).
+    Faces in the order -x, +x, -y, +y, -z, +z (two triangles each). UVs, when asked, are the
+    face's two in-plane coordinates / ``uv_scale_m`` (a texture repeated at a fixed size in metres).
     """
     c = np.asarray(box.centre, float)
     h = np.asarray(box.size, float) / 2
@@ -377,11 +954,8 @@ def box_mesh(box: Box, *, uv_scale_m: float | None = None) -> dict[str, np.ndarr
     return out
 
 
-def _snap_to_road(lines: np.ndarray, value: float) -> float:
-    return float(lines[np.argmin(np.abs(lines - value))])
-
-
-MAX_PLACEMENT_TRIES = 25
+MAX_PLACEMENT_TRIES = 80
+MAX_TURN_DEG = 120.0  # vehicles do not take sharper turns at a junction
 
 
 def _keeps_clear(vp: VehiclePath, others: list[VehiclePath], times_s: np.ndarray, clearance_m: float) -> bool:
@@ -396,12 +970,75 @@ def _keeps_clear(vp: VehiclePath, others: list[VehiclePath], times_s: np.ndarray
     return True
 
 
+def _directed(world: World, k: int, start_node: int) -> np.ndarray:
+    r = world.roads[k]
+    return r.centre_m if r.nodes[0] == start_node else r.centre_m[::-1]
+
+
+def _walk(world: World, adj, k: int, node: int, length_m: float, prefer_turn: bool,
+          rng: np.random.Generator) -> list[tuple[int, int]]:
+    """Roads (index, entry node) driven after arriving at ``node`` along road ``k``, until ``length_m``."""
+    out: list[tuple[int, int]] = []
+    prev = _directed(world, k, world.roads[k].nodes[0] if world.roads[k].nodes[1] == node else world.roads[k].nodes[1])
+    total = 0.0
+    while total < length_m:
+        d_in = prev[-1] - prev[-2]
+        options = []
+        for k2, other in adj.get(node, []):
+            if k2 == k:
+                continue
+            nxt = _directed(world, k2, node)
+            d_out = nxt[1] - nxt[0]
+            turn = math.degrees(math.atan2(d_in[0] * d_out[1] - d_in[1] * d_out[0], d_in @ d_out))
+            if abs(turn) <= MAX_TURN_DEG:
+                options.append((abs(turn), k2, other, nxt))
+        if not options:
+            break
+        options.sort(key=lambda o: o[0])
+        turning = [o for o in options if o[0] > 30.0]
+        if prefer_turn and turning:
+            pick = turning[int(rng.integers(0, len(turning)))]
+        elif rng.uniform() < 0.75:
+            pick = options[0]
+        else:
+            pick = options[int(rng.integers(0, len(options)))]
+        _, k, other, nxt = pick
+        out.append((k, node))
+        total += polyline_arc_lengths(nxt)[-1]
+        prev, node = nxt, other
+    return out
+
+
+def _join(world: World, legs: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """The centre line of consecutive roads (index, entry node) with corners rounded at junctions
+    (a quadratic Bezier from r before to r after the junction, r below the road width so that the
+    rounded path stays on the asphalt); with each vertex's lane offset and each leg's first vertex."""
+    pts, lane, starts = [], [], []
+    lines = [_directed(world, k, n) for k, n in legs]
+    widths = [world.roads[k].width_m for k, _ in legs]
+    lengths = [polyline_arc_lengths(p)[-1] for p in lines]
+    cut = [0.0] * (len(lines) + 1)
+    for i in range(1, len(lines)):
+        cut[i] = min(0.7 * min(widths[i - 1], widths[i]), 0.4 * lengths[i - 1], 0.4 * lengths[i])
+    for i, (line, w) in enumerate(zip(lines, widths)):
+        part = _trim(line, start_m=cut[i], end_m=cut[i + 1])
+        if i > 0:
+            corner = _bezier(pts[-1][-1], line[0], part[0], 0.5)[1:-1]
+            pts.append(corner)
+            lane.append(np.full(len(corner), min(widths[i - 1], w) / 4))
+        starts.append(sum(len(p) for p in pts))
+        pts.append(part)
+        lane.append(np.full(len(part), w / 4))
+    return np.vstack(pts), np.concatenate(lane), starts + [sum(len(p) for p in pts)]
+
+
 def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generator) -> list[VehiclePath]:
     """Put ``spec.vehicles.count`` vehicles on roads (or parking stalls) where the camera will see them.
 
-    Each vehicle is aimed at the view of a random frame: it is at a random point
-    of that frame's footprint at that frame's time (turning vehicles start their
-    turn there). Moving vehicles keep to the right-hand lane.
+    Each vehicle is aimed at the view of a random frame: it is on the road nearest a random
+    point of that frame's footprint at that frame's time. Moving vehicles drive in the
+    right-hand lane along a route through the road graph, turning at junctions (turning
+    vehicles prefer to); parked ones stand in a stall or on a road's shoulder.
     """
     vs = spec.vehicles
     n = vs.count
@@ -423,75 +1060,82 @@ def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generato
     centre_ray = path.R_smooth[:, :, 2]
     lam = -path.C_smooth[:, 2] / centre_ray[:, 2]
     view_centre = path.C_smooth[:, :2] + lam[:, None] * centre_ray[:, :2]
-    lane_m = world.road_width_m / 4
-    radius_m = max(6.0, 0.75 * world.road_width_m)
     lo, hi = vs.speed_range_mps
     free_stalls = list(world.stalls)
+    adj = world.adjacency()
+    x0, y0, x1, y1 = world.extent_m
+    near_roads = [k for k, r in enumerate(world.roads)
+                  if r.centre_m[:, 0].max() > x0 and r.centre_m[:, 0].min() < x1
+                  and r.centre_m[:, 1].max() > y0 and r.centre_m[:, 1].min() < y1]
+
+    def nearest_road(p: np.ndarray) -> tuple[int, int]:
+        best = (np.inf, 0, 0)
+        for k in near_roads:
+            d = np.hypot(*(world.roads[k].centre_m - p).T)
+            j = int(np.argmin(d))
+            if d[j] < best[0]:
+                best = (float(d[j]), k, j)
+        return best[1], best[2]
 
     def _candidate(i: int, kind: str) -> VehiclePath:
-            k = int(rng.integers(0, img.n_frames))
-            t_k = k / img.fps
-            target = view_centre[k] + rng.uniform(-1, 1, 2) * np.array([half_w_m, half_h_m])
-            colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
-            body = np.asarray(colour, float)
-            cabin = body * 0.5 if body.mean() > 90 else body + 90
-            common = dict(vehicle_id=i + 1, size_m=(vs.length_m, vs.width_m, vs.height_m),
-                          body_rgb=tuple(int(c) for c in body), cabin_rgb=tuple(int(min(255, c)) for c in cabin))
-            along_x = bool(rng.integers(0, 2))
-            sign = 1.0 if rng.integers(0, 2) else -1.0
-            if kind == "parked":
-                if free_stalls:
-                    d2 = [(sx - target[0]) ** 2 + (sy - target[1]) ** 2 for sx, sy, _ in free_stalls]
-                    j = int(np.argmin(d2))
-                    sx, sy, th = free_stalls.pop(j)
-                    if math.hypot(sx - target[0], sy - target[1]) < 2 * max(half_w_m, half_h_m):
-                        th = th if rng.integers(0, 2) else th + math.pi
-                        return VehiclePath(kind="parked", p0=np.array([sx, sy]),
-                                           d0=np.array([math.cos(th), math.sin(th)]), v0_mps=0.0, **common)
-                # roadside parking on the shoulder
-                shoulder = world.road_width_m / 2 - vs.width_m / 2 - 0.6
-                if along_x:
-                    ry = _snap_to_road(world.road_y_m, target[1])
-                    d0 = np.array([sign, 0.0])
-                    p = np.array([target[0], ry - sign * shoulder])
-                else:
-                    rx = _snap_to_road(world.road_x_m, target[0])
-                    d0 = np.array([0.0, sign])
-                    p = np.array([rx + sign * shoulder, target[1]])
-                return VehiclePath(kind="parked", p0=p, d0=d0, v0_mps=0.0, **common)
-            if along_x:
-                d0 = np.array([sign, 0.0])
-                ry = _snap_to_road(world.road_y_m, target[1])
-                on_lane = np.array([target[0], ry - sign * lane_m])  # right of +x is -y
-            else:
-                d0 = np.array([0.0, sign])
-                rx = _snap_to_road(world.road_x_m, target[0])
-                on_lane = np.array([rx + sign * lane_m, target[1]])  # right of +y is +x
-            speed_kind = kind if kind in ("accelerating", "stopping") else "constant"
-            if speed_kind == "accelerating":
-                v0 = rng.uniform(lo, 0.5 * (lo + hi))
-            else:
-                v0 = rng.uniform(lo, hi)
-            vp = VehiclePath(kind=speed_kind, p0=on_lane, d0=d0, v0_mps=float(v0), v_max_mps=float(hi),
-                             accel_mps2=vs.acceleration_mps2,
-                             # stopping vehicles brake early enough to stand still before the end
-                             t_stop_start_s=float(min(rng.uniform(0.1, 0.5) * duration_s,
-                                                      max(0.0, duration_s - v0 / vs.acceleration_mps2 - 0.5))),
-                             radius_m=radius_m, **common)
-            if kind == "turning":
-                turn = 1 if rng.integers(0, 2) else -1
-                cross = world.road_x_m if along_x else world.road_y_m
-                long_target = float(on_lane @ d0)
-                cross_long = np.sort(cross * sign)  # road centre coordinates along d0
-                ahead = cross_long[cross_long > long_target + radius_m + lane_m]
-                if ahead.size:
-                    start_long = float(ahead[0]) + turn * lane_m - radius_m
-                    on_lane = on_lane + (start_long - long_target) * d0
-                    vp.turn = turn
-            s_k = vp.distance(t_k)
-            vp.p0 = on_lane - s_k * d0
-            vp.s_turn_m = s_k
-            return vp
+        k = int(rng.integers(0, img.n_frames))
+        t_k = k / img.fps
+        target = view_centre[k] + rng.uniform(-1, 1, 2) * np.array([half_w_m, half_h_m])
+        colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
+        common = dict(vehicle_id=i + 1, size_m=(vs.length_m, vs.width_m, vs.height_m),
+                      body_rgb=tuple(int(c) for c in colour), cabin_rgb=GLASS_RGB)
+        backwards = bool(rng.integers(0, 2))
+        if kind == "parked":
+            if free_stalls:
+                d2 = [(sx - target[0]) ** 2 + (sy - target[1]) ** 2 for sx, sy, _ in free_stalls]
+                j = int(np.argmin(d2))
+                sx, sy, th = free_stalls[j]
+                if math.hypot(sx - target[0], sy - target[1]) < 2 * max(half_w_m, half_h_m):
+                    free_stalls.pop(j)
+                    th = th if backwards else th + math.pi
+                    d = np.array([math.cos(th), math.sin(th)])
+                    return VehiclePath(kind="parked", route_m=np.array([(sx, sy) - d, (sx, sy) + d]), s0_m=1.0,
+                                       v0_mps=0.0, **common)
+            # on the road's shoulder
+            kr, j = nearest_road(target)
+            line = world.roads[kr].centre_m[::-1] if backwards else world.roads[kr].centre_m
+            j = len(line) - 1 - j if backwards else j
+            j = min(max(j, 1), len(line) - 2)
+            shoulder = world.roads[kr].width_m / 2 - vs.width_m / 2 - 0.3
+            seg = _offset_right(line[j - 1:j + 2], shoulder)
+            return VehiclePath(kind="parked", route_m=seg[[0, 2]], s0_m=float(np.hypot(*(seg[1] - seg[0]))),
+                               v0_mps=0.0, **common)
+        speed_kind = kind if kind in ("accelerating", "stopping") else "constant"
+        v0 = rng.uniform(lo, 0.5 * (lo + hi)) if speed_kind == "accelerating" else rng.uniform(lo, hi)
+        vp = VehiclePath(kind=speed_kind, route_m=np.array([[0.0, 0.0], [1.0, 0.0]]), s0_m=0.0, v0_mps=float(v0),
+                         v_max_mps=float(hi), accel_mps2=vs.acceleration_mps2,
+                         # stopping vehicles brake early enough to stand still before the end
+                         t_stop_start_s=float(min(rng.uniform(0.1, 0.5) * duration_s,
+                                                  max(0.0, duration_s - v0 / vs.acceleration_mps2 - 0.5))),
+                         turning=kind == "turning", **common)
+        d_k, d_end = vp.distance(t_k), vp.distance(duration_s)
+        kr, j = nearest_road(target)
+        a, b = world.roads[kr].nodes
+        entry, leave = (b, a) if backwards else (a, b)
+        line = _directed(world, kr, entry)
+        j = len(line) - 1 - j if backwards else j
+        s_on = polyline_arc_lengths(line)[j]
+        after = _walk(world, adj, kr, leave, d_end - d_k + 30.0 - (polyline_arc_lengths(line)[-1] - s_on),
+                      vp.turning, rng)
+        before = _walk(world, adj, kr, entry, d_k + 30.0 - s_on, vp.turning, rng)
+        # the roads before, driven the other way round: each entered at the far end of the walk
+        legs = []
+        for kb, nb in reversed(before):
+            ra, rb = world.roads[kb].nodes
+            legs.append((kb, rb if nb == ra else ra))
+        legs.append((kr, entry))
+        legs += after
+        centre, lane, starts = _join(world, legs)
+        route = _offset_right(centre, lane)
+        mine = slice(starts[len(before)], starts[len(before) + 1])
+        s_route = polyline_arc_lengths(route)
+        m = mine.start + int(np.argmin(np.hypot(*(centre[mine] - line[j]).T)))
+        return dataclasses.replace(vp, route_m=route, s0_m=float(s_route[m] - d_k))
 
     times_s = np.arange(img.n_frames) / img.fps
     clearance_m = vs.length_m + 1.0

@@ -18,8 +18,10 @@ NO_JITTER = {f"camera.jitter.{k}": 0.0 for k in
 def test_warping_next_frame_by_true_flow_reproduces_frame(tmp_path):
     # flat shading and no noise: brightness constancy holds, so I1(x + u) ~ I0(x) on valid pixels.
     # At 30 m the tiny camera has the nominal GSD (0.22 m/px); what remains is the bilinear
-    # interpolation of textured content by warp_backward, well under 2 gray levels.
-    spec = load_scene_spec("tiny", overrides={"camera.altitude_m": 30.0})
+    # interpolation of textured content by warp_backward, well under 2 gray levels. Vehicle
+    # shadows are off: a shadow moving over static ground breaks brightness constancy by design
+    # (truth is the motion field; tests/scenes/test_world_truth.py covers the shadowed world).
+    spec = load_scene_spec("tiny", overrides={"camera.altitude_m": 30.0, "light.shadows": False})
     seq = open_sequence(render_sequence(spec, tmp_path / "seq"))
     for i in range(len(seq) - 1):
         truth = seq.pair_truth(i)
@@ -29,8 +31,8 @@ def test_warping_next_frame_by_true_flow_reproduces_frame(tmp_path):
         assert v.mean() > 0.9
         err_true = np.abs(warped - f0)[v].mean()
         err_zero = np.abs(f1 - f0)[v].mean()
-        assert err_zero > 10.0  # the frames really move
-        assert err_true < 0.1 * err_zero, (i, err_true, err_zero)
+        assert err_zero > 5.0  # the frames really move (the ground is calmer than a test pattern)
+        assert err_true < 0.12 * err_zero, (i, err_true, err_zero)
         assert err_true < 2.0, (i, err_true)
 
 
@@ -51,7 +53,8 @@ def _ground_homography(row) -> np.ndarray:
 
 def test_flat_world_flow_equals_plane_homography_from_saved_poses(tmp_path):
     # oblique, drifting, jittering camera over a world without vehicles or buildings
-    overrides = {"vehicles.count": 0, "camera.tilt_deg": 20.0, "camera.drift.heading_rate_deg_s": 3.0,
+    overrides = {"vehicles.count": 0, "world.trees.density_per_ha": 0.0, "world.trees.wood_density_per_ha": 0.0,
+                 "world.trees.hedge_fraction": 0.0, "world.buildings.count": 0, "camera.tilt_deg": 20.0, "camera.drift.heading_rate_deg_s": 3.0,
                  "camera.drift.climb_rate_mps": 2.0, "camera.jitter.roll_std_deg": 0.5,
                  "camera.jitter.x_std_m": 0.3}
     seq = open_sequence(render_sequence(load_scene_spec("tiny", overrides=overrides), tmp_path / "seq"))
@@ -94,13 +97,15 @@ def test_sign_convention_vehicle_driving_to_image_right_has_larger_u_than_ground
     truth = next(frames).pair
     ground_u = np.median(truth.flow[..., 0][truth.valid & (truth.instances == 0)])
     checked = 0
+    t0_s = 1.0 / spec.image.fps  # the pair is frames 1 -> 2
     for vid, vehicle in enumerate(gen.vehicles, start=1):
         mine = truth.valid & (truth.instances == vid)
-        if mine.sum() < 5 or abs(vehicle.d0[0]) < 0.99:
-            continue
+        d = vehicle.direction(t0_s)
+        if mine.sum() < 5 or abs(d[0]) < 0.7 or np.linalg.norm(vehicle.direction(t0_s + 0.1) - d) > 0.01:
+            continue  # roads are curved: take vehicles driving mostly along x, not turning now
         u_vehicle = np.median(truth.flow[..., 0][mine])
-        expected = vehicle.d0[0] * vehicle.v0_mps / spec.image.fps / spec.gsd_m()
-        assert np.sign(u_vehicle - ground_u) == np.sign(vehicle.d0[0])
+        expected = d[0] * vehicle.v0_mps / spec.image.fps / spec.gsd_m()
+        assert np.sign(u_vehicle - ground_u) == np.sign(d[0])
         assert abs((u_vehicle - ground_u) - expected) < 0.1 * abs(expected) + 0.05
         checked += 1
     assert checked >= 2

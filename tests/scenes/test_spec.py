@@ -11,7 +11,7 @@ from scenes import SceneSpecError, list_presets, load_scene_spec, render_sequenc
 from scenes.motion import ornstein_uhlenbeck
 from scenes.render import GL_SYSTEM_PACKAGES, RendererUnavailableError
 
-REQUIRED_PRESETS = {"nominal", "jitter", "drift", "fast-vehicles", "urban-parallax", "noisy", "tiny"}
+REQUIRED_PRESETS = {"nominal", "jitter", "drift", "fast-vehicles", "urban-parallax", "noisy", "tiny", "thesis"}
 
 
 def test_presets_exist_load_and_describe_themselves():
@@ -53,7 +53,16 @@ def _write(tmp_path, text):
         ("image: {n_frames: 1}\n", r"image\.n_frames: .*greater than or equal to 2"),
         ("vehicles: {speed_range_mps: [10.0, 900.0]}\n", r"vehicles\.speed_range_mps: .*too fast"),
         ("camera: {tilt_deg: 60, intrinsics: {hfov_deg: 100}}\n", r"camera\.tilt_deg: .*horizon"),
-        ("photometry: {shadows: true}\n", r"photometry: shadows: need lighting 'sun'"),
+        ("light: {mode: moon}\n", r"light\.mode: .*'flat' or 'sun'"),
+        ("light: {sun_elevation_deg: 2}\n", r"light\.sun_elevation_deg: .*greater than or equal to 10"),
+        ("light: {ambient: 1.5}\n", r"light\.ambient: .*less than or equal to 1"),
+        ("photometry: {lighting: sun}\n", r"photometry\.lighting: unknown key"),
+        ("world: {road_irregularity: 2}\n", r"world\.road_irregularity: .*less than or equal to 1"),
+        ("world: {parking_fraction: 0.5, built_fraction: 0.4, wood_fraction: 0.3}\n",
+         r"world: parking_fraction \+ built_fraction \+ wood_fraction: expected <= 1, got 1.2"),
+        ("world: {trees: {crown_diameter_range_m: [6.0, 2.0]}}\n",
+         r"world\.trees: crown_diameter_range_m: expected 0 < low <= high, got \(6.0, 2.0\)"),
+        ("world: {trees: {leaf_colour: red}}\n", r"world\.trees\.leaf_colour: unknown key"),
     ],
 )
 def test_bad_spec_file_is_rejected_naming_field_and_file_and_nothing_is_written(tmp_path, yaml_text, pattern):
@@ -108,7 +117,7 @@ def test_missing_gl_backend_names_the_system_packages(monkeypatch):
     assert (17, 19) not in render._RENDERERS
 
 
-@pytest.mark.parametrize("preset", ["tiny", "nominal", "fast-vehicles", "urban-parallax"])
+@pytest.mark.parametrize("preset", ["tiny", "nominal", "fast-vehicles", "urban-parallax", "thesis"])
 @pytest.mark.parametrize("seed", [1, 2, 7])
 def test_vehicles_never_drive_through_each_other(preset, seed):
     import numpy as np

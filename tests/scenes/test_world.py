@@ -33,9 +33,10 @@ def test_strip_build_equals_whole_build(preset, monkeypatch):
     assert whole.ground_texture.shape[0] % 7 != 0
     assert whole.ground_texture.dtype == np.uint8
     np.testing.assert_array_equal(strips.ground_texture, whole.ground_texture)
-    assert strips.stalls == whole.stalls and strips.buildings == whole.buildings
-    if whole.building_texture is not None:
-        np.testing.assert_array_equal(strips.building_texture, whole.building_texture)
+    assert strips.stalls == whole.stalls and strips.buildings == whole.buildings and strips.trees == whole.trees
+    for a, b in zip(strips.wall_textures + strips.roof_textures + strips.crown_textures,
+                    whole.wall_textures + whole.roof_textures + whole.crown_textures, strict=True):
+        np.testing.assert_array_equal(a, b)
     assert next_strips == next_whole
     # the texture is painted: roads, marks and shaded blocks, not a constant
     assert np.unique(whole.ground_texture.reshape(-1, 3), axis=0).shape[0] > 100
@@ -49,8 +50,8 @@ def test_multiscale_noise_equals_one_resize_per_octave(monkeypatch):
     shape, texel_m = (61, 47), 0.5
     ref_rng, rng = np.random.default_rng(7), np.random.default_rng(7)
     expected = np.zeros(shape, np.float32)
-    octaves = [(cell_m / texel_m, amp) for cell_m, amp in ((40.0, 0.35), (10.0, 0.25), (3.0, 0.2), (1.0, 0.15))
-               if cell_m / texel_m >= 2] + [(world_mod.TEXELS_PER_PIXEL, 0.12)]
+    octaves = [(cell_m / texel_m, amp) for cell_m, amp in world_mod.NOISE_OCTAVES_M
+               if cell_m / texel_m >= 2] + [(world_mod.TEXELS_PER_PIXEL, world_mod.GRAIN_AMP)]
     assert len(octaves) == 5
     for cell_px, amp in octaves:
         gh, gw = int(np.ceil(shape[0] / cell_px)) + 2, int(np.ceil(shape[1] / cell_px)) + 2

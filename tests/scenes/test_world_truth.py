@@ -1,0 +1,72 @@
+"""Ground truth stays exact on the new world (trees, buildings, painted shadows), and the light behaves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from algorithms.flow import as_gray, warp_backward
+from scenes import load_scene_spec
+from scenes.generate import SceneGenerator
+from tests.scenes.test_world_layout import _world
+
+pytestmark = pytest.mark.gl
+
+BUILT = {"seed": 2, "camera.altitude_m": 40.0, "world.built_fraction": 0.6, "world.parking_fraction": 0.0,
+         "world.wood_fraction": 0.2, "world.buildings.count": 8, "world.buildings.height_range_m": [4.0, 10.0],
+         "world.buildings.footprint_range_m": [6.0, 12.0], "world.trees.density_per_ha": 40.0}
+
+
+def test_warping_by_true_flow_reproduces_frames_with_trees_buildings_and_shadows():
+    # no vehicles (their shadows move over static ground, by convention): everything left is
+    # static, and the depth-based truth of trees and buildings must explain the parallax
+    spec = load_scene_spec("tiny", overrides={**BUILT, "vehicles.count": 0})
+    gen = SceneGenerator(spec)
+    assert gen.world.trees and gen.world.buildings
+    prev = None
+    for fo in gen.frames():
+        if prev is not None:
+            truth = fo.pair
+            f0, f1 = as_gray(prev), as_gray(fo.rgb)
+            warped, _ = warp_backward(f1, truth.flow)
+            v = truth.valid
+            assert v.mean() > 0.8
+            err_true = np.abs(warped - f0)[v].mean()
+            err_zero = np.abs(f1 - f0)[v].mean()
+            assert err_zero > 5.0
+            assert err_true < 0.12 * err_zero and err_true < 2.0, (fo.index, err_true, err_zero)
+        prev = fo.rgb
+    _, surf = gen.render_frame(0)
+    high = surf.Z < 0.95 * gen.path.C[0, 2]  # nadir: the ground is at least the altitude away
+    assert 0.02 < high.mean() < 0.9  # trees and roofs fill part of the view
+
+
+def test_sun_shadows_only_darken():
+    spec = load_scene_spec("tiny", overrides={**BUILT, "light.mode": "sun", "image.n_frames": 2})
+    lit = SceneGenerator(spec).render_frame(0)[0].astype(int)
+    unshadowed = load_scene_spec("tiny", overrides={**BUILT, "light.mode": "sun", "light.shadows": False,
+                                                    "image.n_frames": 2})
+    plain = SceneGenerator(unshadowed).render_frame(0)[0].astype(int)
+    diff = lit.sum(axis=2) - plain.sum(axis=2)
+    assert (diff <= 3).all()  # shadow maps take light away, never add it
+    assert (diff < -30).mean() > 0.01  # and buildings and trees cast visible shadows
+
+
+def test_flat_light_paints_static_shadows_on_the_ground_and_only_darkens():
+    _, _, with_shadows, _ = _world("tiny", **BUILT)
+    _, _, without, _ = _world("tiny", **{**BUILT, "light.shadows": False})
+    a, b = with_shadows.ground_texture.astype(int), without.ground_texture.astype(int)
+    assert a.shape == b.shape
+    assert (a <= b + 1).all()
+    assert ((b - a).sum(axis=2) > 60).mean() > 0.01
+    # the shadows lie on the side away from the sun (azimuth 135: south-east, so north-west)
+    darker = (b - a).sum(axis=2) > 60
+    rows, cols = np.nonzero(darker)
+    x0, y0 = with_shadows.extent_m[:2]
+    xs, ys = x0 + (cols + 0.5) * with_shadows.texel_m, y0 + (rows + 0.5) * with_shadows.texel_m
+    objects = np.array([b_.centre[:2] for b_ in with_shadows.buildings]
+                       + [(t.x_m, t.y_m) for t in with_shadows.trees])
+    nearest = objects[np.argmin((xs[:, None] - objects[None, :, 0]) ** 2 + (ys[:, None] - objects[None, :, 1]) ** 2,
+                                axis=1)]
+    d = np.stack([xs, ys], axis=1) - nearest
+    assert np.median(d[:, 0]) < 0 and np.median(d[:, 1]) > 0  # west and north of what casts them
