@@ -24,9 +24,12 @@ from scenes.sensor import (
 
 NO_JITTER = {f"camera.jitter.{k}": 0.0 for k in
              ("roll_std_deg", "pitch_std_deg", "yaw_std_deg", "x_std_m", "y_std_m", "z_std_m")}
+# nothing standing on the ground: no buildings, trees, woods or hedges
+BARE_GROUND = {"world.buildings.count": 0, "world.trees.density_per_ha": 0.0,
+               "world.trees.wood_density_per_ha": 0.0, "world.trees.hedge_fraction": 0.0}
 # an oblique, turning, climbing, jittering camera over a world without vehicles or buildings:
 # the ground is a plane, so its flow is a homography of the saved poses
-FLAT_WORLD = {"vehicles.count": 0, "camera.tilt_deg": 20.0, "camera.drift.heading_rate_deg_s": 3.0,
+FLAT_WORLD = {**BARE_GROUND, "vehicles.count": 0, "camera.tilt_deg": 20.0, "camera.drift.heading_rate_deg_s": 3.0,
               "camera.drift.climb_rate_mps": 2.0, "camera.jitter.roll_std_deg": 0.5,
               "camera.jitter.x_std_m": 0.3, "image.n_frames": 3}
 
@@ -78,23 +81,32 @@ def test_appearance_effects_change_frames_not_truth_and_truth_still_warps(effect
         np.testing.assert_array_equal(a.pair.flow, b.pair.flow)
         np.testing.assert_array_equal(a.pair.valid, b.pair.valid)
         np.testing.assert_array_equal(a.instances, b.instances)
-    # the truth still explains the frames: warping by it removes most of the difference
-    err_true, err_zero = _warp_residual(seen[0].rgb, seen[1].rgb, seen[1].pair)
-    assert err_zero > 10.0 and err_true < 0.3 * err_zero, (err_true, err_zero)
+    # the truth still explains the frames: on the clean frames warping by it removes most of the
+    # difference, and the effect adds to that residual no more than it changed the two frames
+    # (triangle inequality: |W(s1) - s0| <= |W(c1) - c0| + |W(s1 - c1)| + |s0 - c0|)
+    clean_true, clean_zero = _warp_residual(clean[0].rgb, clean[1].rgb, clean[1].pair)
+    assert clean_zero > 5.0 and clean_true < 0.3 * clean_zero, (clean_true, clean_zero)
+    err_true, _ = _warp_residual(seen[0].rgb, seen[1].rgb, seen[1].pair)
+    v = seen[1].pair.valid
+    changed = sum(float(np.abs(as_gray(s.rgb) - as_gray(c.rgb))[v].mean()) for s, c in zip(seen[:2], clean[:2]))
+    assert err_true <= clean_true + changed + 0.25, (err_true, clean_true, changed)
 
 
 @pytest.mark.gl
 def test_motion_blur_smears_along_the_motion_only():
     # camera flying to image right (heading east, crab -90): the ground moves along -x,
-    # so blur takes x-gradient energy and leaves y-gradients nearly alone
-    move_x = {**NO_JITTER, "vehicles.count": 0, "camera.heading_deg": 90.0, "camera.drift.crab_deg": -90.0,
+    # so blur takes x-gradient energy and leaves y-gradients nearly alone (on a straight road grid,
+    # whose edges are horizontal or vertical: a curved road's edges lose y-gradient too)
+    move_x = {**NO_JITTER, **BARE_GROUND, "world.road_irregularity": 0.0, "vehicles.count": 0, "camera.heading_deg": 90.0, "camera.drift.crab_deg": -90.0,
               "image.n_frames": 2, "camera.ground_speed_mps": 30.0}
     _, _, sharp = _generate(move_x)
     _, _, blurred = _generate({**move_x, "sensor.motion_blur.exposure_s": 0.08, "sensor.motion_blur.subframes": 9})
     g_sharp, g_blur = as_gray(sharp[0].rgb), as_gray(blurred[0].rgb)
     ratio_x = np.abs(np.diff(g_blur, axis=1)).mean() / np.abs(np.diff(g_sharp, axis=1)).mean()
     ratio_y = np.abs(np.diff(g_blur, axis=0)).mean() / np.abs(np.diff(g_sharp, axis=0)).mean()
-    assert ratio_x < 0.65 * ratio_y and ratio_y > 0.8, (ratio_x, ratio_y)
+    # averaging along x also lowers the y-differences of the isotropic ground texture a little;
+    # along the motion the loss is clearly larger
+    assert ratio_x < 0.75 * ratio_y and ratio_y > 0.7, (ratio_x, ratio_y)
 
 
 # -- lens distortion --------------------------------------------------------------------------
@@ -258,7 +270,7 @@ def test_line_delay_is_recovered_from_the_flow_under_known_camera_motion():
     # Rendered in bands of one row, a point is read at the time of the row nearest to it, so
     # the truth obeys v = s (1 / fps + round(v) delta) exactly
     delay_s = 6e-4
-    fast = {**NO_JITTER, "vehicles.count": 0, "camera.ground_speed_mps": 50.0, "image.n_frames": 3}
+    fast = {**NO_JITTER, **BARE_GROUND, "vehicles.count": 0, "camera.ground_speed_mps": 50.0, "image.n_frames": 3}
     spec, _, gs = _generate(fast)
     _, _, rs = _generate({**fast, "sensor.rolling_shutter.line_delay_s": delay_s,
                           "sensor.rolling_shutter.band_rows": 1})

@@ -56,7 +56,7 @@ def _write(tmp_path, text):
         ("light: {mode: moon}\n", r"light\.mode: .*'flat' or 'sun'"),
         ("light: {sun_elevation_deg: 2}\n", r"light\.sun_elevation_deg: .*greater than or equal to 10"),
         ("light: {ambient: 1.5}\n", r"light\.ambient: .*less than or equal to 1"),
-        ("photometry: {lighting: sun}\n", r"photometry\.lighting: unknown key"),
+        ("photometry: {lighting: sun}\n", r"photometry: this section was split .*photometry\.lighting -> light\.mode"),
         ("world: {road_irregularity: 2}\n", r"world\.road_irregularity: .*less than or equal to 1"),
         ("world: {parking_fraction: 0.5, built_fraction: 0.4, wood_fraction: 0.3}\n",
          r"world: parking_fraction \+ built_fraction \+ wood_fraction: expected <= 1, got 1.2"),
