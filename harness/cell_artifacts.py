@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from algorithms.jitter import cumulative_path
 from scenes.formats import atomic_write_bytes, read_flo, write_flo
 
 __all__ = [
@@ -102,10 +103,11 @@ def stabilisation_table(seq_estimate: Any, camera: pd.DataFrame) -> pd.DataFrame
             a = np.full((n, 2), np.nan)
         stem = name.removesuffix("_px")
         out[f"{stem}_x_px"], out[f"{stem}_y_px"] = a[:, 0], a[:, 1]
-    for a in ("x", "y"):
-        d = pd.to_numeric(camera[f"global_d{a}_px"], errors="coerce").to_numpy(float)
-        # cumulative truth of frame i: sum of the pair shifts before it (frame 0 at the origin)
-        out[f"true_cumulative_{a}_px"] = np.concatenate([[0.0], np.cumsum(np.nan_to_num(d[:-1]))])
+    # cumulative truth of frame i: sum of the pair shifts before it (frame 0 at the origin)
+    true_shifts = np.column_stack([pd.to_numeric(camera[f"global_d{a}_px"], errors="coerce").to_numpy(float)
+                                   for a in ("x", "y")])
+    true_cumulative = cumulative_path(np.nan_to_num(true_shifts[:-1]))
+    out["true_cumulative_x_px"], out["true_cumulative_y_px"] = true_cumulative[:, 0], true_cumulative[:, 1]
     out["true_jitter_x_px"] = camera["jitter_x_px"].to_numpy(float)
     out["true_jitter_y_px"] = camera["jitter_y_px"].to_numpy(float)
     return out[list(STABILISATION_COLUMNS)]

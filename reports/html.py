@@ -17,7 +17,7 @@ from importlib import resources
 import numpy as np
 import pandas as pd
 
-from harness.metrics import endpoint_error
+from harness.metrics import endpoint_error, position_error_px
 from reports import pictures, plots
 from reports.lkhs import LEVEL, N_BOOT
 from reports.load import (RunData, open_scene_sequence, picture_frames, read_cell_flow, read_stabilisation,
@@ -428,8 +428,8 @@ def _table41_html(tr: pd.DataFrame, *, pipe: str, vehicle: int) -> str:
     tr = tr.sort_values("frame")
     cols = [tr["x"].diff(), tr["x_filt"].diff(), tr["x_true"].diff(),
             tr["y"].diff(), tr["y_filt"].diff(), tr["y_true"].diff(),
-            np.hypot(tr["x"] - tr["x_true"], tr["y"] - tr["y_true"]),
-            np.hypot(tr["x_filt"] - tr["x_true"], tr["y_filt"] - tr["y_true"])]
+            pd.Series(position_error_px(tr["x"], tr["y"], tr["x_true"], tr["y_true"]), index=tr.index),
+            pd.Series(position_error_px(tr["x_filt"], tr["y_filt"], tr["x_true"], tr["y_true"]), index=tr.index)]
     rows = []
     for i in range(len(tr)):
         rows.append(f'<tr><th scope="row">Frame {int(tr["frame"].iloc[i])}</th>'
@@ -504,8 +504,9 @@ def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -
             for pipe, t in tracks.items():
                 t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
                 e = pd.DataFrame({"frame": t["frame"],
-                                  "err_raw": np.hypot(t["x"] - t["x_true"], t["y"] - t["y_true"]),
-                                  "err_kalman": np.hypot(t["x_filt"] - t["x_true"], t["y_filt"] - t["y_true"])})
+                                  "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
+                                  "err_kalman": position_error_px(t["x_filt"], t["y_filt"],
+                                                                  t["x_true"], t["y_true"])})
                 errs[pipe] = e.groupby("frame", as_index=False).mean()
             esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
             out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '

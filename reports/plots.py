@@ -20,6 +20,8 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from algorithms.jitter import least_squares_line  # noqa: E402
+
 __all__ = ["pipeline_colors", "fig_to_svg", "difficulty_curves", "stabilisation_figure",
            "jitter_figure", "tracking_figure", "tracking_error_figure", "TRACKER_STYLE",
            "track_polylines"]
@@ -105,16 +107,6 @@ def difficulty_curves(curves: pd.DataFrame, *, param: str, metrics: list[tuple[s
     return fig_to_svg(fig)
 
 
-def _fit_line(t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Least-squares straight line through (t, y), evaluated at t (thesis 3.2)."""
-    ok = np.isfinite(y)
-    if ok.sum() < 2:
-        return np.full_like(y, np.nan)
-    A = np.stack([t[ok], np.ones(ok.sum())], axis=1)
-    coef, *_ = np.linalg.lstsq(A, y[ok], rcond=None)
-    return coef[0] * t + coef[1]
-
-
 def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
     """The thesis's figs. 3.1 and 3.2 for one cell, for the x and y shift.
 
@@ -145,7 +137,7 @@ def stabilisation_figure(stab: pd.DataFrame, *, title: str) -> tuple[str, bool]:
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             if have_truth:
                 after = stab[f"cum_true_{a}"].to_numpy(float) + stab[f"corr_{a}"].to_numpy(float)
-                line = _fit_line(t, after)
+                line = least_squares_line(after, t)
                 ax = axes[1][j]
                 ax.plot(t, after, color="#0072B2", lw=1.5)
                 ax.plot(t, line, color="#D55E00", lw=1.5)
@@ -174,7 +166,7 @@ def jitter_figure(jitters: dict[str, pd.DataFrame], *, colors: dict[str, str], t
             true = first[f"jit_true_{a}"].to_numpy(float)
             if np.isfinite(true).sum() >= 2:
                 # the estimate is measured from a fitted line: measure the truth the same way
-                ax.plot(t, true - _fit_line(t, true), "k--", lw=1.8, label="true jitter (detrended)")
+                ax.plot(t, true - least_squares_line(true, t), "k--", lw=1.8, label="true jitter (detrended)")
                 truth_drawn = True
             ax.set_title(f"jitter {a} [px]")
             ax.set_xlabel("frame")

@@ -18,7 +18,7 @@ ALLOWED = {
     "harness": ("harness", "scenes", "algorithms"),
     "reports": ("reports", "harness.results", "harness.run_folder", "harness.cell_artifacts", "harness.gate",
                 "harness.metrics",
-                "scenes.sequence", "scenes.formats", "algorithms.flow"),
+                "scenes.sequence", "scenes.formats", "algorithms.flow", "algorithms.jitter"),
 }
 
 
