@@ -32,8 +32,8 @@ LOCAL_VS_TOTAL = (
     "vehicles' own motion (zero on the ground). Local error is the larger because the global model (one shift "
     "per frame pair) never matches the true camera flow exactly (sub-pixel rest, rotation, parallax): the flow "
     "method recovers that rest, which keeps the total error small, but in the local comparison the rest counts "
-    "as wrongly estimated vehicle motion. Local error = total error minus the global model's own error, pixel "
-    "by pixel.")
+    "as wrongly estimated vehicle motion. Pixel by pixel, the local error vector is the total error vector "
+    "minus the global model's own error vector (their lengths do not subtract).")
 
 
 @dataclass
