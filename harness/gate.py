@@ -227,17 +227,23 @@ def write_baseline(baseline: Mapping, path: str | os.PathLike) -> Path:
 
 def read_baseline(path: str | os.PathLike) -> dict:
     """Read a baseline; a missing, unreadable or foreign file raises :class:`GateError`."""
+    return _read_format_json(path, what="baseline", fmt=BASELINE_FORMAT,
+                             missing="no baseline file; make one with `aerobench baseline` (a missing baseline "
+                                     "is an error, not a pass)")
+
+
+def _read_format_json(path: str | os.PathLike, *, what: str, fmt: str, missing: str) -> dict:
+    """A JSON object whose ``format`` is ``fmt``; anything else raises :class:`GateError` naming the file."""
     path = Path(path)
     if not path.is_file():
-        raise GateError(f"{path}: no baseline file; make one with `aerobench baseline` (a missing baseline "
-                        "is an error, not a pass)")
+        raise GateError(f"{path}: {missing}")
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
-        raise GateError(f"{path}: baseline is not valid JSON: {exc}") from None
-    if not isinstance(data, dict) or data.get("format") != BASELINE_FORMAT:
+        raise GateError(f"{path}: {what} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or data.get("format") != fmt:
         got = data.get("format") if isinstance(data, dict) else type(data).__name__
-        raise GateError(f"{path}: not an aerobench baseline: format {got!r}, expected {BASELINE_FORMAT!r}")
+        raise GateError(f"{path}: not an aerobench {what}: format {got!r}, expected {fmt!r}")
     return data
 
 
@@ -500,14 +506,6 @@ def write_verdict(result: GateResult, path: str | os.PathLike) -> Path:
 
 def read_verdict(path: str | os.PathLike) -> dict:
     """Read a verdict written by :func:`write_verdict`; a missing or foreign file raises :class:`GateError`."""
-    path = Path(path)
-    if not path.is_file():
-        raise GateError(f"{path}: no gate verdict file; write one with `aerobench gate RUN --baseline B --json {path}`")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise GateError(f"{path}: gate verdict is not valid JSON: {exc}") from None
-    if not isinstance(data, dict) or data.get("format") != VERDICT_FORMAT:
-        got = data.get("format") if isinstance(data, dict) else type(data).__name__
-        raise GateError(f"{path}: not an aerobench gate verdict: format {got!r}, expected {VERDICT_FORMAT!r}")
-    return data
+    return _read_format_json(path, what="gate verdict", fmt=VERDICT_FORMAT,
+                             missing=f"no gate verdict file; write one with `aerobench gate RUN --baseline B "
+                                     f"--json {path}`")
