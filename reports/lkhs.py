@@ -164,6 +164,16 @@ def verdict(c: Comparison) -> str:
     return f"{where}: no clear difference between {c.lk} and {c.hs} (the {ci} contains 0; {count})."
 
 
+def _paired_by_region(table: pd.DataFrame, lk: str, hs: str, *, metric: str, regions: tuple[str, ...],
+                      motions: tuple[str, ...]):
+    """``(region, motion, units)`` for every motion x region whose paired units are not empty."""
+    for motion in motions:
+        for region in regions:
+            u = paired_units(table, lk, hs, metric=metric, region=region, motion=motion)
+            if not u.empty:
+                yield region, motion, u
+
+
 def compare_pair(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_mean",
                  regions: tuple[str, ...] = ("background", "vehicles"), motions: tuple[str, ...] = ("total", "local"),
                  seed: int = 0) -> list[Comparison]:
@@ -175,19 +185,15 @@ def compare_pair(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_me
     unit_col = table.loc[table["metric"] == metric, "unit"]
     unit = str(unit_col.iloc[0]) if len(unit_col) else ""
     out = []
-    for motion in motions:
-        for region in regions:
-            u = paired_units(table, lk, hs, metric=metric, region=region, motion=motion)
-            if u.empty:
-                continue
-            d, lo, hi = bootstrap_difference(u["sum_lk"], u["count_lk"], u["sum_hs"], u["count_hs"],
-                                             rng=np.random.default_rng(seed))
-            per_unit = u["sum_lk"] / u["count_lk"] - u["sum_hs"] / u["count_hs"]
-            out.append(Comparison(lk=lk, hs=hs, metric=metric, unit=unit, region=region, motion=motion,
-                                  n_units=len(u), n_lk_lower=int((per_unit < 0).sum()),
-                                  lk_value=float(u["sum_lk"].sum() / u["count_lk"].sum()),
-                                  hs_value=float(u["sum_hs"].sum() / u["count_hs"].sum()),
-                                  diff=d, lo=lo, hi=hi))
+    for region, motion, u in _paired_by_region(table, lk, hs, metric=metric, regions=regions, motions=motions):
+        d, lo, hi = bootstrap_difference(u["sum_lk"], u["count_lk"], u["sum_hs"], u["count_hs"],
+                                         rng=np.random.default_rng(seed))
+        per_unit = u["sum_lk"] / u["count_lk"] - u["sum_hs"] / u["count_hs"]
+        out.append(Comparison(lk=lk, hs=hs, metric=metric, unit=unit, region=region, motion=motion,
+                              n_units=len(u), n_lk_lower=int((per_unit < 0).sum()),
+                              lk_value=float(u["sum_lk"].sum() / u["count_lk"].sum()),
+                              hs_value=float(u["sum_hs"].sum() / u["count_hs"].sum()),
+                              diff=d, lo=lo, hi=hi))
     return out
 
 
@@ -197,13 +203,9 @@ def by_scene_seed(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_m
     """The pooled difference LK - HS per (scene, seed): one row per scene and seed, one column
     ``"<region> / <motion>"`` per comparison (NaN where that pair has no unit)."""
     parts = []
-    for motion in motions:
-        for region in regions:
-            u = paired_units(table, lk, hs, metric=metric, region=region, motion=motion)
-            if u.empty:
-                continue
-            g = u.groupby(["scene", "seed"], sort=True)[["sum_lk", "count_lk", "sum_hs", "count_hs"]].sum()
-            parts.append((g["sum_lk"] / g["count_lk"] - g["sum_hs"] / g["count_hs"]).rename(f"{region} / {motion}"))
+    for region, motion, u in _paired_by_region(table, lk, hs, metric=metric, regions=regions, motions=motions):
+        g = u.groupby(["scene", "seed"], sort=True)[["sum_lk", "count_lk", "sum_hs", "count_hs"]].sum()
+        parts.append((g["sum_lk"] / g["count_lk"] - g["sum_hs"] / g["count_hs"]).rename(f"{region} / {motion}"))
     if not parts:
         return pd.DataFrame(columns=["scene", "seed"])
     return pd.concat(parts, axis=1).reset_index()
