@@ -215,7 +215,7 @@ def _hs_on_cube(f0: np.ndarray, f1: np.ndarray, flow: np.ndarray | None, *, alph
     return out, valid
 
 
-@register_flow
+@register_flow(cost=4.0)
 def horn_schunck(frame0: np.ndarray, frame1: np.ndarray, *, alpha: float = 15.0, iterations: int = 100,
                  tol: float | None = None, levels: int = 1, warps: int | None = None,
                  median_px: int | None = None, scale: float = 0.5) -> tuple[np.ndarray, np.ndarray]:

@@ -167,7 +167,7 @@ def lk_increment(f0: np.ndarray, f1: np.ndarray, *, window: int, min_eigenvalue:
     return flow, valid
 
 
-@register_flow
+@register_flow(cost=1.0)
 def lucas_kanade(frame0: np.ndarray, frame1: np.ndarray, *, window: int = 15, levels: int = 1,
                  iterations: int = 1, min_eigenvalue: float = 1e-3, gaussian_window: bool = False,
                  median_px: int | None = None, scale: float = 0.5) -> tuple[np.ndarray, np.ndarray]:

@@ -43,7 +43,7 @@ def _from_vu(vu: np.ndarray) -> np.ndarray:
     return np.stack([vu[1], vu[0]], axis=-1)
 
 
-@register_flow
+@register_flow(cost=1.0)
 def farneback(frame0: np.ndarray, frame1: np.ndarray, *, pyr_scale: float = 0.5, levels: int = 4,
               winsize: int = 15, iterations: int = 3, poly_n: int = 5, poly_sigma: float = 1.2,
               gaussian_window: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -72,7 +72,7 @@ _DIS_PRESETS = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.D
 _DIS_MIN_SIDE_PX = 32
 
 
-@register_flow
+@register_flow(cost=0.5)
 def dis(frame0: np.ndarray, frame1: np.ndarray, *, preset: str = "medium") -> tuple[np.ndarray, np.ndarray]:
     """Dense Inverse Search flow (``cv2.DISOpticalFlow``, Kroeger et al. 2016).
 
@@ -97,7 +97,7 @@ def dis(frame0: np.ndarray, frame1: np.ndarray, *, preset: str = "medium") -> tu
     return _finish(flow, g0, g1)
 
 
-@register_flow
+@register_flow(cost=8.0)
 def tvl1(frame0: np.ndarray, frame1: np.ndarray, *, attachment: float = 15.0, tightness: float = 0.3,
          num_warp: int = 5, num_iter: int = 10, tol: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
     """TV-L1 flow (``skimage.registration.optical_flow_tvl1``, Zach et al. 2007).
@@ -113,7 +113,7 @@ def tvl1(frame0: np.ndarray, frame1: np.ndarray, *, attachment: float = 15.0, ti
     return _finish(_from_vu(vu), g0, g1)
 
 
-@register_flow
+@register_flow(cost=2.0)
 def ilk(frame0: np.ndarray, frame1: np.ndarray, *, radius: int = 7, num_warp: int = 10,
         gaussian: bool = False, prefilter: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Iterative dense Lucas-Kanade (``skimage.registration.optical_flow_ilk``), output reordered from (v, u)."""

@@ -7,10 +7,12 @@ time; an unknown name raises ``KeyError`` that lists the valid ones.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TypeVar
 
-__all__ = ["FLOW_METHODS", "STAGES", "register_flow", "register_stage", "get_flow_method", "get_stage"]
+__all__ = ["FLOW_METHODS", "STAGES", "register_flow", "register_stage", "get_flow_method", "get_stage",
+           "flow_cost", "DEFAULT_FLOW_COST"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -18,6 +20,9 @@ F = TypeVar("F", bound=Callable)
 FLOW_METHODS: dict[str, Callable] = {}
 # stage kind ("global_motion", "jitter", "threshold", ...) -> name -> function
 STAGES: dict[str, dict[str, Callable]] = {}
+# name -> rough cost of a pair per pixel relative to Lucas-Kanade (only the runner's order of cells uses it)
+FLOW_COSTS: dict[str, float] = {}
+DEFAULT_FLOW_COST = 2.0
 
 
 def _first_doc_line(fn: Callable) -> str:
@@ -25,13 +30,32 @@ def _first_doc_line(fn: Callable) -> str:
     return doc.splitlines()[0] if doc else ""
 
 
-def register_flow(fn: F) -> F:
-    """Register a flow method under its function name."""
-    name = fn.__name__
-    if name in FLOW_METHODS and FLOW_METHODS[name] is not fn:
-        raise ValueError(f"flow method {name!r} is registered twice")
-    FLOW_METHODS[name] = fn
-    return fn
+def register_flow(fn: F | None = None, *, cost: float | None = None):
+    """Register a flow method under its function name: ``@register_flow`` or ``@register_flow(cost=4.0)``.
+
+    ``cost`` is the method's rough time per pair and pixel relative to Lucas-Kanade
+    (default :data:`DEFAULT_FLOW_COST`); the runner hands out costly cells first with it,
+    no result depends on it.
+    """
+    if cost is not None and (isinstance(cost, bool) or not isinstance(cost, (int, float))
+                             or not math.isfinite(cost) or cost <= 0):
+        raise ValueError(f"cost: expected a finite number > 0, got {cost!r}")
+
+    def deco(f: F) -> F:
+        name = f.__name__
+        if name in FLOW_METHODS and FLOW_METHODS[name] is not f:
+            raise ValueError(f"flow method {name!r} is registered twice")
+        FLOW_METHODS[name] = f
+        if cost is not None:
+            FLOW_COSTS[name] = float(cost)
+        return f
+
+    return deco if fn is None else deco(fn)
+
+
+def flow_cost(name: str) -> float:
+    """The relative cost registered with flow method ``name`` (:data:`DEFAULT_FLOW_COST` when none)."""
+    return FLOW_COSTS.get(name, DEFAULT_FLOW_COST)
 
 
 def register_stage(kind: str) -> Callable[[F], F]:

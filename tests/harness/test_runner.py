@@ -139,7 +139,7 @@ def test_two_runs_into_one_folder_are_refused(tmp_path):
 
 
 def test_each_pipeline_is_warmed_up_once_per_process_before_timing(monkeypatch):
-    from harness import runner
+    from harness import cell_scoring
 
     runs = []
 
@@ -150,7 +150,7 @@ def test_each_pipeline_is_warmed_up_once_per_process_before_timing(monkeypatch):
             runs.append((len(frames), frames[0].shape, frames[0].dtype, seeds))
             yield from ()
 
-    monkeypatch.setattr(runner, "_WARMED", set())
-    runner._warm_up(Recording())
-    runner._warm_up(Recording())  # the same pipeline again: no second warm-up
+    monkeypatch.setattr(cell_scoring, "_WARMED", set())
+    cell_scoring.warm_up(Recording())
+    cell_scoring.warm_up(Recording())  # the same pipeline again: no second warm-up
     assert runs == [(3, (64, 64), np.dtype(np.uint8), [(1, 32.0, 32.0)])]

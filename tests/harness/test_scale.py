@@ -21,6 +21,8 @@ from harness_testdata import TINY_SUITE
 
 import harness.executors
 import harness.runner as runner
+import harness.scheduling as scheduling
+import harness.tasks as tasks
 from harness.cli import main
 from harness.suites import expand, parse_suite
 from scenes.formats import read_flo
@@ -87,7 +89,7 @@ def test_cell_cost_grows_with_frames_pixels_and_method():
     cells, _ = _cells([{"preset": "tiny", "overrides": {"image.n_frames": 4}},
                        {"preset": "tiny", "label": "long", "overrides": {"image.n_frames": 8}}],
                       ["thesis-lk", "thesis-hs"])
-    cost = {(c.variant.label, c.pipeline): runner.cell_cost(c) for c in cells}
+    cost = {(c.variant.label, c.pipeline): scheduling.cell_cost(c) for c in cells}
     assert cost[("long", "thesis-lk")] == pytest.approx(2 * cost[("tiny", "thesis-lk")])
     assert cost[("tiny", "thesis-hs")] > cost[("tiny", "thesis-lk")]
 
@@ -100,7 +102,7 @@ class _Recorder:
 
     def submit(self, fn, *args):
         fut: Future = Future()
-        if fn is runner.render_task:
+        if fn is tasks.render_task:
             key, spec = args[0], args[1]
             self.log.append(("render", f"{spec.image.n_frames}"))
             fut.set_result({"key": key, "path": "/nowhere", "reused": True, "error": None})
@@ -124,7 +126,7 @@ def test_renders_go_first_largest_scene_first_then_the_longest_cells(tmp_path, m
     monkeypatch.setattr(harness.executors, "open_executor", fake_executor)
     cells_dir = tmp_path / "cells"
     cells_dir.mkdir()
-    runner._execute(cells, cells_dir, tmp_path / "cache", {}, suite, "process", 2, None, False)
+    scheduling.execute(cells, cells_dir, tmp_path / "cache", {}, suite, "process", 2, None, False)
     # costs (frames x method weight): long hs 36, short hs 12, long lk 9, long dis 4.5, short lk 3, short dis 1.5
     assert pool.log == [("render", "9"), ("render", "3"),
                         ("cell", "long/thesis-hs"), ("cell", "short/thesis-hs"), ("cell", "long/thesis-lk"),
@@ -162,10 +164,10 @@ def test_a_cell_keeps_no_pair_arrays_after_scoring_the_pair(tmp_path, render_cac
 
     monkeypatch.setattr(harness.metrics, "score_pair", watched_score_pair)
     prov = collect()
-    payload = runner._payload(cell, tmp_path / "cells", {k: prov[k] for k in ("git_commit", "git_dirty", "machine")},
+    payload = tasks.cell_payload(cell, tmp_path / "cells", {k: prov[k] for k in ("git_commit", "git_dirty", "machine")},
                               [])
     payload["sequence"] = str(cached_sequence(cell.variant.spec, render_cache))
-    out = runner.cell_task(payload)
+    out = tasks.cell_task(payload)
     assert out["status"] == "ok", out["error"]
     assert len({i for i, _ in refs}) == 8  # every pair was scored through the watcher
     assert not leaks, leaks

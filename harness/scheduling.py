@@ -1,0 +1,233 @@
+"""Hand a run's tasks to an executor: renders first, then the longest ready cell; retries; progress.
+
+Scheduling only decides the order and the retries, never a result: rows are sorted
+on collection, so the accuracy numbers do not depend on the executor or the number
+of workers. The cost of a cell comes from the flow method's registered relative cost
+(:func:`algorithms.registry.flow_cost`), so plugins take part without a table here.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import sys
+from collections.abc import Mapping
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from harness.suites import Cell, SceneVariant, Suite
+from harness.tasks import cell_payload, cell_task, render_task
+
+__all__ = ["RETRY_ROUNDS", "execute", "cell_cost", "scene_cost", "say"]
+
+
+def say(progress: bool, msg: str) -> None:
+    """A status line on stderr when ``progress`` is on."""
+    if progress:
+        print(msg, file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------- cost model
+
+
+def scene_cost(v: SceneVariant) -> float:
+    """Frames x pixels of a scene variant (the work of rendering it, and of each of its cells)."""
+    img = getattr(v.spec, "image", None)
+    if img is None:
+        return 1.0
+    return float(img.n_frames) * float(img.width_px) * float(img.height_px)
+
+
+def cell_cost(cell: Cell) -> float:
+    """Estimated work of a cell: frames x pixels x the flow method's registered relative cost.
+
+    Only the order of cells depends on it (longest first), never a result.
+    """
+    from algorithms.registry import flow_cost
+
+    flow = cell.pipeline_spec.get("flow") if isinstance(cell.pipeline_spec, Mapping) else None
+    method = flow.get("method") if isinstance(flow, Mapping) else None
+    return scene_cost(cell.variant) * flow_cost(str(method))
+
+
+# --------------------------------------------------------------------------- scheduling
+
+
+# A task whose worker process died is retried: first in a fresh pool with the other lost
+# tasks (most were only queued behind the one that died), then alone in a pool of its own,
+# so that one task that kills its worker cannot take an innocent task down with it.
+RETRY_ROUNDS = ("parallel", "parallel", "isolated")
+
+
+@dataclass
+class _Work:
+    """What ``execute`` still has to do, and what it has seen so far."""
+
+    renders: list[str]  # scene keys to render
+    cells: list[tuple[Cell, dict]]  # cells ready to run, with their render result
+    rendered: int = 0
+    reused: int = 0
+    render_failed: int = 0
+
+
+def _variant_key(v: SceneVariant) -> str:
+    return v.scene_hash
+
+
+def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, suite: Suite,
+            executor: str, workers: int | None, scheduler: str | None,
+            progress: bool) -> tuple[int, int, int]:
+    """Render the scenes ``todo`` needs, then run its cells as their scene becomes ready.
+
+    Returns (scenes rendered, scenes reused from the cache, scenes that failed to render).
+    """
+    from tqdm import tqdm
+
+    if not todo:
+        return 0, 0, 0
+    imports = list(getattr(suite, "imports", None) or [])
+    by_scene: dict[str, list[Cell]] = {}
+    variants: dict[str, SceneVariant] = {}
+    for c in todo:
+        key = _variant_key(c.variant)
+        by_scene.setdefault(key, []).append(c)
+        variants[key] = c.variant
+    cache.mkdir(parents=True, exist_ok=True)
+    bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
+               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    ctx = {"cells_dir": cells_dir, "cache": cache, "provenance": provenance, "imports": imports,
+           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress}
+    work = _Work(renders=list(variants), cells=[])
+    for mode in RETRY_ROUNDS:
+        if not work.renders and not work.cells:
+            break
+        if mode == "parallel":
+            work = _round(work, ctx, executor, workers, scheduler)
+        else:  # each remaining task alone in a fresh single-worker pool
+            left = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
+                         render_failed=work.render_failed)
+            for item in [("render", k) for k in work.renders] + [("cell", c) for c in work.cells]:
+                one = _Work(renders=[item[1]] if item[0] == "render" else [],
+                            cells=[item[1]] if item[0] == "cell" else [])
+                one = _round(one, ctx, executor, 1 if executor != "dask" else None, scheduler)
+                left.renders += one.renders
+                left.cells += one.cells
+                left.rendered += one.rendered
+                left.reused += one.reused
+                left.render_failed += one.render_failed
+            work = left
+        lost = len(work.renders) + len(work.cells)
+        if lost:
+            say(progress, f"{lost} task(s) lost with a worker process that died; retrying them")
+    # still lost after every retry: the task itself kills its worker (a crash in native code, OOM)
+    lost_msg = f"WorkerLost: the worker process died {len(RETRY_ROUNDS)} times running this"
+    for key in work.renders:
+        work.render_failed += 1
+        for c in by_scene[key]:
+            work.cells.append((c, {"path": None, "error": f"{lost_msg} scene's rendering"}))
+    for c, render in work.cells:
+        payload = _cell_payload(c, render, ctx)
+        payload["render_error"] = render.get("error") or f"{lost_msg} cell"
+        cell_task(payload)  # records the failure (in this process: it raises before any work)
+        bar.update(1)
+    bar.close()
+    return work.rendered, work.reused, work.render_failed
+
+
+def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
+    payload = cell_payload(c, ctx["cells_dir"], ctx["provenance"], ctx["imports"])
+    payload["sequence"] = render["path"]
+    if render.get("error"):
+        payload["render_error"] = render["error"]
+        payload["render_traceback"] = render.get("traceback", "")
+    return payload
+
+
+def _in_flight_limit(executor: str, workers: int | None) -> int | None:
+    """Tasks handed to the executor at once: one per worker and one queued behind them.
+
+    Holding the rest back lets the runner pick the next task when a worker frees up
+    (renders first, then the longest ready cell), instead of the pool's first-in-first-out
+    queue. A remote dask cluster has its own workers and scheduler: no limit there.
+    """
+    from harness.executors import default_workers
+
+    if executor == "dask":
+        return None
+    return (workers or default_workers()) + 1
+
+
+def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler: str | None) -> _Work:
+    """Run ``work`` on one executor; returns what was lost with a dead worker (to retry).
+
+    Scheduling: renders go first, largest scene first (they unblock cells); a scene's
+    cells become ready when its render returns; whenever a worker frees up, the longest
+    ready cell (:func:`cell_cost`) is handed out, so the run does not end on a long cell
+    started last while the other workers idle.
+    """
+    from harness.executors import open_executor
+
+    lost = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
+                 render_failed=work.render_failed)
+    bar = ctx["bar"]
+    limit = _in_flight_limit(executor, workers)
+    renders = sorted(work.renders, key=lambda k: -scene_cost(ctx["variants"][k]))
+    ready: list[tuple[float, int, tuple[Cell, dict]]] = []  # a heap: the longest cell on top
+    order = itertools.count()  # ties keep the suite's order
+
+    def make_ready(item: tuple[Cell, dict]) -> None:
+        heapq.heappush(ready, (-cell_cost(item[0]), next(order), item))
+
+    for item in work.cells:
+        make_ready(item)
+    with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
+        pending: dict[Future, tuple[str, Any]] = {}
+
+        def fill() -> None:
+            """Hand out tasks until the in-flight limit: renders first, then the longest cell."""
+            while renders or ready:
+                if limit is not None and len(pending) >= limit:
+                    return
+                if renders:
+                    submit("render", renders.pop(0))
+                else:
+                    submit("cell", heapq.heappop(ready)[2])
+
+        def submit(kind: str, item: Any) -> None:
+            try:
+                if kind == "render":
+                    v = ctx["variants"][item]
+                    fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"])
+                else:
+                    fut = pool.submit(cell_task, _cell_payload(item[0], item[1], ctx))
+            except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor
+                (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                return
+            pending[fut] = (kind, item)
+
+        fill()
+        while pending:
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for fut in done:
+                kind, item = pending.pop(fut)
+                try:
+                    result = fut.result()
+                except Exception:  # our tasks record their own failures: this is a lost worker
+                    (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                    continue
+                bar.update(1)
+                if kind == "render":
+                    if result["error"]:
+                        lost.render_failed += 1
+                    elif result["reused"]:
+                        lost.reused += 1
+                    else:
+                        lost.rendered += 1
+                    for c in ctx["by_scene"][item]:
+                        make_ready((c, result))
+                elif result["status"] != "ok" and ctx["progress"]:
+                    bar.write(f"cell {result['cell_id']} failed: {result['error']}", file=sys.stderr)
+            fill()  # after a broken pool, every submit lands in ``lost`` and ``pending`` empties
+    return lost

@@ -1,0 +1,143 @@
+"""What a worker does: the two tasks of a run, plain functions of plain data.
+
+Any :class:`concurrent.futures.Executor` (local processes or Dask) can run them:
+
+1. :func:`render_task`, one per distinct scene variant: ``scenes.cached_sequence``
+   renders into the shared cache, or finds the sequence already there.
+2. :func:`cell_task`, one per (scene variant, seed, pipeline), on the payload
+   :func:`cell_payload` builds: scores the cell (:func:`harness.cell_scoring.score_cell`),
+   writes its rows and artifacts into a temporary folder and renames it to
+   ``cells/<cell_id>/``. A cell that raises is recorded (``status = "failed"`` with its
+   error) and the run goes on.
+
+A cell's results depend only on its payload (no shared RNG).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import time
+import traceback
+import uuid
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from harness import cell_artifacts as artifacts
+from harness.cell_scoring import score_cell
+from harness.results import ROWS_FILE, rows_to_frame, write_table
+from harness.suites import Cell
+
+__all__ = ["render_task", "cell_task", "cell_payload"]
+
+
+def _prepare_worker() -> None:
+    # Before anything imports OpenGL: headless EGL (see README).
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+
+def _import_plugins(modules: Iterable[str]) -> None:
+    from harness.suites import import_modules
+
+    import_modules(list(modules), source="worker")
+
+
+def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = ()) -> dict:
+    """Render one scene variant into the cache (or find it there); returns where and whether reused."""
+    _prepare_worker()
+    t0 = time.perf_counter()
+    try:
+        _import_plugins(imports)
+        from scenes import cached_sequence_result
+
+        result = cached_sequence_result(spec, cache_dir)
+    except Exception as exc:  # the cells of this scene are recorded as failed, the run goes on
+        return {"key": variant_key, "path": None, "reused": False,
+                "error": f"rendering failed: {type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc()}
+    return {"key": variant_key, "path": str(result.path), "reused": not result.rendered, "error": None,
+            "render_s": time.perf_counter() - t0}
+
+
+def cell_payload(cell: Cell, cells_dir: Path, provenance: dict, imports: list[str]) -> dict:
+    """The plain-data input of :func:`cell_task` (the caller adds ``sequence``, the rendered folder)."""
+    v = cell.variant
+    return {
+        "cell_id": cell.cell_id,
+        "config_hash": cell.config_hash,
+        "scene": v.label,
+        "scene_hash": v.scene_hash,
+        "seed": v.seed,
+        "sweep_param": v.sweep_param,
+        "sweep_value": None if v.sweep_value is None else str(v.sweep_value),
+        "pipeline": cell.pipeline,
+        "pipeline_spec": cell.pipeline_spec,
+        "pipeline_hash": cell.pipeline_hash,
+        "metrics": list(cell.metrics) if cell.metrics is not None else None,
+        "picture_pairs": list(cell.picture_pairs),
+        "cells_dir": str(cells_dir),
+        "provenance": provenance,
+        "imports": imports,
+    }
+
+
+def _cell_columns(payload: Mapping) -> dict:
+    return {
+        "cell_id": payload["cell_id"],
+        "scene": payload["scene"],
+        "scene_hash": payload["scene_hash"],
+        "seed": payload["seed"],
+        "pipeline": payload["pipeline"],
+        "pipeline_hash": payload["pipeline_hash"],
+        "sweep_param": payload["sweep_param"],
+        "sweep_value": payload["sweep_value"],
+        "config_hash": payload["config_hash"],
+        **payload["provenance"],
+    }
+
+
+def cell_task(payload: Mapping) -> dict:
+    """Run, score and write one cell; never raises for a failure of the cell itself.
+
+    Returns a small summary dict (``cell_id``, ``status``, ``error``, ``rows``).
+    """
+    _prepare_worker()
+    cells_dir = Path(payload["cells_dir"])
+    final = cells_dir / payload["cell_id"]
+    tmp = cells_dir / f".tmp-{payload['cell_id']}-{uuid.uuid4().hex[:8]}"
+    tmp.mkdir(parents=True)
+    t0 = time.perf_counter()
+    status, error, tb, renderer = "ok", "", "", ""
+    try:
+        _import_plugins(payload.get("imports", ()))
+        if payload.get("render_error"):
+            raise RuntimeError(payload["render_error"])
+        rows, renderer = score_cell(payload, tmp)
+        if not rows:
+            raise RuntimeError("the cell produced no result rows (no metric applies?)")
+    except Exception as exc:
+        status, error, tb = "failed", f"{type(exc).__name__}: {exc}", traceback.format_exc()
+        rows = [{"metric": "cell_failed", "value": math.nan, "sum": math.nan, "count": 0.0}]
+        artifacts.write_error(tmp, tb + payload.get("render_traceback", ""))
+    table = rows_to_frame(rows, **_cell_columns(payload), renderer=renderer, status=status, error=error)
+    write_table(table, tmp / ROWS_FILE)
+    artifacts.write_cell_info(tmp, {
+        "cell_id": payload["cell_id"], "config_hash": payload["config_hash"], "status": status,
+        "error": error, "rows": len(table), "elapsed_s": round(time.perf_counter() - t0, 3),
+        "scene": payload["scene"], "seed": payload["seed"], "pipeline": payload["pipeline"],
+    })
+    _rename_into_place(tmp, final)
+    return {"cell_id": payload["cell_id"], "status": status, "error": error, "rows": len(table)}
+
+
+def _rename_into_place(tmp: Path, final: Path) -> None:
+    """Make ``tmp`` the folder ``final``; an older folder there (a failed try) is moved aside first."""
+    if final.exists():
+        old = final.with_name(f".old-{final.name}-{uuid.uuid4().hex[:8]}")
+        os.rename(final, old)
+        os.rename(tmp, final)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.rename(tmp, final)
