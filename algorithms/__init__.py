@@ -6,8 +6,8 @@ scikit-image or the pipeline:
 
 * flow convention: ``as_gray``, ``check_frame_pair``, ``check_flow``, ``warp_backward``,
   ``flow_to_color``, ``color_wheel_image`` (``algorithms.flow``)
-* registries: ``FLOW_METHODS``, ``STAGES``, ``register_flow``, ``register_stage``,
-  ``get_flow_method``, ``get_stage`` (``algorithms.registry``)
+* the stage registry: ``STAGES`` (kind -> name -> function; ``FLOW_METHODS`` is ``STAGES["flow"]``),
+  ``register_flow``, ``register_stage``, ``get_flow_method``, ``get_stage``, ``flow_cost`` (``algorithms.registry``)
 * flow methods ``flow, valid = f(frame0, frame1, **params)``: ``lucas_kanade``,
   ``horn_schunck`` (in ``lucas_kanade_flow`` / ``horn_schunck_flow``: a module named like
   its function would shadow the function on the package), ``farneback``, ``dis``,
@@ -17,7 +17,9 @@ scikit-image or the pipeline:
   ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
   ``ConstantVelocityKalman``, ``kalman_cv_filter``; tracking: ``detect_moving_objects``,
   ``PointTracker``, ``MultiTargetTracker``
-* the pipeline: ``Pipeline``, ``PIPELINES``, ``get_pipeline``, ``PairEstimate``, ``SequenceEstimate``
+* the pipeline: ``Pipeline``, ``PIPELINES``, ``get_pipeline``, ``PairEstimate``, ``SequenceEstimate``;
+  its description: ``PipelineSpec``, ``resolve_pipeline`` (``algorithms.pipeline_spec``; the built-ins are
+  ``algorithms/pipelines/*.yaml``)
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ for _module, _names in {
     "algorithms.flow": ("FLOW_DTYPE", "as_gray", "check_frame_pair", "check_flow", "warp_backward",
                         "flow_to_color", "color_wheel_image"),
     "algorithms.registry": ("FLOW_METHODS", "STAGES", "register_flow", "register_stage", "get_flow_method",
-                            "get_stage", "describe"),
+                            "get_stage", "flow_cost", "describe"),
     "algorithms.lucas_kanade_flow": ("lucas_kanade",),
     "algorithms.horn_schunck_flow": ("horn_schunck",),
     "algorithms.reference": ("farneback", "dis", "tvl1", "ilk"),
@@ -43,6 +45,7 @@ for _module, _names in {
     "algorithms.tracking": ("TRACK_COLUMNS", "detect_moving_objects", "PointTracker", "MultiTargetTracker"),
     "algorithms.pipeline": ("Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
                             "get_pipeline", "pipeline_hash"),
+    "algorithms.pipeline_spec": ("PipelineSpec", "resolve_pipeline"),
 }.items():
     for _name in _names:
         _EXPORTS[_name] = _module

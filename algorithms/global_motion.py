@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
+from algorithms.registry import register_stage
 
 __all__ = ["GlobalMotion", "GlobalModel", "ncc_global_motion", "affine_global_motion", "global_flow"]
 
@@ -67,6 +68,7 @@ def _parabola_offset(left: float, centre: float, right: float) -> float:
     return float(np.clip(0.5 * (left - right) / curvature, -0.5, 0.5))
 
 
+@register_stage("global_motion")
 def ncc_global_motion(frame0: np.ndarray, frame1: np.ndarray, *, max_shift: int = 16, subpixel: bool = False,
                       min_peak: float = 0.3, template_px: int | None = 256) -> GlobalMotion:
     """Global shift by normalized cross-correlation (thesis 3.1, eq. 3.1).

@@ -27,12 +27,8 @@ local flow ``w`` (``I1'(x + w) ~ I0(x)``) give ``total = s + w``. With a matrix
 from __future__ import annotations
 
 import copy
-import hashlib
-import inspect
-import json
-import math
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,26 +36,30 @@ import cv2
 import numpy as np
 import pandas as pd
 
-import algorithms.horn_schunck_flow  # noqa: F401  (fills FLOW_METHODS)
-import algorithms.lucas_kanade_flow  # noqa: F401
-import algorithms.reference  # noqa: F401
-from algorithms.filters import spatial_filter, temporal_filter, threshold_flow
 from algorithms.flow import FLOW_DTYPE, as_gray
-from algorithms.global_motion import affine_global_motion, global_flow, ncc_global_motion
-from algorithms.jitter import JITTER_MODELS, cumulative_path, remove_jitter
-from algorithms.registry import FLOW_METHODS
-from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, detect_moving_objects
+from algorithms.global_motion import affine_global_motion, global_flow
+from algorithms.jitter import cumulative_path
+from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builtin_pipelines, pipeline_hash,
+                                      resolve_pipeline)
+from algorithms.registry import STAGES, get_stage, register_stage
+from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
            "GLOBAL_MOTION_METHODS", "COMPENSATION_MODELS", "get_pipeline", "pipeline_hash"]
 
-# Global shift methods usable in pass 1, by the name YAML uses: (frame0, frame1, **params) -> .shift_px, .valid
-GLOBAL_MOTION_METHODS: dict[str, Callable] = {"ncc_global_motion": ncc_global_motion}
-COMPENSATION_MODELS = ("none", "shift", "affine", "homography")
+# The trackers are classes of algorithms.tracking, registered here beside the other stages the pipeline
+# resolves by kind and name (global_motion and flow by the names a pipeline dict gives).
+register_stage("tracking", name="point")(PointTracker)
+register_stage("tracking", name="multi")(MultiTargetTracker)
+# global shift methods usable in pass 1: (frame0, frame1, **params) -> .shift_px, .valid (the registry's table)
+GLOBAL_MOTION_METHODS = STAGES["global_motion"]
+# the stage functions the pipeline runs where its dict names no method
+_STAGE = {"jitter": "remove_jitter", "threshold": "threshold_flow", "spatial": "spatial_filter",
+          "temporal": "temporal_filter", "detection": "detect_moving_objects"}
 
 
-class PipelineError(ValueError):
-    """A pipeline description is invalid; the message names the field."""
+def _stage(kind: str):
+    return get_stage(kind, _STAGE[kind])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -135,203 +135,6 @@ class SequenceEstimate:
 
 
 # ---------------------------------------------------------------------------------------------
-# validation
-
-_DEFAULTS: dict[str, Any] = {
-    "description": "",
-    "global_motion": {"method": "ncc_global_motion", "params": {}},
-    "jitter": {"model": "line"},
-    "compensation": "shift",
-    "threshold": None,
-    "spatial": False,
-    "temporal": False,
-    "detection": {},
-    "tracking": {"point": True, "multi": None},
-}
-_TOP_KEYS = ("name", "description", "global_motion", "jitter", "compensation", "flow", "threshold",
-             "spatial", "temporal", "detection", "tracking")
-_JITTER_DEFAULTS = {"model": "line", "window_frames": 15, "polyorder": 2, "iterations": 1}
-_DETECTION_DEFAULTS = {"min_magnitude_px": 0.5, "min_area_px": 20}
-_THRESHOLD_DEFAULTS = {"direction": None, "tolerance_deg": 45.0, "min_magnitude_px": 0.0, "max_magnitude_px": None}
-_MULTI_DEFAULTS = {"gate_px": 8.0, "birth_hits": 3, "death_misses": 3, "sigma_accel_px": 0.5,
-                   "sigma_meas_px": 1.0, "sigma_vel0_px": 5.0}
-_KALMAN_KEYS = ("x0", "p0", "q", "r")
-
-
-def _type_name(v: Any) -> str:
-    return type(v).__name__
-
-
-def _check_value(where: str, v: Any, default: Any) -> Any:
-    """Check ``v`` against the type of ``default`` (None default: any finite JSON-like value)."""
-    if isinstance(v, float) and not math.isfinite(v):
-        raise PipelineError(f"{where}: expected a finite number, got {v}")
-    if isinstance(default, bool):
-        if not isinstance(v, bool):
-            raise PipelineError(f"{where}: expected true/false, got {v!r} ({_type_name(v)})")
-    elif isinstance(default, int):
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise PipelineError(f"{where}: expected an integer, got {v!r} ({_type_name(v)})")
-    elif isinstance(default, float):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise PipelineError(f"{where}: expected a number, got {v!r} ({_type_name(v)})")
-        v = float(v)
-    elif isinstance(default, str):
-        if not isinstance(v, str):
-            raise PipelineError(f"{where}: expected a string, got {v!r} ({_type_name(v)})")
-    elif isinstance(v, (list, tuple)):
-        v = [_check_value(f"{where}[{i}]", x, None) for i, x in enumerate(v)]
-    return v
-
-
-def _mapping(where: str, v: Any) -> dict:
-    if not isinstance(v, Mapping):
-        raise PipelineError(f"{where}: expected a mapping, got {v!r} ({_type_name(v)})")
-    return dict(v)
-
-
-def _fill(where: str, given: Any, defaults: Mapping) -> dict:
-    """Defaults overlaid by ``given``; unknown keys and wrong types are errors."""
-    given = _mapping(where, given)
-    for k in given:
-        if k not in defaults:
-            raise PipelineError(f"{where}.{k}: unknown key; valid: {', '.join(defaults)}")
-    return {k: _check_value(f"{where}.{k}", given[k], d) if k in given else copy.deepcopy(d)
-            for k, d in defaults.items()}
-
-
-def _method_params(where: str, fn: Callable, params: Any, *, skip: tuple[str, ...] = ()) -> dict:
-    """Check ``params`` against the keyword parameters of ``fn`` (after its two frames)."""
-    params = _mapping(where, params)
-    sig = list(inspect.signature(fn).parameters.values())[2:]
-    accepted = {p.name: p.default for p in sig if p.name not in skip
-                and p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)}
-    out = {}
-    for k, v in params.items():
-        if k not in accepted:
-            raise PipelineError(f"{where}.{k}: unknown parameter of {fn.__name__}; valid: {', '.join(accepted)}")
-        d = accepted[k]
-        out[k] = _check_value(f"{where}.{k}", v, None if d is inspect.Parameter.empty else d)
-    return out
-
-
-def _method_section(where: str, v: Any, table: Mapping[str, Callable], what: str,
-                    skip: tuple[str, ...] = ()) -> dict:
-    sec = _mapping(where, v)
-    for k in sec:
-        if k not in ("method", "params"):
-            raise PipelineError(f"{where}.{k}: unknown key; valid: method, params "
-                                f"(method parameters go under {where}.params)")
-    if "method" not in sec:
-        raise PipelineError(f"{where}.method: missing; valid: {', '.join(sorted(table)) or '(none registered)'}")
-    name = sec["method"]
-    if not isinstance(name, str) or name not in table:
-        raise PipelineError(f"{where}.method: unknown {what} {name!r}; valid: "
-                            f"{', '.join(sorted(table)) or '(none registered)'}")
-    return {"method": name, "params": _method_params(f"{where}.params", table[name], sec.get("params", {}),
-                                                    skip=skip)}
-
-
-def _validate(d: Any) -> dict:
-    d = _mapping("pipeline", d)
-    for k in d:
-        if k not in _TOP_KEYS:
-            raise PipelineError(f"{k}: unknown key; valid: {', '.join(_TOP_KEYS)}")
-    for k in ("name", "flow"):
-        if k not in d:
-            raise PipelineError(f"{k}: missing (required)")
-    out: dict[str, Any] = {}
-    if not isinstance(d["name"], str) or not d["name"]:
-        raise PipelineError(f"name: expected a non-empty string, got {d['name']!r}")
-    out["name"] = d["name"]
-    out["description"] = _check_value("description", d.get("description", ""), "")
-    out["global_motion"] = _method_section("global_motion", d.get("global_motion", _DEFAULTS["global_motion"]),
-                                           GLOBAL_MOTION_METHODS, "global motion method")
-    j = d.get("jitter", _DEFAULTS["jitter"])
-    if j is not None:
-        j = _fill("jitter", j, _JITTER_DEFAULTS)
-        if j["model"] not in JITTER_MODELS:
-            raise PipelineError(f"jitter.model: expected one of {', '.join(JITTER_MODELS)}, got {j['model']!r}")
-        if j["iterations"] < 1:
-            raise PipelineError(f"jitter.iterations: expected >= 1, got {j['iterations']}")
-        if j["window_frames"] < 3 or j["window_frames"] % 2 == 0:
-            raise PipelineError(f"jitter.window_frames: expected an odd integer >= 3, got {j['window_frames']}")
-    out["jitter"] = j
-    c = d.get("compensation", _DEFAULTS["compensation"])
-    c = {"model": c} if isinstance(c, str) else _mapping("compensation", c)
-    for k in c:
-        if k not in ("model", "params"):
-            raise PipelineError(f"compensation.{k}: unknown key; valid: model, params")
-    if c.get("model") not in COMPENSATION_MODELS:
-        raise PipelineError(f"compensation.model: expected one of {', '.join(COMPENSATION_MODELS)}, "
-                            f"got {c.get('model')!r}")
-    if c["model"] in ("affine", "homography"):
-        c["params"] = _method_params("compensation.params", affine_global_motion, c.get("params", {}),
-                                     skip=("model",))
-    elif c.get("params"):
-        raise PipelineError(f"compensation.params: the {c['model']!r} model takes no parameters")
-    else:
-        c["params"] = {}
-    out["compensation"] = c
-    out["flow"] = _method_section("flow", d["flow"], FLOW_METHODS, "flow method")
-    t = d.get("threshold")
-    if t is not None:
-        t = _fill("threshold", t, _THRESHOLD_DEFAULTS)
-        try:  # the function's own checks, on a 1-pixel field, so errors come now and not mid-run
-            threshold_flow(np.zeros((1, 1, 2), np.float32), **t)
-        except (TypeError, ValueError) as e:
-            raise PipelineError(f"threshold: {e}") from None
-    out["threshold"] = t
-    for k in ("spatial", "temporal"):
-        out[k] = _check_value(k, d.get(k, _DEFAULTS[k]), False)
-    out["detection"] = _fill("detection", d.get("detection", {}), _DETECTION_DEFAULTS)
-    tr = _mapping("tracking", d.get("tracking", _DEFAULTS["tracking"]))
-    for k in tr:
-        if k not in ("point", "multi"):
-            raise PipelineError(f"tracking.{k}: unknown key; valid: point, multi")
-    point = tr.get("point", True)
-    if isinstance(point, Mapping):
-        point = _fill("tracking.point", point, {"field": "filtered", "kalman": None, "recentre_px": None,
-                                                "filter": "flow", "sigma_accel_px": 0.5, "sigma_meas_px": 1.0})
-        if point["filter"] not in ("flow", "position"):
-            raise PipelineError(f"tracking.point.filter: expected flow or position, got {point['filter']!r}")
-        try:
-            PointTracker(0.0, 0.0, position_filter={k: point[k] for k in ("sigma_accel_px", "sigma_meas_px")})
-        except ValueError as e:
-            raise PipelineError(f"tracking.point: {e}") from None
-        rc = point["recentre_px"]
-        if rc is not None and (isinstance(rc, bool) or not isinstance(rc, (int, float)) or not rc > 0):
-            raise PipelineError(f"tracking.point.recentre_px: expected null or a number > 0, got {rc!r}")
-        if point["field"] not in ("filtered", "local"):
-            raise PipelineError(f"tracking.point.field: expected filtered or local, got {point['field']!r}")
-        if point["kalman"] is not None:
-            kal = _mapping("tracking.point.kalman", point["kalman"])
-            for k in kal:
-                if k not in _KALMAN_KEYS:
-                    raise PipelineError(f"tracking.point.kalman.{k}: unknown key; valid: {', '.join(_KALMAN_KEYS)}")
-            point["kalman"] = {k: _check_value(f"tracking.point.kalman.{k}", kal[k], None if k == "x0" else 0.0)
-                               for k in kal}
-    elif not isinstance(point, bool):
-        raise PipelineError(f"tracking.point: expected true/false or a mapping, got {point!r}")
-    multi = tr.get("multi")
-    if multi is not None:
-        multi = _fill("tracking.multi", multi, _MULTI_DEFAULTS)
-        try:
-            MultiTargetTracker(**multi)
-        except ValueError as e:
-            raise PipelineError(f"tracking.multi: {e}") from None
-    out["tracking"] = {"point": point, "multi": multi}
-    return out
-
-
-def pipeline_hash(config: Mapping) -> str:
-    """Stable 16-hex hash of what a pipeline computes (its resolved dict without name and description)."""
-    body = {k: v for k, v in config.items() if k not in ("name", "description")}
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-# ---------------------------------------------------------------------------------------------
 # the pipeline
 
 
@@ -389,7 +192,7 @@ class Pipeline:
         global_motion: {method: ncc_global_motion, params: {max_shift: 16, subpixel: false}}
         jitter: {model: line | smooth, window_frames: 15, polyorder: 2, iterations: 1}   # or null
         compensation: none | shift | affine | homography     # or {model: affine, params: {...}}
-        flow: {method: lucas_kanade, params: {window: 15}}    # any name in FLOW_METHODS
+        flow: {method: lucas_kanade, params: {window: 15}}    # any name registered as a flow stage
         threshold: {direction: -90, tolerance_deg: 45, min_magnitude_px: 0.0, max_magnitude_px: null}  # or null
         spatial: true        # eq. 4.11
         temporal: true       # eq. 4.12
@@ -419,7 +222,8 @@ class Pipeline:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Pipeline":
-        return cls(_validate(d))
+        """Validate ``d`` (see the class docstring) and resolve its defaults; raises :class:`PipelineError`."""
+        return cls(resolve_pipeline(d))
 
     def to_dict(self) -> dict:
         """The resolved description (defaults filled), a fresh copy."""
@@ -441,7 +245,7 @@ class Pipeline:
 
     def _global_shifts(self, frames, n: int, correction: np.ndarray | None = None):
         gm = self.config["global_motion"]
-        fn, params = GLOBAL_MOTION_METHODS[gm["method"]], gm["params"]
+        fn, params = get_stage("global_motion", gm["method"]), gm["params"]
         shifts, valid, times = np.zeros((n - 1, 2)), np.zeros(n - 1, bool), np.zeros(n - 1)
 
         def load(i):
@@ -475,12 +279,26 @@ class Pipeline:
             Read on demand; at least two frames.
         seeds : sequence of (vehicle_id, x_px, y_px), optional
             Pixels of frame 0 for the thesis point tracker (``tracking.point``).
+
+        Yields
+        ------
+        PairEstimate
+            One per pair t = 0 .. N-2, in order, each as soon as its temporal window is complete.
+        SequenceEstimate
+            Exactly one, last. Consumers tell the two apart with ``isinstance`` (two types,
+            two roles: the pair's fields are scored and dropped, the sequence's paths and
+            tracks are scored once).
         """
         n = len(frames)
         if n < 2:
             raise ValueError(f"frames: expected at least 2 frames, got {n}")
         cfg = self.config
         totals: dict[str, float] = {}
+        # every stage is resolved through algorithms.registry, the built-ins and plugins' alike
+        remove_jitter, threshold_flow = _stage("jitter"), _stage("threshold")
+        spatial_filter, temporal_filter, detect_moving_objects = (_stage("spatial"), _stage("temporal"),
+                                                                  _stage("detection"))
+        point_tracker, multi_tracker = get_stage("tracking", "point"), get_stage("tracking", "multi")
 
         # pass 1: global shifts of all pairs, jitter over the whole path
         shifts, shifts_valid, gm_ms = self._global_shifts(frames, n)
@@ -498,7 +316,7 @@ class Pipeline:
             line, correction, jitter = cumulative.copy(), np.zeros_like(cumulative), np.zeros_like(cumulative)
         totals["jitter"] = _ms(t0)
 
-        flow_fn, flow_params = FLOW_METHODS[cfg["flow"]["method"]], cfg["flow"]["params"]
+        flow_fn, flow_params = get_stage("flow", cfg["flow"]["method"]), cfg["flow"]["params"]
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
         points = []
@@ -506,12 +324,12 @@ class Pipeline:
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
         if track_cfg["point"] and seeds:
             kal = point_cfg.get("kalman")
-            points = [PointTracker(float(x), float(y), track_id=i, seed_vehicle_id=vid, kalman=kal,
+            points = [point_tracker(float(x), float(y), track_id=i, seed_vehicle_id=vid, kalman=kal,
                                    recentre_px=point_cfg.get("recentre_px"),
                                    position_filter={k: point_cfg[k] for k in ("sigma_accel_px", "sigma_meas_px")}
                                    if point_cfg.get("filter") == "position" else None)
                       for i, (vid, x, y) in enumerate(seeds)]
-        multi = MultiTargetTracker(**track_cfg["multi"]) if track_cfg["multi"] is not None else None
+        multi = multi_tracker(**track_cfg["multi"]) if track_cfg["multi"] is not None else None
 
         def estimate_pair(t: int, g0: np.ndarray, g1: np.ndarray) -> dict:
             ms: dict[str, float] = {"global_motion": float(gm_ms[t])}
@@ -599,67 +417,9 @@ class Pipeline:
 
 
 # ---------------------------------------------------------------------------------------------
-# built-in pipelines
+# built-in pipelines: algorithms/pipelines/<name>.yaml, name -> the plain dict a YAML suite would hold
 
-_THESIS_CLEANUP = {"threshold": None, "spatial": True, "temporal": True}
-# Beyond-thesis point trackers re-centre on the region that moves like the point (search half-side, px):
-# larger than a vehicle on `nominal` (about 20 x 10 px), smaller than the gap between vehicles. On `nominal`
-# (60 frames) it takes pyramidal-lk's mean point error from 2.6 px (max 13) to 1.5 px (max 7.6).
-# Their filtered track is a constant-velocity Kalman filter of those positions in the ground frame (the
-# multi-target tracker's default noise): on nominal and noisy (60 frames) it changes the mean point error by
-# +0.02 and +0.03 px, since what is left there is a bias of the region's centroid (about 1 px), not noise.
-_POINT_RECENTRED = {"field": "local", "recentre_px": 12.0, "filter": "position", "sigma_accel_px": 0.5,
-                    "sigma_meas_px": 1.0}
-
-# name -> plain dict (what a YAML suite would hold); get_pipeline(name) validates it.
-PIPELINES: dict[str, dict] = {
-    "thesis-lk": {
-        "name": "thesis-lk",
-        "description": "Thesis: integer NCC shift, straight flight line, single-level LK 15x15, spatial+temporal filters",
-        "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 16, "subpixel": False}},
-        "jitter": {"model": "line"}, "compensation": "shift",
-        "flow": {"method": "lucas_kanade", "params": {"window": 15}},
-        **_THESIS_CLEANUP,
-        "tracking": {"point": True, "multi": None},
-    },
-    "thesis-hs": {
-        "name": "thesis-hs",
-        "description": "Thesis: integer NCC shift, straight flight line, single-level Horn-Schunck, spatial+temporal filters",
-        "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 16, "subpixel": False}},
-        "jitter": {"model": "line"}, "compensation": "shift",
-        "flow": {"method": "horn_schunck", "params": {"alpha": 15.0, "iterations": 100}},
-        **_THESIS_CLEANUP,
-        "tracking": {"point": True, "multi": None},
-    },
-    "pyramidal-lk": {
-        "name": "pyramidal-lk",
-        "description": "Sub-pixel NCC shift, smooth flight path, coarse-to-fine LK with warping, multi-target tracker",
-        "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 16, "subpixel": True}},
-        "jitter": {"model": "smooth"}, "compensation": "shift",
-        "flow": {"method": "lucas_kanade", "params": {"window": 11, "levels": 4, "iterations": 3}},
-        **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
-    },
-    "pyramidal-hs": {
-        "name": "pyramidal-hs",
-        "description": "Sub-pixel NCC shift, smooth flight path, coarse-to-fine Horn-Schunck with warping, multi-target tracker",
-        "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 16, "subpixel": True}},
-        "jitter": {"model": "smooth"}, "compensation": "shift",
-        "flow": {"method": "horn_schunck", "params": {"levels": 4}},
-        **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
-    },
-}
-for _name, _desc in (("dis", "OpenCV DIS"), ("farneback", "OpenCV Farneback"), ("tvl1", "scikit-image TV-L1")):
-    PIPELINES[_name] = {
-        "name": _name,
-        "description": f"Reference: sub-pixel NCC shift compensation, then {_desc} flow; spatial+temporal filters",
-        "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 16, "subpixel": True}},
-        "jitter": {"model": "smooth"}, "compensation": "shift",
-        "flow": {"method": _name, "params": {}},
-        **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
-    }
+PIPELINES: dict[str, dict] = builtin_pipelines()
 
 
 def get_pipeline(name: str) -> Pipeline:

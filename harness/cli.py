@@ -43,18 +43,16 @@ class UsageError(Exception):
 
 def _user_errors() -> tuple[type[BaseException], ...]:
     from harness.executors import ExecutorError
-    from harness.runner import RunFolderError
+    from harness.gate import GateError
+    from harness.resume import RunFolderError
+    from harness.results import ResultsError
     from harness.suites import SuiteError
+    from scenes import SceneSpecError
+    from scenes.formats import FormatError
 
     # OSError: disk full, permission denied, a file vanished; its message names the file
-    errors: list[type[BaseException]] = [UsageError, SuiteError, RunFolderError, ExecutorError, OSError]
-    for module, name in (("scenes.formats", "FormatError"), ("harness.gate", "GateError"),
-                         ("harness.results", "ResultsError"), ("scenes", "SceneSpecError")):
-        try:
-            errors.append(getattr(__import__(module, fromlist=[name]), name))
-        except (ImportError, AttributeError):
-            pass
-    return tuple(errors)
+    return (UsageError, SuiteError, RunFolderError, ExecutorError, FormatError, GateError, ResultsError,
+            SceneSpecError, OSError)
 
 
 def _one_line(text: str, width: int = 100) -> str:
@@ -99,8 +97,7 @@ def _list_pipelines() -> dict[str, str]:
 
     out = {}
     for name, p in pipeline_names().items():
-        desc = p.get("description", "") if isinstance(p, dict) else getattr(p, "description", "")
-        out[name] = _one_line(desc or "")
+        out[name] = _one_line(p.get("description") or "")
     return out
 
 
@@ -188,12 +185,10 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def _write_report(run_dir: Path, baseline: str | None = None, gate: str | None = None,
-                  rules: str | None = None) -> Path | None:
-    """``reports.write_report`` if the reports package provides it (it is optional for a run)."""
-    try:
-        from reports import write_report
-    except ImportError:
-        return None
+                  rules: str | None = None) -> Path | dict:
+    """The run's report (``reports.write_report``): HTML and Markdown beside the results."""
+    from reports import write_report
+
     return write_report(run_dir, baseline=baseline, gate_verdict=gate, rules=rules)
 
 
@@ -218,8 +213,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         except Exception as exc:  # the results are written; a report failure must not hide them
             print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         else:
-            if report is not None:
-                print(f"report: {_paths(report)}")
+            print(f"report: {_paths(report)}")
     if not result.ok:
         for line in result.failed_cells:
             print(f"FAILED {line}", file=sys.stderr)
@@ -237,8 +231,6 @@ def cmd_report(args: argparse.Namespace) -> int:
         if value is not None and not Path(value).is_file():
             raise UsageError(f"{option}: {value}: no such file")
     report = _write_report(run_dir, args.baseline, args.gate, args.rules)
-    if report is None:
-        raise UsageError("the reports package provides no write_report")
     print(f"report: {_paths(report)}")
     return EXIT_OK
 

@@ -176,8 +176,8 @@ class Suite(_Model):
 # --------------------------------------------------------------------------- registries
 
 
-def pipeline_names() -> dict[str, Any]:
-    """The built-in pipelines, ``algorithms.pipeline.PIPELINES`` (name -> dict or Pipeline)."""
+def pipeline_names() -> dict[str, dict]:
+    """The built-in pipelines, ``algorithms.pipeline.PIPELINES`` (name -> plain dict, from ``algorithms/pipelines/``)."""
     from algorithms.pipeline import PIPELINES
 
     return PIPELINES
@@ -192,14 +192,9 @@ def metric_names() -> list[str]:
     return sorted(set(metrics.METRICS) | set(timing))
 
 
-def _pipeline_dict(entry: Any) -> dict:
-    """A built-in pipeline as a plain dict (PIPELINES may hold dicts or Pipeline objects)."""
-    if isinstance(entry, Mapping):
-        return copy.deepcopy(dict(entry))
-    for attr in ("to_dict", "model_dump"):
-        if hasattr(entry, attr):
-            return getattr(entry, attr)()
-    raise TypeError(f"cannot turn built-in pipeline {entry!r} into a dict")
+def _pipeline_dict(entry: Mapping) -> dict:
+    """A built-in pipeline as a fresh plain dict (to merge a suite's changes into)."""
+    return copy.deepcopy(dict(entry))
 
 
 def _deep_merge(base: dict, top: Mapping) -> dict:
@@ -318,10 +313,8 @@ def _check_names(suite: Suite, source: str) -> None:
         for i, m in enumerate(suite.metrics):
             if m not in valid:
                 raise SuiteError(f"{source}: metrics[{i}]: unknown metric {m!r}; valid: {', '.join(valid)}")
-    try:
-        from scenes import list_presets
-    except ImportError:
-        return
+    from scenes import list_presets
+
     presets = set(list_presets())
     for i, s in enumerate(suite.scenes):
         looks_like_path = s.preset.endswith((".yaml", ".yml")) or os.sep in s.preset

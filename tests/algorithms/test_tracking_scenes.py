@@ -14,7 +14,7 @@ def _point_errors(preset: str, overrides: dict, pipeline: str, tmp_path) -> np.n
     """Per-frame |raw point position - true vehicle centre| (px) of every seeded vehicle while visible."""
     from algorithms.pipeline import get_pipeline
     from harness.metrics import position_error_px
-    from harness.runner import point_seeds
+    from harness.cell_scoring import point_seeds
     from scenes import load_scene_spec, open_sequence, render_sequence
 
     seq = open_sequence(render_sequence(load_scene_spec(preset, overrides), tmp_path / "seq"))

@@ -149,8 +149,8 @@ def test_fused_scoring_equals_the_reference_with_nan_truth_and_empty_regions():
 @pytest.mark.slow
 def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
     """Every pair of every cell of the smoke suite, scored both ways."""
-    from algorithms.pipeline import Pipeline
-    from harness.runner import point_seeds
+    from algorithms.pipeline import PairEstimate, Pipeline
+    from harness.cell_scoring import point_seeds
     from harness.suites import expand, load_suite
     from scenes import cached_sequence, open_sequence
 
@@ -160,7 +160,7 @@ def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
     for cell in cells:
         seq = open_sequence(cached_sequence(cell.variant.spec, render_cache))
         for est in Pipeline.from_dict(cell.pipeline_spec).run(seq, seeds=point_seeds(seq.tracks)):
-            if hasattr(est, "flow_total"):
+            if isinstance(est, PairEstimate):
                 assert_same_scores(est, seq.pair_truth(est.index), est.index)
                 pairs += 1
     assert pairs == 20 * 5

@@ -1,0 +1,433 @@
+"""The pipeline description: a pydantic model, the built-in pipelines (YAML package data) and the hash.
+
+A pipeline is described by a plain dict, as YAML holds it (the schema is in the
+:class:`~algorithms.pipeline.Pipeline` docstring). :func:`resolve_pipeline` validates it
+with :class:`PipelineSpec` (extra keys forbidden, NaN and infinities refused, no
+silent type coercion except an integer where a number is expected) and returns the
+resolved dict, defaults filled; :func:`pipeline_hash` hashes what it computes. Method
+sections (``global_motion``, ``flow``) name a stage of :mod:`algorithms.registry` and
+their ``params`` are checked against that function's keyword parameters, so a method a
+plugin registers is validated like a built-in one.
+
+The built-in pipelines are the files ``algorithms/pipelines/<name>.yaml`` (package
+data), loaded once by :func:`builtin_pipelines`; an error there names the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+import math
+from collections.abc import Callable, Mapping
+from functools import cache
+from importlib import resources
+from typing import Annotated, Any, ClassVar, Union
+
+import numpy as np
+import yaml
+from pydantic import (BaseModel, ConfigDict, Discriminator, Field, StrictBool, StrictInt, StrictStr,
+                      Tag, ValidationError, field_validator, model_validator)
+from pydantic_core import PydanticCustomError
+
+import algorithms.horn_schunck_flow  # noqa: F401  (each built-in stage module registers its stages on import)
+import algorithms.lucas_kanade_flow  # noqa: F401
+import algorithms.reference  # noqa: F401
+from algorithms.filters import threshold_flow
+from algorithms.global_motion import affine_global_motion
+from algorithms.jitter import JITTER_MODELS
+from algorithms.registry import STAGES
+from algorithms.tracking import MultiTargetTracker, PointTracker
+
+__all__ = ["PipelineError", "PipelineSpec", "COMPENSATION_MODELS", "resolve_pipeline", "pipeline_hash",
+           "builtin_pipelines", "BUILTIN_DIR"]
+
+COMPENSATION_MODELS = ("none", "shift", "affine", "homography")
+BUILTIN_DIR = "pipelines"  # inside the algorithms package: <name>.yaml per built-in pipeline
+
+
+class PipelineError(ValueError):
+    """A pipeline description is invalid; the message names the field (and the file, for a built-in)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# errors: one line per problem, "dotted.field: what was expected, what came"
+
+
+def _fail(msg: str, **ctx: Any) -> PydanticCustomError:
+    """An error whose message is ours; ``at`` (dotted, optional) is appended to the field's location."""
+    return PydanticCustomError("pipeline", msg.replace("{", "{{").replace("}", "}}"), ctx)
+
+
+def _got(v: Any) -> str:
+    return f"{v!r} ({type(v).__name__})"
+
+
+_MESSAGES = {
+    "bool_type": "expected true/false, got {got}",
+    "int_type": "expected an integer, got {got}",
+    "float_type": "expected a number, got {got}",
+    "string_type": "expected a string, got {got}",
+    "finite_number": "expected a finite number, got {input}",
+    "missing": "missing (required)",
+    "model_type": "expected a mapping, got {got}",
+    "model_attributes_type": "expected a mapping, got {got}",
+    "dict_type": "expected a mapping, got {got}",
+}
+
+
+_UNION_TAGS = ("true/false", "mapping")  # members of a union, not fields
+
+
+def _error_lines(err: ValidationError) -> list[str]:
+    lines = []
+    for e in err.errors(include_url=False):
+        loc = [str(p) for p in e["loc"] if p not in _UNION_TAGS]
+        ctx = e.get("ctx") or {}
+        if ctx.get("at"):
+            loc.append(ctx["at"])
+        if e["type"] == "pipeline":
+            msg = e["msg"]
+        elif e["type"] in _MESSAGES:
+            msg = _MESSAGES[e["type"]].format(got=_got(e.get("input")), input=e.get("input"))
+        else:
+            msg = e["msg"]
+        lines.append(f"{'.'.join(loc) or 'pipeline'}: {msg}")
+    # a value of a union type fails once per member: say each line once
+    return list(dict.fromkeys(lines))
+
+
+# ---------------------------------------------------------------------------------------------
+# the model
+
+
+class _Section(BaseModel):
+    """Strict: no unknown keys (the error lists the valid ones), no NaN, no coercion but int -> float."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, validate_default=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, v: Any) -> Any:
+        if isinstance(v, Mapping):
+            for k in v:
+                if k not in cls.model_fields:
+                    raise _fail(f"unknown key; valid: {', '.join(cls.model_fields)}{cls._hint()}", at=str(k))
+        return v
+
+    @classmethod
+    def _hint(cls) -> str:
+        return ""
+
+
+def _finite(where: str, v: Any) -> Any:
+    """A value of a parameter whose default is None: any JSON-like value, numbers finite, lists checked inside."""
+    if isinstance(v, float) and not math.isfinite(v):
+        raise _fail(f"expected a finite number, got {v}", at=where)
+    if isinstance(v, (list, tuple)):
+        return [_finite(f"{where}[{i}]" if where else f"[{i}]", x) for i, x in enumerate(v)]
+    return v
+
+
+def _check_param(name: str, v: Any, default: Any) -> Any:
+    """``v`` checked against the type of the function's default (None default: any finite value)."""
+    if default is None or default is inspect.Parameter.empty:
+        return _finite(name, v)
+    if isinstance(v, float) and not math.isfinite(v):
+        raise _fail(f"expected a finite number, got {v}", at=name)
+    if isinstance(default, bool):
+        if not isinstance(v, bool):
+            raise _fail(f"expected true/false, got {_got(v)}", at=name)
+    elif isinstance(default, int):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise _fail(f"expected an integer, got {_got(v)}", at=name)
+    elif isinstance(default, float):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise _fail(f"expected a number, got {_got(v)}", at=name)
+        v = float(v)
+    elif isinstance(default, str):
+        if not isinstance(v, str):
+            raise _fail(f"expected a string, got {_got(v)}", at=name)
+    return v
+
+
+def check_params(fn: Callable, params: Mapping, *, skip: tuple[str, ...] = ()) -> dict:
+    """``params`` checked against the keyword parameters of ``fn`` after its two frames (given order kept)."""
+    sig = list(inspect.signature(fn).parameters.values())[2:]
+    accepted = {p.name: p.default for p in sig if p.name not in skip
+                and p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)}
+    out = {}
+    for k, v in params.items():
+        if k not in accepted:
+            raise _fail(f"unknown parameter of {fn.__name__}; valid: {', '.join(accepted)}", at=f"params.{k}")
+        out[k] = _check_param(f"params.{k}", v, accepted[k])
+    return out
+
+
+class _MethodSection(_Section):
+    """``{method: <name registered as a stage of KIND>, params: {...}}``."""
+
+    KIND: ClassVar[str]
+    WHAT: ClassVar[str]
+
+    method: str
+    params: dict[str, Any] = Field(default_factory=dict)
+
+    @classmethod
+    def _hint(cls) -> str:
+        return f" (method parameters go under {cls.KIND}.params)"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _method_known(cls, v: Any) -> Any:
+        if isinstance(v, Mapping):
+            table = STAGES.get(cls.KIND, {})
+            valid = ", ".join(sorted(table)) or "(none registered)"
+            if "method" not in v:
+                raise _fail(f"missing; valid: {valid}", at="method")
+            name = v["method"]
+            if not isinstance(name, str) or name not in table:
+                raise _fail(f"unknown {cls.WHAT} {name!r}; valid: {valid}", at="method")
+        return v
+
+    @model_validator(mode="after")
+    def _params_fit(self) -> _MethodSection:
+        self.params = check_params(STAGES[self.KIND][self.method], self.params)
+        return self
+
+
+class GlobalMotionSpec(_MethodSection):
+    KIND = "global_motion"
+    WHAT = "global motion method"
+
+
+class FlowSpec(_MethodSection):
+    KIND = "flow"
+    WHAT = "flow method"
+
+
+class JitterSpec(_Section):
+    model: StrictStr = "line"
+    window_frames: StrictInt = 15
+    polyorder: StrictInt = 2
+    iterations: StrictInt = 1
+
+    @model_validator(mode="after")
+    def _ranges(self) -> JitterSpec:
+        if self.model not in JITTER_MODELS:
+            raise _fail(f"expected one of {', '.join(JITTER_MODELS)}, got {self.model!r}", at="model")
+        if self.iterations < 1:
+            raise _fail(f"expected >= 1, got {self.iterations}", at="iterations")
+        if self.window_frames < 3 or self.window_frames % 2 == 0:
+            raise _fail(f"expected an odd integer >= 3, got {self.window_frames}", at="window_frames")
+        return self
+
+
+class CompensationSpec(_Section):
+    """``none | shift | affine | homography``, or ``{model, params}`` (params: of affine_global_motion)."""
+
+    model: Any = None
+    params: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_name(cls, v: Any) -> Any:
+        return {"model": v} if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _model_and_params(self) -> CompensationSpec:
+        if self.model not in COMPENSATION_MODELS:
+            raise _fail(f"expected one of {', '.join(COMPENSATION_MODELS)}, got {self.model!r}", at="model")
+        if self.model in ("affine", "homography"):
+            self.params = check_params(affine_global_motion, self.params, skip=("model",))
+        elif self.params:
+            raise _fail(f"the {self.model!r} model takes no parameters", at="params")
+        return self
+
+
+class ThresholdSpec(_Section):
+    direction: Any = None
+    tolerance_deg: float = 45.0
+    min_magnitude_px: float = 0.0
+    max_magnitude_px: Any = None
+
+    @field_validator("direction", "max_magnitude_px")
+    @classmethod
+    def _any_finite(cls, v: Any) -> Any:
+        return _finite("", v)
+
+    @model_validator(mode="after")
+    def _function_accepts(self) -> ThresholdSpec:
+        try:  # the function's own checks, on a 1-pixel field, so errors come now and not mid-run
+            threshold_flow(np.zeros((1, 1, 2), np.float32), **_dump(self))
+        except (TypeError, ValueError) as e:
+            raise _fail(str(e)) from None
+        return self
+
+
+class DetectionSpec(_Section):
+    min_magnitude_px: float = 0.5
+    min_area_px: StrictInt = 20
+
+
+# the scalar Kalman filter of the thesis point tracker (eqs. 4.6-4.10): the keys a pipeline may give, and the
+# type each takes (x0: any finite value); only the given ones are kept (the filter's own defaults apply)
+_KALMAN_TYPES = {"x0": None, "p0": 0.0, "q": 0.0, "r": 0.0}
+
+
+class PointSpec(_Section):
+    field: StrictStr = "filtered"
+    kalman: dict[str, Any] | None = None
+    recentre_px: Any = None
+    filter: StrictStr = "flow"
+    sigma_accel_px: float = 0.5
+    sigma_meas_px: float = 1.0
+
+    @field_validator("kalman", mode="before")
+    @classmethod
+    def _kalman(cls, v: Any) -> Any:
+        if v is None:
+            return v
+        if not isinstance(v, Mapping):
+            raise _fail(f"expected a mapping, got {_got(v)}")
+        for k in v:
+            if k not in _KALMAN_TYPES:
+                raise _fail(f"unknown key; valid: {', '.join(_KALMAN_TYPES)}", at=str(k))
+        return {k: _check_param(k, v[k], _KALMAN_TYPES[k]) for k in v}
+
+    @field_validator("recentre_px", mode="before")
+    @classmethod
+    def _radius(cls, v: Any) -> Any:
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+            raise _fail(f"expected null or a number > 0, got {v!r}")
+        return _finite("", v)
+
+    @model_validator(mode="after")
+    def _values(self) -> PointSpec:
+        if self.filter not in ("flow", "position"):
+            raise _fail(f"expected flow or position, got {self.filter!r}", at="filter")
+        try:
+            PointTracker(0.0, 0.0, position_filter={"sigma_accel_px": self.sigma_accel_px,
+                                                    "sigma_meas_px": self.sigma_meas_px})
+        except ValueError as e:
+            raise _fail(str(e)) from None
+        if self.field not in ("filtered", "local"):
+            raise _fail(f"expected filtered or local, got {self.field!r}", at="field")
+        return self
+
+
+class MultiSpec(_Section):
+    gate_px: float = 8.0
+    birth_hits: StrictInt = 3
+    death_misses: StrictInt = 3
+    sigma_accel_px: float = 0.5
+    sigma_meas_px: float = 1.0
+    sigma_vel0_px: float = 5.0
+
+    @model_validator(mode="after")
+    def _tracker_accepts(self) -> MultiSpec:
+        try:
+            MultiTargetTracker(**_dump(self))
+        except ValueError as e:
+            raise _fail(str(e)) from None
+        return self
+
+
+class TrackingSpec(_Section):
+    point: Annotated[Union[Annotated[StrictBool, Tag("true/false")], Annotated[PointSpec, Tag("mapping")]],
+                     Discriminator(lambda v: "true/false" if isinstance(v, bool) else "mapping")] = True
+    multi: MultiSpec | None = None
+
+    @field_validator("point", mode="before")
+    @classmethod
+    def _bool_or_mapping(cls, v: Any) -> Any:
+        if not isinstance(v, (bool, Mapping)):
+            raise _fail(f"expected true/false or a mapping, got {v!r}")
+        return v
+
+
+class PipelineSpec(_Section):
+    """A pipeline description (the stages in the order they run); :func:`resolve_pipeline` dumps it."""
+
+    name: StrictStr
+    description: StrictStr = ""
+    global_motion: GlobalMotionSpec = Field(
+        default_factory=lambda: GlobalMotionSpec(method="ncc_global_motion"))
+    jitter: JitterSpec | None = Field(default_factory=JitterSpec)
+    compensation: CompensationSpec = Field(default_factory=lambda: CompensationSpec(model="shift"))
+    flow: FlowSpec
+    threshold: ThresholdSpec | None = None
+    spatial: StrictBool = False
+    temporal: StrictBool = False
+    detection: DetectionSpec = Field(default_factory=DetectionSpec)
+    tracking: TrackingSpec = Field(default_factory=TrackingSpec)
+
+    @field_validator("name")
+    @classmethod
+    def _non_empty(cls, v: str) -> str:
+        if not v:
+            raise _fail(f"expected a non-empty string, got {v!r}")
+        return v
+
+
+def _dump(model: BaseModel) -> dict:
+    """A section as the resolved dict holds it: every field (defaults filled) in the model's order."""
+    out = {}
+    for k in type(model).model_fields:
+        v = getattr(model, k)
+        if isinstance(v, BaseModel):
+            v = _dump(v)
+        elif isinstance(v, (dict, list)):
+            v = json.loads(json.dumps(v))  # a fresh copy
+        out[k] = v
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# entry points
+
+
+def resolve_pipeline(d: Any, *, source: str | None = None) -> dict:
+    """Validate a pipeline dict and return it resolved (defaults filled, ints widened to floats where a
+    number is expected). Raises :class:`PipelineError` naming the field, and ``source`` (a file) when given."""
+    prefix = f"{source}: " if source else ""
+    if not isinstance(d, Mapping):
+        raise PipelineError(f"{prefix}pipeline: expected a mapping, got {_got(d)}")
+    try:
+        spec = PipelineSpec.model_validate(dict(d))
+    except ValidationError as e:
+        raise PipelineError(prefix + "; ".join(_error_lines(e))) from None
+    return _dump(spec)
+
+
+def pipeline_hash(config: Mapping) -> str:
+    """Stable 16-hex hash of what a pipeline computes (its resolved dict without name and description)."""
+    body = {k: v for k, v in config.items() if k not in ("name", "description")}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@cache
+def _builtin_texts() -> tuple[tuple[str, str, str], ...]:
+    folder = resources.files("algorithms") / BUILTIN_DIR
+    return tuple(sorted((f.name.removesuffix(".yaml"), str(f), f.read_text())
+                        for f in folder.iterdir() if f.name.endswith(".yaml")))
+
+
+def builtin_pipelines() -> dict[str, dict]:
+    """The built-in pipelines, name -> the plain dict of its YAML file (as a suite would hold it), checked.
+
+    Each file ``algorithms/pipelines/<name>.yaml`` holds one pipeline whose ``name`` is the
+    file's stem; a file that does not validate raises :class:`PipelineError` naming it.
+    """
+    out = {}
+    for stem, path, text in _builtin_texts():
+        try:
+            d = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            raise PipelineError(f"{path}: not valid YAML: {e}") from None
+        resolve_pipeline(d, source=path)
+        if d["name"] != stem:
+            raise PipelineError(f"{path}: name: expected {stem!r} (the file's name), got {d['name']!r}")
+        out[stem] = d
+    return out
