@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import affine_field, rotation_about, translation
+from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
 from algorithms.global_motion import GlobalMotion, affine_global_motion, global_flow, ncc_global_motion
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import affine_field, rotation_about, translation
+from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
 from algorithms.horn_schunck_flow import cube_to_pixels, horn_schunck, hs_derivatives, hs_iterate, pixels_to_cube
 from algorithms.registry import get_flow_method

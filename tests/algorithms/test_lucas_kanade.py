@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import affine_field, rotation_about, translation
+from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
 from algorithms.lucas_kanade_flow import lucas_kanade
 from algorithms.registry import get_flow_method

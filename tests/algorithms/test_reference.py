@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import translation
+from tests.algorithms.synthetic import translation
 
 from algorithms.reference import dis, farneback, ilk, tvl1
 from algorithms.registry import get_flow_method

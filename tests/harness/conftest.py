@@ -9,7 +9,7 @@ import copy
 
 import pytest
 import yaml
-from harness_testdata import HERE, RESUME_SUITE, ROOT
+from tests.harness.harness_testdata import HERE, RESUME_SUITE, ROOT
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 

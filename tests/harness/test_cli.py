@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from harness_testdata import ROOT, TINY_SUITE
+from tests.harness.harness_testdata import ROOT, TINY_SUITE
 
 from harness.cli import main
 

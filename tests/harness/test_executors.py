@@ -8,7 +8,7 @@ import sys
 
 import pandas as pd
 import pytest
-from harness_testdata import TINY_SUITE, accuracy_table
+from tests.harness.harness_testdata import TINY_SUITE, accuracy_table
 
 from harness.executors import ExecutorError, open_executor
 

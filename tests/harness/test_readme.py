@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from harness_testdata import ROOT
+from tests.harness.harness_testdata import ROOT
 
 README = ROOT / "README.md"
 SECTION = "## Benchmark your own method"

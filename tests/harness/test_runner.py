@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 import numpy as np
 import pytest
-from harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
+from tests.harness.harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
 
 from harness.cli import main
 from harness.results import read_results, read_run_json
@@ -63,7 +63,7 @@ def test_two_workers_give_the_same_numbers(reference_run, tmp_path, render_cache
 @pytest.mark.slow
 def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache, write_suite, capsys):
     # the plugin's flow method raises on 64 px wide frames only: one scene of two fails
-    suite = {**copy.deepcopy(TINY_SUITE), "name": "test-failing", "imports": ["aerobench_test_plugin"],
+    suite = {**copy.deepcopy(TINY_SUITE), "name": "test-failing", "imports": ["tests.harness.aerobench_test_plugin"],
              "scenes": [{"preset": "tiny", "overrides": {"image.n_frames": 3}},
                         {"preset": "tiny", "label": "narrow",
                          "overrides": {"image.n_frames": 3, "image.width_px": 64, "image.height_px": 48}}],

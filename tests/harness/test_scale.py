@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from harness_testdata import TINY_SUITE
+from tests.harness.harness_testdata import TINY_SUITE
 
 import harness.executors
 import harness.runner as runner

@@ -7,7 +7,7 @@ import textwrap
 
 import pytest
 import yaml
-from harness_testdata import TINY_SUITE
+from tests.harness.harness_testdata import TINY_SUITE
 
 from harness.suites import SuiteError, builtin_suites, expand, load_suite, parse_suite
 

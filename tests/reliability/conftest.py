@@ -33,7 +33,7 @@ def rel_env(rel_cache) -> dict:
 @pytest.fixture(scope="session")
 def reference_run(tmp_path_factory, rel_cache):
     """``rel_support.SUITE`` run uninterrupted on one worker: the numbers every other run must give."""
-    from rel_support import suite
+    from tests.reliability.rel_support import suite
 
     from harness.runner import run_suite
     from harness.suites import parse_suite

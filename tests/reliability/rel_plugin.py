@@ -1,4 +1,4 @@
-"""A plugin the reliability suites import in every worker (``imports: [rel_plugin]``).
+"""A plugin the reliability suites import in every worker (``imports: [tests.reliability.rel_plugin]``).
 
 * ``die_once``: a flow method that kills its own worker process with SIGKILL the first
   time it runs while the marker file named by its ``marker`` parameter exists (it removes

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from rel_support import assert_bit_identical, partial_files, suite, tree_state
+from tests.reliability.rel_support import assert_bit_identical, partial_files, suite, tree_state
 
 from harness import gate as G
 from harness import results as R

@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pandas as pd
 import pytest
-from rel_support import assert_bit_identical, suite
+from tests.reliability.rel_support import assert_bit_identical, suite
 
 from harness.results import read_results
 from harness.runner import render_task, run_suite

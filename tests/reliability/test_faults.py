@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rel_plugin import GL_FAIL_WIDTH_PX
-from rel_support import ROOT, assert_all_readable, assert_bit_identical, partial_files, suite, tree_state
+from tests.reliability.rel_plugin import GL_FAIL_WIDTH_PX
+from tests.reliability.rel_support import ROOT, assert_all_readable, assert_bit_identical, partial_files, suite, tree_state
 
 from harness.results import read_results, read_run_json
 from harness.runner import run_suite
@@ -28,7 +28,7 @@ N_KILLS = 5
 
 
 def _dying_suite(marker: Path) -> dict:
-    return suite(imports=["rel_plugin"], pipelines=[
+    return suite(imports=["tests.reliability.rel_plugin"], pipelines=[
         "thesis-lk",
         {"name": "dies", "base": "thesis-lk", "spec": {"flow": {"method": "die_once", "params": {"marker": str(marker)}}}},
     ])
@@ -80,7 +80,7 @@ def test_a_cell_that_always_kills_its_worker_is_recorded_as_failed(tmp_path, rel
 @pytest.mark.gl
 @pytest.mark.slow
 def test_a_gl_failure_fails_the_cells_of_that_scene_not_the_run(tmp_path, rel_cache):
-    s = suite(imports=["rel_plugin"], seeds=[1], pipelines=["dis"], scenes=[
+    s = suite(imports=["tests.reliability.rel_plugin"], seeds=[1], pipelines=["dis"], scenes=[
         {"preset": "tiny", "overrides": {"image.n_frames": 3}},
         {"preset": "tiny", "label": "broken-gl",
          "overrides": {"image.n_frames": 3, "image.width_px": GL_FAIL_WIDTH_PX, "image.height_px": 54}},

@@ -90,7 +90,7 @@ def test_dis_on_small_frames_is_refused_not_a_crash(shape):
     import subprocess
     import sys
 
-    from rel_support import ROOT
+    from tests.reliability.rel_support import ROOT
 
     code = (f"import numpy as np\nfrom algorithms.reference import dis\n"
             f"f0 = (np.random.default_rng(0).random({shape}) * 255).astype(np.uint8)\n"

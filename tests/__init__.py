@@ -1,0 +1,1 @@
+"""The aerobench test suite: one package per project package (names cannot clash across folders)."""

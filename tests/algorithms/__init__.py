@@ -1,0 +1,1 @@
+"""Tests of algorithms: known motion recovered, bad input refused, invariants."""

@@ -1,0 +1,1 @@
+"""Tests of the conventions every package shares: flow layout and signs, file formats."""

@@ -1,0 +1,1 @@
+"""Tests of harness: suites, runner, metrics, results, gate, CLI."""

@@ -1,0 +1,1 @@
+"""Reliability tests: bad inputs, determinism, faults (kill -9, lost workers), properties."""

@@ -1,0 +1,1 @@
+"""Tests of scenes: specs, world, motion, rendering, ground truth, sensor, sequence folders, cache."""
