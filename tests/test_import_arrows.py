@@ -3,23 +3,35 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
 PROJECT = ("algorithms", "scenes", "harness", "reports")
 
-# module prefix of the importer -> project module prefixes it may import
-ALLOWED = {
-    "algorithms": ("algorithms",),
-    "scenes": ("scenes", "algorithms.flow"),
-    "harness.cli": ("harness", "scenes", "algorithms", "reports"),
-    "harness": ("harness", "scenes", "algorithms"),
-    "reports": ("reports", "harness.results", "harness.run_folder", "harness.cell_artifacts", "harness.gate",
-                "harness.metrics",
-                "scenes.sequence", "scenes.formats", "algorithms.flow", "algorithms.jitter"),
-}
+
+def read_arrows(text: str) -> dict[str, tuple[str, ...]]:
+    """The table under "## Import arrows": importer prefix -> project module prefixes it may import.
+
+    A row is ``| `importer` | `a`, `b` (why), ... |``; "nothing" allows only the importer itself.
+    """
+    section = text.split("## Import arrows", 1)[1].split("\n## ", 1)[0]
+    arrows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 2 or not cells[0].startswith("`"):
+            continue
+        importer = re.findall(r"`([\w.]+)`", cells[0])[0]
+        allowed = [n for n in re.findall(r"`([\w.]+)`", cells[1]) if n.split(".")[0] in PROJECT]
+        arrows[importer] = tuple(dict.fromkeys([importer, *allowed]))
+    return arrows
+
+
+# module prefix of the importer -> project module prefixes it may import (docs/architecture.md)
+ALLOWED = read_arrows(ARCHITECTURE.read_text())
 
 
 def _rule(module: str) -> tuple[str, ...]:
@@ -63,9 +75,18 @@ def _allowed(name: str, rule: tuple[str, ...]) -> bool:
                for p in rule)
 
 
-def test_every_package_exists():
+def test_every_package_exists_and_has_a_row_in_the_table():
     for top in PROJECT:
         assert (ROOT / top / "__init__.py").is_file(), top
+        assert top in ALLOWED, f"docs/architecture.md: no import-arrow row for {top}"
+
+
+def test_the_table_reads_as_the_page_states_it():
+    assert ALLOWED["algorithms"] == ("algorithms",)
+    assert ALLOWED["scenes"] == ("scenes", "algorithms.flow")
+    assert set(ALLOWED["harness"]) == {"harness", "scenes", "algorithms"}
+    assert "reports" in ALLOWED["harness.cli"] and "reports" not in ALLOWED["harness"]
+    assert "harness.runner" not in ALLOWED["reports"] and "harness.results" in ALLOWED["reports"]
 
 
 @pytest.mark.parametrize("path,module", list(_modules()), ids=lambda x: str(x) if isinstance(x, str) else "")
