@@ -617,14 +617,14 @@ _THESIS_CLEANUP = {"threshold": None, "spatial": True, "temporal": True}
 # pixel (thesis 4.1; the defaults of algorithms.tracking.CORRELATION_DEFAULTS). On `thesis` (50 frames) it
 # takes thesis-lk's mean point error from 4.74 px (flow alone, open loop) to 0.17 px and thesis-hs's from
 # 3.03 px to 0.18 px.
-# Beyond-thesis point trackers re-centre on the region that moves like the point (search half-side, px):
-# larger than a vehicle on `nominal` (about 20 x 10 px), smaller than the gap between vehicles. On `nominal`
-# (60 frames) it takes pyramidal-lk's mean point error from 2.6 px (max 13) to 1.5 px (max 7.6).
-# Their filtered track is a constant-velocity Kalman filter of those positions in the ground frame (the
-# multi-target tracker's default noise): on nominal and noisy (60 frames) it changes the mean point error by
-# +0.02 and +0.03 px, since what is left there is a bias of the region's centroid (about 1 px), not noise.
-_POINT_RECENTRED = {"field": "local", "recentre_px": 12.0, "filter": "position", "sigma_accel_px": 0.5,
-                    "sigma_meas_px": 1.0}
+# Beyond-thesis point trackers: the same flow prediction and image correlation (see above; re-centring on
+# the region that moves like the point, tracking.point.recentre_px, was 1.5 px on the old world but 3.2 px on
+# the new one, above the open loop's 2.4), and their filtered track is a constant-velocity Kalman filter of
+# those positions in the ground frame (the multi-target tracker's default noise). pyramidal-lk, mean point
+# error raw / filtered (60 frames): nominal 3.21 / 3.25 px re-centred -> 0.38 / 0.35 px, nominal seed 2
+# 2.52 / 2.51 -> 0.52 / 0.53, noisy 3.69 / 3.71 -> 0.55 / 0.56.
+_POINT_BEYOND = {"field": "local", "recentre_px": None, "filter": "position", "sigma_accel_px": 0.5,
+                 "sigma_meas_px": 1.0, "correlation": {}}
 
 # name -> plain dict (what a YAML suite would hold); get_pipeline(name) validates it.
 PIPELINES: dict[str, dict] = {
@@ -653,7 +653,7 @@ PIPELINES: dict[str, dict] = {
         "jitter": {"model": "smooth"}, "compensation": "shift",
         "flow": {"method": "lucas_kanade", "params": {"window": 11, "levels": 4, "iterations": 3}},
         **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
+        "tracking": {"point": copy.deepcopy(_POINT_BEYOND), "multi": {}},
     },
     "pyramidal-hs": {
         "name": "pyramidal-hs",
@@ -662,7 +662,7 @@ PIPELINES: dict[str, dict] = {
         "jitter": {"model": "smooth"}, "compensation": "shift",
         "flow": {"method": "horn_schunck", "params": {"levels": 4}},
         **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
+        "tracking": {"point": copy.deepcopy(_POINT_BEYOND), "multi": {}},
     },
 }
 for _name, _desc in (("dis", "OpenCV DIS"), ("farneback", "OpenCV Farneback"), ("tvl1", "scikit-image TV-L1")):
@@ -673,7 +673,7 @@ for _name, _desc in (("dis", "OpenCV DIS"), ("farneback", "OpenCV Farneback"), (
         "jitter": {"model": "smooth"}, "compensation": "shift",
         "flow": {"method": _name, "params": {}},
         **_THESIS_CLEANUP,
-        "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
+        "tracking": {"point": copy.deepcopy(_POINT_BEYOND), "multi": {}},
     }
 
 

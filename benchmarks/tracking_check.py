@@ -43,6 +43,7 @@ VARIANTS = {
     "built-in": None,
     "open loop": {"recentre_px": None, "filter": "flow", "correlation": None},
     "flow + image correlation (thesis 4.1)": {"recentre_px": None, "filter": "flow", "correlation": {}},
+    "image correlation, position filter": {"recentre_px": None, "filter": "position", "correlation": {}},
     "re-centred, flow filter": {"recentre_px": 12.0, "filter": "flow", "correlation": None},
     "re-centred, position filter": {"recentre_px": 12.0, "filter": "position", "correlation": None},
 }
