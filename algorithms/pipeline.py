@@ -198,7 +198,8 @@ class Pipeline:
         temporal: true       # eq. 4.12
         detection: {min_magnitude_px: 0.5, min_area_px: 20}
         tracking: {point: true | {field: filtered | local, kalman: {x0, p0, q, r}, recentre_px: null | 12.0,
-                                  filter: flow | position, sigma_accel_px: 0.5, sigma_meas_px: 1.0},
+                                  filter: flow | position, sigma_accel_px: 0.5, sigma_meas_px: 1.0,
+                                  correlation: null | {template_px: 15, search_px: 3, min_ncc: 0.5, renew_ncc: 0.8}},
                    multi: null | {gate_px, birth_hits, death_misses, sigma_accel_px, sigma_meas_px, sigma_vel0_px}}
 
     Method parameters are checked against the function's keyword parameters.
@@ -211,7 +212,9 @@ class Pipeline:
     flow integration leaves open; null: the thesis's open loop); ``filter: flow`` is the
     thesis's scalar Kalman filter on the sampled flow (``kalman``), ``filter: position``
     a constant-velocity filter of the positions in the ground frame (``sigma_accel_px``,
-    ``sigma_meas_px``). ``jitter.iterations > 1`` re-measures the global shifts on
+    ``sigma_meas_px``). ``correlation`` places the point by NCC of its template around the
+    flow's prediction (thesis 4.1, :class:`~algorithms.tracking.PointTracker`; null: flow
+    alone). ``jitter.iterations > 1`` re-measures the global shifts on
     the corrected frames (one more pass over the frames per round).
     """
 
@@ -325,7 +328,7 @@ class Pipeline:
         if track_cfg["point"] and seeds:
             kal = point_cfg.get("kalman")
             points = [point_tracker(float(x), float(y), track_id=i, seed_vehicle_id=vid, kalman=kal,
-                                   recentre_px=point_cfg.get("recentre_px"),
+                                   recentre_px=point_cfg.get("recentre_px"), correlation=point_cfg.get("correlation"),
                                    position_filter={k: point_cfg[k] for k in ("sigma_accel_px", "sigma_meas_px")}
                                    if point_cfg.get("filter") == "position" else None)
                       for i, (vid, x, y) in enumerate(seeds)]
@@ -362,7 +365,7 @@ class Pipeline:
                 cleaned = spatial_filter(cleaned)
             ms["spatial"] = _ms(t0)
             return {"index": t, "flow_global": fg, "flow_total": total, "flow_local": w_local, "valid": valid,
-                    "cleaned": cleaned, "stage_ms": ms}
+                    "cleaned": cleaned, "stage_ms": ms, "gray": (g0, g1)}
 
         def finish(prev: dict | None, cur: dict, nxt: dict | None) -> PairEstimate:
             ms, t = cur["stage_ms"], cur["index"]
@@ -379,7 +382,8 @@ class Pipeline:
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:
-                p.step(shifts[t], filtered if point_field == "filtered" else cur["flow_local"], cur["valid"])
+                p.step(shifts[t], filtered if point_field == "filtered" else cur["flow_local"], cur["valid"],
+                       frames=cur["gray"])
             if multi is not None:
                 multi.step(t, dets, offset_px=cumulative[t])
             ms["tracking"] = _ms(t0)

@@ -282,6 +282,7 @@ class PointSpec(_Section):
     filter: StrictStr = "flow"
     sigma_accel_px: float = 0.5
     sigma_meas_px: float = 1.0
+    correlation: dict[str, Any] | None = None
 
     @field_validator("kalman", mode="before")
     @classmethod
@@ -313,6 +314,13 @@ class PointSpec(_Section):
             raise _fail(str(e)) from None
         if self.field not in ("filtered", "local"):
             raise _fail(f"expected filtered or local, got {self.field!r}", at="field")
+        if self.correlation is not None:
+            # the tracker fills CORRELATION_DEFAULTS and checks them: one home for its keys and their ranges
+            try:
+                self.correlation = PointTracker(0.0, 0.0, correlation=self.correlation).correlation
+            except ValueError as e:
+                at, _, msg = str(e).partition(": ")
+                raise _fail(msg, at=at) from None
         return self
 
 

@@ -9,6 +9,32 @@ and the scalar Kalman filter (eqs. 4.6-4.10) is run on the series of local flow
 measurements w per axis. Appendix B moves the column by the correlation alone
 (its targets moved vertically); here both axes use global + local flow.
 
+Thesis 4.1 also says "we track the same single pixel of an object all the
+time, which means we use the image correlation data to track the pixel", and
+3.1 names NCC the best of the feature-tracking methods it compared. With
+``correlation`` set, the flow step above is the prediction and the image
+correlation places the point: the template of the pixel (a square around it,
+taken where the tracking starts) is searched by NCC (eq. 3.1) in frame t+1
+within a few pixels of the prediction, to sub-pixel precision
+(:func:`ncc_refine`). The flow alone is open loop: single-level LK or HS on a
+vehicle of about 17x7 px whose window also covers ground sees 60-70 % of its
+motion, and the point integrates that shortfall into a straight-line drift
+(4.7 px mean on the `thesis` preset). The template is kept from the first
+frame (not taken again every frame, which would integrate the same
+shortfall, since a template that covers ground matches partly as ground) and
+is renewed only when its match falls below ``renew_ncc`` (turns, light), so
+the point does not drift between renewals. The Kalman filter's measurement
+Z(k) is then the local motion of the tracked pixel, p(t+1) - p(t) - s(t).
+
+What is ours, not the thesis's: Appendix B reads one pair of correlation
+values per frame (``icx``, ``icy``: the frame's correlation shift, as far as the
+listing shows) and rounds the position every frame, which freezes a point
+moving under 0.5 px/frame; it gives no template, search range, sub-pixel peak
+or renewal. Placing the pixel's own template by eq. 3.1 is our reading of
+"use the image correlation data to track the pixel"; the sizes are in
+``CORRELATION_DEFAULTS``. The Kalman filter is the thesis's (eqs. 4.6-4.10,
+P(1|1) = 1, Q = 1, R = 0.05) except X(1|1), see :class:`PointTracker`.
+
 Multi-target tracker (beyond the thesis): connected moving regions of the
 motion mask are detections; each track is a constant-velocity Kalman filter
 (:class:`~algorithms.kalman.ConstantVelocityKalman`); detections are assigned
@@ -29,12 +55,15 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.optimize import linear_sum_assignment
 
+from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["detect_moving_objects", "recentre_on_region", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
+__all__ = ["detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine", "CorrelationMatch",
+           "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
 TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
@@ -133,8 +162,178 @@ def recentre_on_region(flow: np.ndarray, x_px: float, y_px: float, *, radius_px:
     return float(xs.mean() + x0), float(ys.mean() + y0)
 
 
+# The thesis point tracker's image correlation (tracking.point.correlation), defaults:
+# template_px: side of the pixel's square template (odd), the thesis's 15 x 15 LK window, which holds a
+#   17 x 7 px vehicle's width and most of its length at 0.27 m/px;
+# search_px: half-side of the NCC search around the flow's prediction; the prediction is one frame's flow
+#   error away (under 1 px in the thesis domain), 3 px leaves room for a flow that missed a frame;
+# min_ncc: a weaker peak is no match (the point keeps the flow's prediction);
+# renew_ncc: a match weaker than this renews the template from the new frame (turns, shadows).
+CORRELATION_DEFAULTS = {"template_px": 15, "search_px": 3, "min_ncc": 0.5, "renew_ncc": 0.8}
+
+
+@dataclass(frozen=True)
+class CorrelationMatch:
+    """Result of :func:`ncc_refine`.
+
+    x_px, y_px : float
+        Where the template's centre lies in the searched image (sub-pixel); NaN when not valid.
+    ncc : float
+        Eq. 3.1 at the best integer offset, in [-1, 1]; NaN when undefined (flat template
+        or flat search area, or the search area outside the image).
+    valid : bool
+        A clear peak inside the search area with ``ncc >= min_ncc``.
+    reason : str
+        Why not valid ("" when valid): "flat template", "outside the image",
+        "flat search area", "peak on the search border", "peak below min_ncc".
+    """
+
+    x_px: float
+    y_px: float
+    ncc: float
+    valid: bool
+    reason: str = ""
+
+
+def _check_gray(name: str, image) -> np.ndarray:
+    g = np.asarray(image)
+    if g.ndim != 2 or not np.issubdtype(g.dtype, np.number):
+        raise ValueError(f"{name}: expected an (H, W) gray image, got {tuple(g.shape)} {g.dtype}")
+    return g
+
+
+def point_template(image: np.ndarray, x_px: float, y_px: float, *, half_px: int) -> np.ndarray | None:
+    """The square patch of ``image`` centred on the sub-pixel point, bilinearly interpolated.
+
+    Parameters
+    ----------
+    image : ndarray, (H, W) float or integer
+        A gray frame.
+    x_px, y_px : float
+        The patch centre (pixel centres at integer coordinates, x right, y down).
+    half_px : int
+        Half-side: the patch is ``(2 half_px + 1)`` px square.
+
+    Returns
+    -------
+    ndarray, (2 half_px + 1, 2 half_px + 1) float32, or None
+        ``patch[i, j] = image(y_px - half_px + i, x_px - half_px + j)``; None when
+        the patch (with the interpolation's neighbours) does not lie wholly inside
+        the image (never a padded patch).
+    """
+    g = _check_gray("image", image)
+    if isinstance(half_px, bool) or not isinstance(half_px, (int, np.integer)) or half_px < 1:
+        raise ValueError(f"half_px: expected an integer >= 1, got {half_px!r}")
+    h, w = g.shape
+    if not (math.isfinite(x_px) and math.isfinite(y_px)):
+        return None
+    if not (half_px <= x_px and math.floor(x_px) + half_px + 1 <= w - 1
+            and half_px <= y_px and math.floor(y_px) + half_px + 1 <= h - 1):
+        return None
+    side = 2 * int(half_px) + 1
+    return cv2.getRectSubPix(g.astype(np.float32, copy=False), (side, side), (float(x_px), float(y_px)))
+
+
+def ncc_refine(template: np.ndarray, image: np.ndarray, x_px: float, y_px: float, *, search_px: int = 3,
+               min_ncc: float = 0.5) -> CorrelationMatch:
+    """Place a point's template in ``image`` near a predicted position by NCC (thesis eq. 3.1), sub-pixel.
+
+    The candidate centres are ``(x_px + dx, y_px + dy)`` for integer ``dx, dy`` in
+    ``[-search_px, search_px]``; at each, eq. 3.1 compares the template with the
+    image patch there (bilinear for a sub-pixel prediction),
+
+        r = sum (T - T_bar)(I - I_bar) / sqrt(sum (T - T_bar)^2 sum (I - I_bar)^2)      (eq. 3.1)
+
+    and the best offset is refined by a parabola through its neighbours,
+    separately in x and y (as :func:`~algorithms.global_motion.ncc_global_motion`
+    does with ``subpixel=True``).
+
+    Parameters
+    ----------
+    template : ndarray, (2h+1, 2h+1) float
+        The point's patch (:func:`point_template`), centred on the point.
+    image : ndarray, (H, W)
+        The frame to search.
+    x_px, y_px : float
+        The predicted position of the template's centre in ``image``.
+    search_px : int
+        Half-side of the search, px (integer offsets).
+    min_ncc : float
+        Smallest peak that counts as a match.
+
+    Returns
+    -------
+    CorrelationMatch
+        Not valid, with NaN position, for a flat template, a search area not
+        wholly inside the image, a flat search area, a peak on the border of the
+        search (the best match may lie beyond it) or a peak below ``min_ncc``.
+    """
+    t = np.asarray(template, dtype=np.float64)
+    if t.ndim != 2 or t.shape[0] != t.shape[1] or t.shape[0] % 2 != 1 or t.shape[0] < 3:
+        raise ValueError(f"template: expected an odd square (2h+1, 2h+1) array, h >= 1, got {tuple(t.shape)}")
+    if isinstance(search_px, bool) or not isinstance(search_px, (int, np.integer)) or search_px < 1:
+        raise ValueError(f"search_px: expected an integer >= 1, got {search_px!r}")
+    if not (math.isfinite(min_ncc) and -1.0 <= min_ncc <= 1.0):
+        raise ValueError(f"min_ncc: expected a number in [-1, 1], got {min_ncc!r}")
+    nan = math.nan
+    t = t - t.mean()
+    t_energy = float((t * t).sum())
+    # a flat template correlates with nothing (eq. 3.1's denominator is 0)
+    if not t_energy > 1e-9 * t.size:
+        return CorrelationMatch(nan, nan, nan, False, "flat template")
+    half, r = t.shape[0] // 2, int(search_px)
+
+    area = point_template(image, x_px, y_px, half_px=half + r)
+    if area is None:
+        return CorrelationMatch(nan, nan, nan, False, "outside the image")
+    # c[j, i]: eq. 3.1 with the image patch centred at (x_px + i - r, y_px + j - r); NaN where undefined
+    win = sliding_window_view(area.astype(np.float64), t.shape)   # (2r+1, 2r+1, 2h+1, 2h+1)
+    wz = win - win.mean(axis=(2, 3), keepdims=True)
+    num = np.einsum("ijkl,kl->ij", wz, t)
+    energy = np.einsum("ijkl,ijkl->ij", wz, wz)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.where(energy > 1e-9 * t.size, num / np.sqrt(energy * t_energy), np.nan)
+    if not np.isfinite(c).any():
+        return CorrelationMatch(nan, nan, nan, False, "flat search area")
+    iy, ix = np.unravel_index(int(np.nanargmax(c)), c.shape)
+    peak = float(c[iy, ix])
+    if ix in (0, 2 * r) or iy in (0, 2 * r):
+        return CorrelationMatch(nan, nan, peak, False, "peak on the search border")
+    if peak < min_ncc:
+        return CorrelationMatch(nan, nan, peak, False, "peak below min_ncc")
+    # the vertex of a parabola through the peak and its neighbours, per axis; an undefined neighbour (flat
+    # patch) gives no curvature, so the integer peak stands on that axis. A 3-point fit is biased by the
+    # NCC peak's asymmetry (up to about 0.15 px on the tests' textures), without accumulating: the
+    # template stays the same between renewals.
+    cz = np.nan_to_num(c, nan=-1.0)
+    x = x_px + ix - r + _parabola_offset(cz[iy, ix - 1], peak, cz[iy, ix + 1])
+    y = y_px + iy - r + _parabola_offset(cz[iy - 1, ix], peak, cz[iy + 1, ix])
+    return CorrelationMatch(float(x), float(y), peak, True)
+
+
+def _check_correlation(given: Mapping) -> dict:
+    """``CORRELATION_DEFAULTS`` overlaid by ``given``, checked."""
+    unknown = set(given) - set(CORRELATION_DEFAULTS)
+    if unknown:
+        raise ValueError(f"correlation: unknown key(s) {sorted(unknown)}; valid: {', '.join(CORRELATION_DEFAULTS)}")
+    c = {**CORRELATION_DEFAULTS, **given}
+    for k in ("template_px", "search_px"):
+        v = c[k]
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (3 if k == "template_px" else 1):
+            raise ValueError(f"correlation.{k}: expected an integer >= {3 if k == 'template_px' else 1}, got {v!r}")
+    if c["template_px"] % 2 != 1:
+        raise ValueError(f"correlation.template_px: expected an odd side (the point is its centre), "
+                         f"got {c['template_px']}")
+    for k in ("min_ncc", "renew_ncc"):
+        v = c[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and -1 <= v <= 1):
+            raise ValueError(f"correlation.{k}: expected a number in [-1, 1], got {v!r}")
+    return {"template_px": int(c["template_px"]), "search_px": int(c["search_px"]),
+            "min_ncc": float(c["min_ncc"]), "renew_ncc": float(c["renew_ncc"])}
+
+
 class PointTracker:
-    """The thesis point tracker: one pixel followed by global shift + local flow, Kalman-filtered flow.
+    """The thesis point tracker: one pixel followed by global shift + local flow (+ image correlation), Kalman-filtered.
 
     Parameters
     ----------
@@ -153,6 +352,11 @@ class PointTracker:
         nearly the raw one.
     recentre_px : float, optional
         Re-centre on the region that moves like the point (see :meth:`step`).
+    correlation : mapping, optional
+        Thesis 4.1's image correlation (see :meth:`step`): keys of
+        ``CORRELATION_DEFAULTS`` (``template_px`` odd side of the template,
+        ``search_px``, ``min_ncc``, ``renew_ncc``), missing ones take those
+        defaults. None: the flow alone moves the point (open loop).
     position_filter : mapping, optional
         ``{"sigma_accel_px": ..., "sigma_meas_px": ...}``: instead of the thesis's
         filter on the flow, filter the raw positions with a constant-velocity
@@ -167,7 +371,7 @@ class PointTracker:
 
     def __init__(self, x_px: float, y_px: float, *, track_id: int = 0, seed_vehicle_id=None,
                  kalman: Mapping | None = None, recentre_px: float | None = None,
-                 position_filter: Mapping | None = None):
+                 position_filter: Mapping | None = None, correlation: Mapping | None = None):
         if position_filter is not None:
             unknown = set(position_filter) - {"sigma_accel_px", "sigma_meas_px"}
             if unknown:
@@ -180,15 +384,29 @@ class PointTracker:
         self.track_id, self.seed_vehicle_id = int(track_id), seed_vehicle_id
         self.kalman = dict(THESIS_KALMAN, x0=None) if kalman is None else dict(kalman)
         self.recentre_px = None if recentre_px is None else float(recentre_px)
+        self.correlation = None if correlation is None else _check_correlation(correlation)
         self._pos = [(float(x_px), float(y_px))]
         self._shift: list[tuple[float, float]] = []
         self._w: list[tuple[float, float]] = []
+        self._template: np.ndarray | None = None
+        #: per step, the correlation's match (None without ``correlation``)
+        self.matches: list[CorrelationMatch | None] = []
 
-    def step(self, global_shift_px, flow_local: np.ndarray, valid: np.ndarray | None = None) -> None:
+    def step(self, global_shift_px, flow_local: np.ndarray, valid: np.ndarray | None = None, *,
+             frames: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Advance by pair t -> t+1: sample the local flow at the current position.
 
         Outside the image, or where ``valid`` is False, the measurement is NaN
         (the Kalman filter only predicts) and the point moves by the global shift.
+
+        With ``correlation`` set, ``frames`` are the gray frames t and t+1
+        (uncompensated, the frames the point's coordinates live in). The flow
+        step is the prediction; :func:`ncc_refine` of the point's template
+        around it in frame t+1 gives the new position when it finds a match
+        (``self.matches[t]``), else the prediction stands. The template is taken
+        from frame t at the point when there is none (the first step, or the
+        last one was flat), and from frame t+1 at the new position when the
+        match's NCC is below ``renew_ncc``.
 
         With ``recentre_px`` set, the point is first moved to the centroid of the
         region around it that moves like it (:func:`recentre_on_region` on the
@@ -199,6 +417,14 @@ class PointTracker:
         point slide off its vehicle in a straight line, and once on the ground it
         follows the ground for good. The vehicle's region closes the loop.
         """
+        corr = self.correlation
+        if corr is not None:
+            if frames is None or len(frames) != 2:
+                raise ValueError("frames: the correlation needs the gray frames (t, t+1), got none")
+            f0, f1 = _check_gray("frames[0]", frames[0]), _check_gray("frames[1]", frames[1])
+            if f0.shape != f1.shape or f0.shape != flow_local.shape[:2]:
+                raise ValueError(f"frames: expected two frames of the flow's shape {flow_local.shape[:2]}, "
+                                 f"got {f0.shape} and {f1.shape}")
         x, y = self._pos[-1]
         if self.recentre_px is not None:
             for _ in range(2):
@@ -209,17 +435,37 @@ class PointTracker:
         inside = 0 <= c < w and 0 <= r < h and (valid is None or bool(valid[r, c]))
         wu, wv = (float(flow_local[r, c, 0]), float(flow_local[r, c, 1])) if inside else (math.nan, math.nan)
         sx, sy = float(global_shift_px[0]), float(global_shift_px[1])
+        # p(t+1) = p(t) + s(t) + w(t)(p(t))  (Appendix B: row = row + ofy + icy)
+        x1, y1 = x + sx + (wu if inside else 0.0), y + sy + (wv if inside else 0.0)
+        if corr is not None:
+            half = corr["template_px"] // 2
+            if self._template is None:
+                self._template = point_template(f0, x, y, half_px=half)
+            match = (ncc_refine(self._template, f1, x1, y1, search_px=corr["search_px"], min_ncc=corr["min_ncc"])
+                     if self._template is not None else
+                     CorrelationMatch(math.nan, math.nan, math.nan, False, "outside the image"))
+            self.matches.append(match)
+            if match.valid:
+                x1, y1 = match.x_px, match.y_px
+                # Z(k): the local motion of the tracked pixel, which the correlation measured
+                wu, wv = x1 - x - sx, y1 - y - sy
+                if match.ncc < corr["renew_ncc"]:
+                    self._template = point_template(f1, x1, y1, half_px=half)
+            elif match.reason == "flat template":
+                self._template = None
+        else:
+            self.matches.append(None)
         self._shift.append((sx, sy))
         self._w.append((wu, wv))
-        # p(t+1) = p(t) + s(t) + w(t)(p(t))  (Appendix B: row = row + ofy + icy)
-        self._pos.append((x + sx + (wu if inside else 0.0), y + sy + (wv if inside else 0.0)))
+        self._pos.append((x1, y1))
 
     def rows(self) -> list[dict]:
         """One row per frame 0..len(steps): raw, filtered and one-step-predicted positions.
 
         The filtered path makes the same moves as the raw one (global shift, and
-        re-centring jumps) with the Kalman-filtered flow X(k|k) in place of the
-        measured flow Z(k): ``filt(k) = raw(k) + sum_{j<k} (X(j|j) - Z(j))``.
+        re-centring jumps) with the Kalman-filtered local motion X(k|k) in place of
+        the measured one Z(k) (the flow at the point, or with ``correlation`` the
+        motion the correlation found): ``filt(k) = raw(k) + sum_{j<k} (X(j|j) - Z(j))``.
         """
         n = len(self._w)
         rows = []

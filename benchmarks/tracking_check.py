@@ -7,12 +7,14 @@ run the same trackers on a few frames). Run from the project root:
 
 Renders (or reuses from ``$AEROBENCH_CACHE``, default ``.aerobench-cache``) the
 scene, runs the pipeline with its built-in point tracker and with variants of
-``tracking.point`` (open loop: no re-centring, the thesis's flow filter;
-re-centred with either filter), seeded on the vehicles visible in frame 0 as the runner seeds
-them, and prints per vehicle the mean and largest distance of the raw and the
+``tracking.point`` (open loop: flow alone, the thesis's flow filter; flow
+predicted and placed by image correlation, thesis 4.1; re-centred with either
+filter), seeded on the vehicles visible in frame 0 as the runner seeds them,
+and prints per vehicle the mean and largest distance of the raw and the
 filtered point to the vehicle's true centre over the frames where it is
 visible. Examples (numbers of this commit's measurement are in its message):
 
+    python benchmarks/tracking_check.py --scene thesis --pipeline thesis-lk
     python benchmarks/tracking_check.py --scene nominal --pipeline pyramidal-lk
     python benchmarks/tracking_check.py --scene tiny --pipeline thesis-lk --set seed=1 --set image.fps=30.0
 """
@@ -39,9 +41,11 @@ from scenes.cache import cached_sequence  # noqa: E402
 
 VARIANTS = {
     "built-in": None,
-    "open loop": {"recentre_px": None, "filter": "flow"},
-    "re-centred, flow filter": {"recentre_px": 12.0, "filter": "flow"},
-    "re-centred, position filter": {"recentre_px": 12.0, "filter": "position"},
+    "open loop": {"recentre_px": None, "filter": "flow", "correlation": None},
+    "flow + image correlation (thesis 4.1)": {"recentre_px": None, "filter": "flow", "correlation": {}},
+    "image correlation, position filter": {"recentre_px": None, "filter": "position", "correlation": {}},
+    "re-centred, flow filter": {"recentre_px": 12.0, "filter": "flow", "correlation": None},
+    "re-centred, position filter": {"recentre_px": 12.0, "filter": "position", "correlation": None},
 }
 
 

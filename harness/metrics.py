@@ -53,6 +53,7 @@ shift_rows, jitter_rows, detrend                       global motion and stabili
 stabilisation_scores, stabilisation_rows               cropping ratio, distortion, stability (Liu 2013)
 position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID switches
 MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
+HOTACounts, hota_counts                                HOTA (Luiten 2021) per alpha, from summed counts
 score_sequence                                         SequenceEstimate + camera.csv + tracks.csv -> rows
 aggregate                                              rows DataFrame -> aggregates from totals
 """
@@ -80,6 +81,7 @@ __all__ = [
     "epe_histogram", "encode_hist", "decode_hist", "hist_quantile",
     "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair",
     "shift_rows", "detrend", "jitter_rows", "stabilisation_scores", "stabilisation_rows", "position_error_px", "associate_tracks", "track_rows", "MOTCounts", "mot_counts", "mot_rows",
+    "HOTA_ALPHAS", "HOTACounts", "hota_counts",
     "score_sequence",
     "aggregate", "reduce_totals",
 ]
@@ -931,6 +933,147 @@ def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: f
             _row("mot_false_positives", c.false_positives, c.false_positives, c.predictions, **kw),
         ]
     return rows
+
+
+# HOTA's localisation thresholds alpha = 0.05, 0.10, ..., 0.95 (Luiten et al. 2021, sec. 5)
+HOTA_ALPHAS = np.round(np.arange(1, 20) * 0.05, 2)
+
+
+@dataclass(frozen=True)
+class HOTACounts:
+    """HOTA totals of one tracker on one sequence, per alpha (Luiten et al. 2021); ``+`` pools sequences.
+
+    Arrays of shape (19,), one entry per alpha in :data:`HOTA_ALPHAS`: ``tp``, ``fn``,
+    ``fp`` (detection true positives, misses, false positives at that alpha),
+    ``ass_sum`` (sum over the true positives c of the association score
+    A(c) = |TPA(c)| / (|TPA(c)| + |FNA(c)| + |FPA(c)|), eq. 9), ``loc_sum`` (sum
+    of their similarities). Every score is a ratio of such sums, so pooling
+    sequences is adding their counts (TrackEval sums TP, FN, FP and weights AssA
+    and LocA by TP, which is the same):
+
+        DetA = TP / (TP + FN + FP)                              (eq. 4)
+        AssA = ass_sum / TP                                     (eq. 10)
+        HOTA_alpha = sqrt(DetA AssA) = sqrt(ass_sum / (TP + FN + FP))
+        HOTA = mean over alpha of HOTA_alpha                    (eq. 12)
+
+    HOTA_alpha is one sum / count pair (reduce ``rms``); HOTA, a mean of 19
+    square roots, is not: it needs the 19 pairs.
+    """
+
+    tp: np.ndarray
+    fn: np.ndarray
+    fp: np.ndarray
+    ass_sum: np.ndarray
+    loc_sum: np.ndarray
+
+    def __add__(self, other: "HOTACounts") -> "HOTACounts":
+        return HOTACounts(*(getattr(self, k) + getattr(other, k) for k in ("tp", "fn", "fp", "ass_sum", "loc_sum")))
+
+    def _ratio(self, num: np.ndarray, den: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(den > 0, num / np.where(den > 0, den, 1), np.nan)
+
+    @property
+    def deta(self) -> np.ndarray:
+        """DetA per alpha; NaN where there is nothing to detect or predict."""
+        return self._ratio(self.tp, self.tp + self.fn + self.fp)
+
+    @property
+    def assa(self) -> np.ndarray:
+        """AssA per alpha; NaN without true positives."""
+        return self._ratio(self.ass_sum, self.tp)
+
+    @property
+    def loca(self) -> np.ndarray:
+        """LocA per alpha: mean similarity of the true positives; NaN without them."""
+        return self._ratio(self.loc_sum, self.tp)
+
+    @property
+    def hota_alpha(self) -> np.ndarray:
+        """HOTA per alpha, sqrt(DetA AssA) (0 where there are objects but no true positive)."""
+        return np.sqrt(self._ratio(self.ass_sum, self.tp + self.fn + self.fp))
+
+    @property
+    def hota(self) -> float:
+        """HOTA: the mean of HOTA_alpha over the 19 alphas (eq. 12)."""
+        return float(np.mean(self.hota_alpha))
+
+
+def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> HOTACounts:
+    """HOTA totals (Luiten et al. 2021) of one tracker's points against the visible vehicles.
+
+    Similarity of a vehicle and a track in a frame: ``S = max(0, 1 - d / gate_px)``
+    with d the distance of the true centre ``x_px, y_px`` and the estimate
+    ``x_filt_px, y_filt_px`` (HOTA is defined for any similarity in [0, 1]; boxes
+    use IoU, points here a distance ramp that reaches 0 at the CLEAR-MOT gate).
+    Matching as TrackEval does it: per frame one Hungarian assignment
+    maximising ``global_alignment(vehicle, track) * S``, where the global
+    alignment score is the pair's soft overlap over the sequence,
+    ``sum_t S~ / (n_vehicle + n_track - sum_t S~)`` with ``S~ = S / (row sum +
+    column sum - S)`` of the frame's similarity matrix; at each alpha a matched
+    pair with ``S >= alpha`` is a true positive. A(c) of a true positive of the
+    pair (vehicle, track) is ``n_matched / (n_vehicle + n_track - n_matched)``,
+    the counts over the sequence at that alpha.
+
+    Two differences from TrackEval's ``hota.py``, both at edges: the alphas are
+    exact (its ``np.arange(0.05, 0.99, 0.05)`` holds 0.30000000000000004 and the
+    like, so a similarity equal to such an alpha fails there), and a sequence
+    with neither vehicles nor tracks gives NaN, not 0 (as MOTA does here).
+
+    Parameters and row conventions as :func:`mot_counts`. Not yet a results-table
+    row: HOTA_alpha is one sum / count pair (``ass_sum``, ``tp + fn + fp``, reduce
+    ``rms``), but HOTA itself needs all 19 after pooling.
+    """
+    if not gate_px > 0:
+        raise ValueError(f"gate_px: expected > 0, got {gate_px}")
+    vis = truth[truth["visible"].astype(bool)]
+    est = est[np.isfinite(est["x_filt_px"].to_numpy(np.float64)) & np.isfinite(est["y_filt_px"].to_numpy(np.float64))]
+    vids = np.unique(vis["vehicle_id"].to_numpy(np.int64))
+    tids = np.unique(est["track_id"].to_numpy(np.int64))
+    na = len(HOTA_ALPHAS)
+    tp, fn, fp = np.zeros(na), np.zeros(na), np.zeros(na)
+    loc = np.zeros(na)
+    vis_by_f = {f: g for f, g in vis.groupby("frame")}
+    est_by_f = {f: g for f, g in est.groupby("frame")}
+    frames = []
+    for f in sorted(set(vis_by_f) | set(est_by_f)):
+        g, e = vis_by_f.get(f), est_by_f.get(f)
+        a = np.searchsorted(vids, g["vehicle_id"].to_numpy(np.int64)) if g is not None else np.zeros(0, np.int64)
+        b = np.searchsorted(tids, e["track_id"].to_numpy(np.int64)) if e is not None else np.zeros(0, np.int64)
+        P = g[["x_px", "y_px"]].to_numpy(np.float64) if g is not None else np.zeros((0, 2))
+        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64) if e is not None else np.zeros((0, 2))
+        D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
+        frames.append((a, b, np.maximum(0.0, 1.0 - D / gate_px)))
+    # pass 1: global alignment score of every (vehicle, track) pair
+    n_v, n_t = np.zeros(len(vids)), np.zeros(len(tids))
+    soft = np.zeros((len(vids), len(tids)))
+    for a, b, S in frames:
+        n_v[a] += 1
+        n_t[b] += 1
+        den = S.sum(axis=0)[None, :] + S.sum(axis=1)[:, None] - S
+        soft[np.ix_(a, b)] += np.where(den > 0, S / np.where(den > 0, den, 1), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        align = soft / (n_v[:, None] + n_t[None, :] - soft)
+    # pass 2: per frame one assignment, thresholded at each alpha
+    matched = np.zeros((na, len(vids), len(tids)))
+    for a, b, S in frames:
+        if len(a) == 0 or len(b) == 0:
+            fn += len(a)
+            fp += len(b)
+            continue
+        ra, rb = linear_sum_assignment(-(align[np.ix_(a, b)] * S))
+        s = S[ra, rb]
+        for k, alpha in enumerate(HOTA_ALPHAS):
+            ok = s >= alpha - 1e-10
+            tp[k] += ok.sum()
+            fn[k] += len(a) - ok.sum()
+            fp[k] += len(b) - ok.sum()
+            loc[k] += s[ok].sum()
+            np.add.at(matched[k], (a[ra[ok]], b[rb[ok]]), 1)
+    # sum over true positives of A(c) = sum over pairs of n_matched * n_matched / (n_v + n_t - n_matched)
+    union = n_v[None, :, None] + n_t[None, None, :] - matched
+    ass = (matched * np.where(union > 0, matched / np.where(union > 0, union, 1), 0.0)).sum(axis=(1, 2))
+    return HOTACounts(tp=tp, fn=fn, fp=fp, ass_sum=ass, loc_sum=loc)
 
 
 def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:

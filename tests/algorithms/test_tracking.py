@@ -146,3 +146,108 @@ def test_position_filter_smooths_noisy_recentred_positions_in_the_ground_frame()
     assert filt_err.mean() < 0.7 * raw_err.mean()
     with pytest.raises(ValueError, match="position_filter: unknown key"):
         PointTracker(0.0, 0.0, position_filter={"q": 1.0})
+
+
+def _blobs(h: int, w: int, dx: float = 0.0, dy: float = 0.0, seed: int = 3) -> np.ndarray:
+    """A smooth texture of Gaussian blobs, moved exactly by (dx, dy) px: I1(x + d) = I0(x)."""
+    rng = np.random.default_rng(seed)
+    cx, cy = rng.uniform(0, w, 120), rng.uniform(0, h, 120)
+    amp, sig = rng.uniform(40, 120, 120), rng.uniform(1.5, 3.5, 120)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    img = np.zeros((h, w))
+    for a, s, u, v in zip(amp, sig, cx + dx, cy + dy):
+        img += a * np.exp(-((x - u) ** 2 + (y - v) ** 2) / (2 * s * s))
+    return img.astype(np.float32)
+
+
+@pytest.mark.parametrize("dx, dy, pred", [
+    (2.0, -1.0, (0.0, 0.0)),      # integer shift, the prediction a whole shift off
+    (2.0, -1.0, (2.3, -0.6)),     # integer shift from a sub-pixel prediction
+    (0.35, -0.6, (0.0, 0.0)),     # sub-pixel shift (the thesis's vehicles: 0.35-1 px/frame)
+    (-1.7, 0.45, (-1.0, 0.0)),
+])
+def test_ncc_refine_recovers_a_known_shift_of_the_template(dx, dy, pred):
+    from algorithms.tracking import ncc_refine, point_template
+
+    f0, f1 = _blobs(60, 80), _blobs(60, 80, dx, dy)
+    x0, y0 = 40.0, 30.0
+    t = point_template(f0, x0, y0, half_px=7)
+    assert t.shape == (15, 15) and t[7, 7] == pytest.approx(f0[30, 40], rel=1e-6)
+    m = ncc_refine(t, f1, x0 + pred[0], y0 + pred[1], search_px=3)
+    assert m.valid and m.reason == "" and m.ncc > 0.95   # bilinear resampling at a sub-pixel prediction: < 1
+    # the 3-point parabola's bias from the NCC peak's asymmetry is up to about 0.15 px on this texture;
+    # a sign or axis mix-up or a wrong integer peak would be off by 0.7 px or more
+    assert abs(m.x_px - (x0 + dx)) < 0.2 and abs(m.y_px - (y0 + dy)) < 0.2
+
+
+def test_ncc_refine_degenerate_cases_are_invalid_not_zeros():
+    from algorithms.tracking import ncc_refine, point_template
+
+    f0 = _blobs(60, 80)
+    flat = np.full((60, 80), 90.0, np.float32)
+    t = point_template(f0, 40.0, 30.0, half_px=7)
+    cases = {
+        "flat template": ncc_refine(point_template(flat, 40.0, 30.0, half_px=7), f0, 40.0, 30.0),
+        "outside the image": ncc_refine(t, f0, 76.0, 30.0),          # the search area crosses the right edge
+        "flat search area": ncc_refine(t, flat, 40.0, 30.0),
+        "peak on the search border": ncc_refine(t, _blobs(60, 80, 6.0, 0.0), 40.0, 30.0, search_px=3),
+        "peak below min_ncc": ncc_refine(t, f0 + np.random.default_rng(0).normal(0, 40, f0.shape), 40.0, 30.0,
+                                         min_ncc=0.9),
+    }
+    for reason, m in cases.items():
+        assert not m.valid and m.reason == reason, (reason, m)
+        assert np.isnan(m.x_px) and np.isnan(m.y_px)
+    assert point_template(f0, 3.0, 30.0, half_px=7) is None                   # does not fit: no padded patch
+    assert point_template(f0, float("nan"), 30.0, half_px=7) is None
+    with pytest.raises(ValueError, match=r"template: expected an odd square"):
+        ncc_refine(np.ones((4, 4)), f0, 40.0, 30.0)
+    with pytest.raises(ValueError, match=r"image: expected an \(H, W\) gray image"):
+        point_template(np.zeros((5, 5, 3)), 2.0, 2.0, half_px=1)
+
+
+def _moving_car(h: int, w: int, x: float, y: float) -> np.ndarray:
+    """Ground texture with a 17 x 7 px car (bright body, dark windows) centred at (x, y), exact sub-pixel."""
+    img = _blobs(h, w, seed=11) * 0.3 + 60.0
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    # a smooth-edged box (logistic edges), so a sub-pixel move is a true resampling of the car
+    box = lambda hx, hy, ox=0.0: (1 / (1 + np.exp(-4 * (hx - np.abs(xx - x - ox)))) *  # noqa: E731
+                                  1 / (1 + np.exp(-4 * (hy - np.abs(yy - y)))))
+    return (img + 150 * box(8.5, 3.5) - 110 * box(1.5, 2.5, -3.0) - 110 * box(1.0, 2.5, 4.0)).astype(np.float32)
+
+
+def test_thesis_tracker_with_image_correlation_holds_a_car_that_the_flow_underestimates():
+    # 0.6 px/frame to the right, 0.2 px/frame down; the flow sees 60 % of it, as single-level LK does on
+    # a thesis vehicle, so the flow alone drifts by 0.25 px a frame; the correlation places the pixel
+    h, w, n = 60, 120, 30
+    truth = np.array([[30.0 + 0.6 * t, 28.0 + 0.2 * t] for t in range(n)])
+    frames = [_moving_car(h, w, *p) for p in truth]
+    flow_only = PointTracker(*truth[0], kalman=THESIS_KALMAN)
+    corr = PointTracker(*truth[0], kalman=THESIS_KALMAN, correlation={})
+    for t in range(n - 1):
+        flow = np.zeros((h, w, 2), np.float32)
+        flow[..., 0], flow[..., 1] = 0.36, 0.12
+        flow_only.step((0.0, 0.0), flow)
+        corr.step((0.0, 0.0), flow, frames=(frames[t], frames[t + 1]))
+    err = lambda trk: np.hypot(*(np.array([[r["x_px"], r["y_px"]] for r in trk.rows()]) - truth).T)  # noqa: E731
+    assert err(flow_only)[-1] > 5.0
+    assert err(corr).max() < 0.25
+    assert all(m.valid for m in corr.matches)
+    # the thesis filter's measurement is the tracked pixel's motion: X(k|k) -> 0.6 px/frame, not the flow's 0.36
+    rows = corr.rows()
+    assert rows[-1]["x_filt_px"] - rows[-2]["x_filt_px"] == pytest.approx(0.6, abs=0.1)
+    with pytest.raises(ValueError, match=r"frames: the correlation needs the gray frames"):
+        PointTracker(1.0, 1.0, correlation={}).step((0.0, 0.0), np.zeros((4, 4, 2), np.float32))
+    with pytest.raises(ValueError, match=r"correlation.template_px: expected an odd side"):
+        PointTracker(1.0, 1.0, correlation={"template_px": 14})
+
+
+def test_pipeline_validates_the_point_correlation_key():
+    from algorithms.pipeline import PIPELINES, Pipeline, PipelineError
+
+    d = {**PIPELINES["thesis-lk"], "tracking": {"point": {"correlation": {"search_px": 2}}}}
+    assert Pipeline.from_dict(d).config["tracking"]["point"]["correlation"] == {
+        "template_px": 15, "search_px": 2, "min_ncc": 0.5, "renew_ncc": 0.8}
+    with pytest.raises(PipelineError, match=r"tracking\.point\.correlation: unknown key\(s\) \['size'\]"):
+        Pipeline.from_dict({**d, "tracking": {"point": {"correlation": {"size": 3}}}})
+    with pytest.raises(PipelineError, match=r"tracking\.point\.correlation\.min_ncc: expected a number in \[-1, 1\]"):
+        Pipeline.from_dict({**d, "tracking": {"point": {"correlation": {"min_ncc": 2}}}})
