@@ -16,7 +16,8 @@ scikit-image or the pipeline:
 * jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``spatial_filter``,
   ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
   ``ConstantVelocityKalman``, ``kalman_cv_filter``; tracking: ``detect_moving_objects``,
-  ``PointTracker``, ``MultiTargetTracker``
+  ``PointTracker``, ``MultiTargetTracker``, the point's image correlation ``ncc_refine``,
+  ``point_template``, ``CorrelationMatch``, ``CORRELATION_DEFAULTS``
 * the pipeline: ``Pipeline``, ``PIPELINES``, ``get_pipeline``, ``PairEstimate``, ``SequenceEstimate``;
   its description: ``PipelineSpec``, ``resolve_pipeline`` (``algorithms.pipeline_spec``; the built-ins are
   ``algorithms/pipelines/*.yaml``)
@@ -42,7 +43,8 @@ for _module, _names in {
     "algorithms.filters": ("threshold_flow", "spatial_filter", "temporal_filter"),
     "algorithms.kalman": ("THESIS_KALMAN", "scalar_kalman", "ConstantVelocityKalman", "CVFilterResult",
                           "kalman_cv_filter"),
-    "algorithms.tracking": ("TRACK_COLUMNS", "detect_moving_objects", "PointTracker", "MultiTargetTracker"),
+    "algorithms.tracking": ("TRACK_COLUMNS", "detect_moving_objects", "PointTracker", "MultiTargetTracker",
+                            "ncc_refine", "point_template", "CorrelationMatch", "CORRELATION_DEFAULTS"),
     "algorithms.pipeline": ("Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
                             "get_pipeline", "pipeline_hash"),
     "algorithms.pipeline_spec": ("PipelineSpec", "resolve_pipeline"),
