@@ -43,6 +43,7 @@ import pandas as pd
 import algorithms.horn_schunck_flow  # noqa: F401  (fills FLOW_METHODS)
 import algorithms.lucas_kanade_flow  # noqa: F401
 import algorithms.reference  # noqa: F401
+import algorithms.tv_l1_flow  # noqa: F401
 from algorithms.filters import spatial_filter, temporal_filter, threshold_flow
 from algorithms.flow import FLOW_DTYPE, as_gray
 from algorithms.global_motion import affine_global_motion, global_flow, ncc_global_motion
@@ -650,7 +651,8 @@ PIPELINES: dict[str, dict] = {
         "tracking": {"point": dict(_POINT_RECENTRED), "multi": {}},
     },
 }
-for _name, _desc in (("dis", "OpenCV DIS"), ("farneback", "OpenCV Farneback"), ("tvl1", "scikit-image TV-L1")):
+for _name, _desc in (("dis", "OpenCV DIS"), ("farneback", "OpenCV Farneback"), ("tvl1", "scikit-image TV-L1"),
+                     ("tv_l1", "our TV-L1")):
     PIPELINES[_name] = {
         "name": _name,
         "description": f"Reference: sub-pixel NCC shift compensation, then {_desc} flow; spatial+temporal filters",
