@@ -633,7 +633,8 @@ def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
 
 # Rough cost of a pair of frames per pixel, relative to Lucas-Kanade, by flow method: only the
 # order of cells depends on it (longest first), never a result. Unknown methods count as 2.
-FLOW_COST = {"lucas_kanade": 1.0, "farneback": 1.0, "dis": 0.5, "ilk": 2.0, "horn_schunck": 4.0, "tvl1": 8.0}
+FLOW_COST = {"lucas_kanade": 1.0, "farneback": 1.0, "dis": 0.5, "ilk": 2.0, "horn_schunck": 4.0, "tvl1": 8.0,
+             "tv_l1": 4.0}
 
 
 def _scene_cost(v: SceneVariant) -> float:

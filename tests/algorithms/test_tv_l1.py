@@ -176,3 +176,26 @@ def test_external_constant_flow_pairs(pair, limit_px):
     known = np.isfinite(gt).all(axis=-1)
     flow = tv_l1(g0, g1)[0]
     assert float(np.hypot(*(flow - gt)[known].T).mean()) <= limit_px
+
+
+@pytest.mark.parametrize("scene, limit_px", [("RubberWhale", 0.22), ("Yosemite", 0.13)])
+def test_external_middlebury_and_yosemite(scene, limit_px):
+    """Mean EPE over known pixels (Yosemite: sky masked); scikit-image's TV-L1: 0.26 and 0.15 px
+    (SOURCES.md: 0.27 / 0.14); ours measured 0.188 and 0.114 px with the defaults."""
+    if scene == "RubberWhale":
+        d = EXTERNAL / "middlebury" / "RubberWhale"
+        p0, p1, pf = d / "frame10.png", d / "frame11.png", d / "flow10.flo"
+    else:
+        d = EXTERNAL / "yosemite" / "yosemite"
+        p0, p1, pf = d / "yos9.png", d / "yos10.png", d / "correct_yos.flo"
+    if not p0.exists():
+        pytest.skip(f"external data missing: {p0}")
+    g0 = cv2.imread(str(p0), cv2.IMREAD_GRAYSCALE)
+    g1 = cv2.imread(str(p1), cv2.IMREAD_GRAYSCALE)
+    gt = read_flo(pf)
+    known = np.isfinite(gt).all(axis=-1)
+    if scene == "Yosemite":
+        known &= g0 > 0  # the black sky's ground truth is a placeholder
+    flow, valid = tv_l1(g0, g1)
+    assert valid[known].mean() > 0.9
+    assert float(np.hypot(*(flow - gt)[known].T).mean()) <= limit_px
