@@ -13,8 +13,8 @@ Papers
   Estimation", IPOL 2013: the discretisation (central differences for the image
   gradient, forward differences for grad u, their adjoint for div p), the
   parameter values lambda = 0.15 on a 0..255 intensity scale, tau = 0.25,
-  theta = 0.3, zoom factor 0.5, 5 warps, and the pyramid's anti-alias blur
-  sigma = 0.8 sqrt(1 / eta^2 - 1).
+  theta = 0.3, zoom factor 0.5, 5 warps, the stopping rule on the change of u,
+  and a Gaussian anti-alias blur before each reduction of the pyramid.
 
 The model ([Z] sec. 2-3, [S] sec. 2)
 ------------------------------------
@@ -29,7 +29,7 @@ relaxed with an auxiliary field v close to u:
 
 and minimised alternately:
 
-1. u fixed, v pointwise ([Z] Prop. 2, the thresholding step):
+1. u fixed, v pointwise ([Z] sec. 3, the thresholding step):
 
        v = u + lambda theta grad I1          if rho(u) < -lambda theta |grad I1|^2
        v = u - lambda theta grad I1          if rho(u) >  lambda theta |grad I1|^2
@@ -38,17 +38,17 @@ and minimised alternately:
    i.e. v = u - clip(rho(u) / |grad I1|^2, -lambda theta, lambda theta) grad I1,
    which is how the kernel computes it (no branch).
 
-2. v fixed, each u_d solves a ROF problem ([Z] Prop. 1, Chambolle's projection,
-   in the sign convention of [S]):
+2. v fixed, each u_d solves a ROF problem ([Z] sec. 3, Chambolle's 2004 dual
+   projection, in the sign convention of [S]):
 
        u_d = v_d + theta div p_d
        p_d <- (p_d + tau / theta grad u_d) / (1 + tau / theta |grad u_d|)
 
    tau <= 1/8 is Chambolle's proven bound; tau = 1/4 is what [Z] and [S] use.
 
-Where the warp samples outside frame t+1 the data term is dropped (grad I1 = 0,
-rho = 0, so v = u): the smoothness term fills those pixels in, as in our
-Horn-Schunck. One pass over the rows fuses both steps: row i gets its new u
+Where the warp samples outside frame t+1, or grad I1 vanishes, the data term is
+dropped (our choice: grad I1 = 0, rho = 0, so v = u): the smoothness term fills
+those pixels in, as in our Horn-Schunck. One pass over the rows fuses both steps: row i gets its new u
 (which needs p of rows i and i - 1, not yet updated), then row i - 1 gets its
 new p (which needs the new u of rows i - 1 and i). So one iteration reads and
 writes each array once.
@@ -90,14 +90,14 @@ def _primal_row(a, b, rho0, inv_g2, u1, u2, p11, p12, p21, p22, p12_up, p22_up, 
         x2 = u2[j]
         ga = a[j]
         gb = b[j]
-        # step 1, [Z] Prop. 2: v = u - clip(rho(u) / |grad I1|^2, -lambda theta, lambda theta) grad I1
+        # step 1, [Z] thresholding: v = u - clip(rho(u) / |grad I1|^2, -lambda theta, lambda theta) grad I1
         k = min(max((rho0[j] + ga * x1 + gb * x2) * inv_g2[j], -lt), lt)
         div1 = p11[j] + p12[j] - p12_up[j]
         div2 = p21[j] + p22[j] - p22_up[j]
         if j > 0:
             div1 -= p11[j - 1]
             div2 -= p21[j - 1]
-        # step 2, [Z] Prop. 1: u = v + theta div p
+        # step 2, [Z] ROF step: u = v + theta div p
         n1 = x1 - k * ga + th * div1
         n2 = x2 - k * gb + th * div2
         change += (n1 - x1) * (n1 - x1) + (n2 - x2) * (n2 - x2)
@@ -236,8 +236,10 @@ def _central_gradient(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def tv_l1_pyramid(image: np.ndarray, n_scales: int, zoom: float) -> list[np.ndarray]:
     """Finest-first pyramid of ``image`` ``(H, W)`` float32: blur, then resample by ``zoom``.
 
-    [S]: Gaussian anti-alias blur of sigma ``0.8 sqrt(1 / zoom^2 - 1)`` px of the
-    finer level before each reduction (about 1.39 px for halving); levels
+    A Gaussian anti-alias blur before each reduction ([S]), of sigma
+    ``0.8 sqrt(1 / zoom^2 - 1)`` px of the finer level (about 1.39 px for
+    halving; ``algorithms.pyramid`` uses the factor 0.5, the stronger blur here
+    keeps the coarse levels' linearisation valid over larger motions); levels
     whose shorter side would drop below 16 px are not built.
     """
     sigma = 0.8 * math.sqrt(1.0 / zoom**2 - 1.0)
@@ -290,8 +292,9 @@ def tv_l1(frame0: np.ndarray, frame1: np.ndarray, *, lambda_: float = 0.15, tau:
     the rendered presets (background 0.045 vs 0.055 px on nominal, 0.027 vs
     0.046 on thesis) and on Yosemite; a 3x3 median ([W] uses 5x5) keeps small
     vehicles (nominal vehicles 1.27 vs 1.49 px); 15 iterations per warp instead
-    of 10. [S] runs up to 300 iterations per warp with ``epsilon`` 0.01: too
-    slow here (about 1 ms per iteration at 640x480) for little gain.
+    of 10. [S] iterates each warp until its stopping rule holds (``epsilon``
+    0.01): many more iterations, too slow here (about 1 ms per iteration at
+    640x480) for little gain.
 
     Parameters
     ----------
