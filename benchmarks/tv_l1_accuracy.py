@@ -14,6 +14,12 @@ same stages, only the flow method differs) and every pair is scored by
 and the local motion on background and vehicles, and the CPU seconds of the
 whole pipeline per sequence (process time, so a machine busy with other work
 inflates it less than wall time), with the ratio.
+
+Measured (6-frame renders of nominal, thesis, fast-vehicles, realistic; tv_l1 / tvl1):
+total EPE background 0.052 / 0.067, 0.028 / 0.046, 0.042 / 0.064, 0.210 / 0.212 px;
+vehicles 1.27 / 1.73, 0.236 / 0.300, 10.9 / 11.5, 0.246 / 0.406 px; local background
+equal within 0.003 px (realistic 0.508 / 0.506); pipeline CPU 1.0-1.1 s / 19-21 s per
+sequence (ratio 0.05).
 """
 
 from __future__ import annotations
