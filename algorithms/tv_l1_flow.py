@@ -238,8 +238,8 @@ def tv_l1_pyramid(image: np.ndarray, n_scales: int, zoom: float) -> list[np.ndar
 
     A Gaussian anti-alias blur before each reduction ([S]), of sigma
     ``0.8 sqrt(1 / zoom^2 - 1)`` px of the finer level (about 1.39 px for
-    halving; ``algorithms.pyramid`` uses the factor 0.5, the stronger blur here
-    keeps the coarse levels' linearisation valid over larger motions); levels
+    halving; ``algorithms.pyramid`` uses the factor 0.5; 0.8 is our choice,
+    not tuned); levels
     whose shorter side would drop below 16 px are not built.
     """
     sigma = 0.8 * math.sqrt(1.0 / zoom**2 - 1.0)
