@@ -10,8 +10,8 @@ scikit-image or the pipeline:
   ``register_flow``, ``register_stage``, ``get_flow_method``, ``get_stage``, ``flow_cost`` (``algorithms.registry``)
 * flow methods ``flow, valid = f(frame0, frame1, **params)``: ``lucas_kanade``,
   ``horn_schunck`` (in ``lucas_kanade_flow`` / ``horn_schunck_flow``: a module named like
-  its function would shadow the function on the package), ``farneback``, ``dis``,
-  ``tvl1``, ``ilk``
+  its function would shadow the function on the package), ``tv_l1`` (our TV-L1, in
+  ``tv_l1_flow``), ``farneback``, ``dis``, ``tvl1`` (scikit-image's), ``ilk``
 * global motion: ``ncc_global_motion``, ``affine_global_motion``, ``global_flow``
 * jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``spatial_filter``,
   ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
@@ -37,6 +37,7 @@ for _module, _names in {
     "algorithms.lucas_kanade_flow": ("lucas_kanade",),
     "algorithms.horn_schunck_flow": ("horn_schunck",),
     "algorithms.reference": ("farneback", "dis", "tvl1", "ilk"),
+    "algorithms.tv_l1_flow": ("tv_l1",),
     "algorithms.global_motion": ("GlobalMotion", "GlobalModel", "ncc_global_motion", "affine_global_motion",
                                  "global_flow"),
     "algorithms.jitter": ("JitterResult", "cumulative_path", "fit_flight_path", "remove_jitter"),

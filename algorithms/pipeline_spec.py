@@ -33,6 +33,7 @@ from pydantic_core import PydanticCustomError
 import algorithms.horn_schunck_flow  # noqa: F401  (each built-in stage module registers its stages on import)
 import algorithms.lucas_kanade_flow  # noqa: F401
 import algorithms.reference  # noqa: F401
+import algorithms.tv_l1_flow  # noqa: F401
 from algorithms.filters import threshold_flow
 from algorithms.global_motion import affine_global_motion
 from algorithms.jitter import JITTER_MODELS

@@ -247,7 +247,7 @@ def test_from_dict_rejects_bad_descriptions_naming_the_field(d, match):
 
 
 def test_builtin_pipelines_validate_and_hash_is_stable():
-    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis", "farneback", "tvl1"} <= set(PIPELINES)
+    assert {"thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis", "farneback", "tvl1", "tv-l1"} <= set(PIPELINES)
     hashes = set()
     for name, d in PIPELINES.items():
         p = get_pipeline(name)

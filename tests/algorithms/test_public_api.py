@@ -24,7 +24,7 @@ def test_flow_methods_are_registered_under_their_function_names():
 
     assert callable(lucas_kanade) and callable(horn_schunck)  # functions, not modules of the same name
     assert FLOW_METHODS["lucas_kanade"] is lucas_kanade and FLOW_METHODS["horn_schunck"] is horn_schunck
-    for name in ("lucas_kanade", "horn_schunck", "farneback", "dis", "tvl1", "ilk"):
+    for name in ("lucas_kanade", "horn_schunck", "farneback", "dis", "tvl1", "ilk", "tv_l1"):
         assert FLOW_METHODS[name] is getattr(algorithms, name)
 
 

@@ -30,7 +30,7 @@ def test_list_names_presets_suites_pipelines_and_metrics(capsys):
             sections[current][name] = desc.strip()
     stage_title = "pipeline stage keys (the flow key names a flow method)"
     assert list(sections) == ["scene presets", "suites", "pipelines", "flow methods", stage_title, "metrics"]
-    assert {"lucas_kanade", "horn_schunck", "dis", "farneback", "tvl1", "ilk"} <= set(sections["flow methods"])
+    assert {"lucas_kanade", "horn_schunck", "dis", "farneback", "tvl1", "ilk", "tv_l1"} <= set(sections["flow methods"])
     assert sections["flow methods"]["lucas_kanade"].startswith("params: window, levels, iterations")
     assert list(sections[stage_title]) == ["global_motion", "jitter", "compensation", "flow", "threshold",
                                            "spatial", "temporal", "detection", "tracking"]

@@ -28,7 +28,7 @@ from scenes.formats import read_flo, read_png, write_flo, write_png
 
 FAST = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-BUILT_IN_FLOW = ("lucas_kanade", "horn_schunck", "farneback", "dis", "tvl1", "ilk")
+BUILT_IN_FLOW = ("lucas_kanade", "horn_schunck", "farneback", "dis", "tvl1", "ilk", "tv_l1")
 DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 DIS_SAFE_SIDE_PX = 16  # below, cv2 5.0 DIS crashes the process on some shapes (15x48) or raises cv2.error
 
