@@ -48,32 +48,34 @@ def surface_depth(D, gx, gy, Cz, rel, abs_m, Z):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, error_model="numpy")
-def project_static(Z, ax, ay, b, fx, fy, cx, cy, xs, ys, x1, y1, Z1, flow, flow_cam):  # pragma: no cover - numba
+def project_static(Z, ax, ay, b, fx, fy, cx, cy, xs, ys, x1, y1, Z1, flow_cam):  # pragma: no cover - numba
     """Where each pixel's point lands in frame t+1 if it is static: ``X1 = A (Z d) + b``, projected.
 
     Z : (H, W) float32 depth (inf = sky, projected as depth 1 and zeroed by the caller's valid pass);
     ax : (3, W), ay : (3, H) float32, row k of A split into ``ax[k, x] + ay[k, y]``; b : (3,) float32;
     fx, fy, cx, cy float32; xs (W,), ys (H,) float32 pixel coordinates.
-    Out: x1, y1, Z1 (H, W) float32 (pixel and depth in t+1); flow and flow_cam (H, W, 2) float32,
-    both the camera-induced flow ``(x1 - x, y1 - y)`` (the caller overwrites the moving pixels of flow).
+    Out: x1, y1, Z1 (H, W) float32 (pixel and depth in t+1); flow_cam (H, W, 2) float32, the
+    camera-induced flow ``(x1 - x, y1 - y)``. The selects are branch-free and the interleaved
+    flow is written in a second pass over the row, so that the first pass vectorises (2x faster).
     """
     h, w = Z.shape
     one = np.float32(1.0)
+    inf = np.float32(np.inf)
+    b0, b1, b2 = b[0], b[1], b[2]
     for y in range(h):
         ay0, ay1, ay2 = ay[0, y], ay[1, y], ay[2, y]
         for x in range(w):
             z = Z[y, x]
-            if z == np.float32(np.inf):
-                z = one
+            z = one if z == inf else z
             X = ax[0, x] + ay0
             Y = ax[1, x] + ay1
             W = ax[2, x] + ay2
             X *= z
-            X += b[0]
+            X += b0
             Y *= z
-            Y += b[1]
+            Y += b1
             W *= z
-            W += b[2]
+            W += b2
             inv = one / W
             # x1 = fx X1_x / X1_z + cx, y1 = fy X1_y / X1_z + cy
             X *= inv
@@ -85,12 +87,10 @@ def project_static(Z, ax, ay, b, fx, fy, cx, cy, xs, ys, x1, y1, Z1, flow, flow_
             x1[y, x] = X
             y1[y, x] = Y
             Z1[y, x] = W
-            u = X - xs[x]
-            v = Y - ys[y]
-            flow_cam[y, x, 0] = u
-            flow_cam[y, x, 1] = v
-            flow[y, x, 0] = u
-            flow[y, x, 1] = v
+        yy = ys[y]
+        for x in range(w):
+            flow_cam[y, x, 0] = x1[y, x] - xs[x]
+            flow_cam[y, x, 1] = y1[y, x] - yy
 
 
 @numba.njit(cache=True, error_model="numpy")

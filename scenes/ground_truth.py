@@ -305,10 +305,11 @@ class GroundTruth:
         if self._scratch is None:
             self._scratch = tuple(np.empty((h, w), np.float32) for _ in range(4))
         x1, y1, Z1, D1 = self._scratch
-        flow, flow_cam = np.empty((h, w, 2), np.float32), np.empty((h, w, 2), np.float32)
+        flow_cam = np.empty((h, w, 2), np.float32)
         # sky (Z = inf) is projected as if at depth 1 and made invalid below
         project_static(s0.Z, ax, ay, b.astype(np.float32), np.float32(self.fx), np.float32(self.fy),
-                       np.float32(self.cx), np.float32(self.cy), self.xs32, self.ys32, x1, y1, Z1, flow, flow_cam)
+                       np.float32(self.cx), np.float32(self.cy), self.xs32, self.ys32, x1, y1, Z1, flow_cam)
+        flow = flow_cam.copy()  # the static world's; the vehicles' pixels are overwritten
         for vid, rows, cols in s0.vehicle_pixels:
             M0, M1 = s0.vehicle_M[vid - 1], s1.vehicle_M[vid - 1]
             Mrel = M1 @ np.linalg.inv(M0)
