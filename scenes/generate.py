@@ -228,13 +228,15 @@ class SceneGenerator:
 
     def _tracks(self, i: int, surf) -> None:
         t = float(self.path.t_s[i])
-        counts = np.bincount(surf.instances.ravel(), minlength=len(self.vehicles) + 1)
         if self.banded:
+            counts = np.bincount(surf.instances.ravel(), minlength=len(self.vehicles) + 1)
+            seen = {vid for vid in range(1, len(self.vehicles) + 1) if counts[vid] > 0}
             boxes = self.banded_truth.vehicle_bboxes(surf)
-        else:
-            boxes = self.truth.vehicle_bboxes(surf.R, surf.C, surf.vehicle_M)
+        else:  # the surface listed each vehicle's pixels and projected its box already
+            seen = {vid for vid, _, _ in surf.vehicle_pixels}
+            boxes = surf.vehicle_bboxes
         for vid, (v, (bbox, centre)) in enumerate(zip(self.vehicles, boxes), start=1):
-            self.track_rows.append((i, vid, centre[0], centre[1], *bbox, int(counts[vid] > 0),
+            self.track_rows.append((i, vid, centre[0], centre[1], *bbox, int(vid in seen),
                                     v.speed(t), int(v.parked)))
 
     def frames(self) -> Iterator[FrameOutput]:

@@ -26,6 +26,14 @@ affine in the pixel). :class:`BandedGroundTruth` is the general one the sensor n
 and time, a distorting lens bends each pixel's ray to ``U(p)``; the same equations
 are solved per pixel ray, the band a point lands in at t+1 by a fixed point over
 bands, and flow, valid and instances are given on the distorted grid.
+
+Cost: the pinhole truth's whole-image passes are numba kernels
+(:mod:`scenes._truth_kernels`: ground depth, vehicle windows, projection, validity),
+each the float32 operations of the numpy expressions they replaced in the same
+order, so the arrays are bit for bit the same (tests/scenes/test_ground_truth.py
+keeps the numpy formulas as the reference); about 0.1x the render of a 640x480
+frame (benchmarks/render_throughput.py). The first use in a process loads numba
+(about 1.5 s, shared with the scoring kernels of :mod:`harness._flow_kernels`).
 """
 
 from __future__ import annotations
@@ -78,6 +86,8 @@ class FrameSurface:
     R, C : camera-to-world rotation (3, 3) and centre (3,)
     vehicle_M : list of (4, 4) vehicle-to-world matrices at this frame
     vehicle_pixels : list of (vehicle id, rows, cols) of the pixels showing each vehicle
+    vehicle_bboxes : per vehicle, its projected bbox (x0, y0, x1, y1) and centre (x, y) in px
+        (:meth:`GroundTruth.vehicle_bboxes`; NaN when behind the camera)
     """
 
     depth: np.ndarray
@@ -87,6 +97,7 @@ class FrameSurface:
     C: np.ndarray
     vehicle_M: list
     vehicle_pixels: list
+    vehicle_bboxes: list
 
 
 def ray_boxes_depth(R: np.ndarray, C: np.ndarray, M: np.ndarray, boxes: list[Box], xn: np.ndarray,
@@ -138,6 +149,7 @@ class GroundTruth:
         self.xn32, self.yn32 = self.xn.astype(np.float32), self.yn.astype(np.float32)
         self.xs32, self.ys32 = xs.astype(np.float32), ys.astype(np.float32)
         self.vehicle_boxes = vehicle_boxes
+        self._scratch = None  # x1, y1, Z1, D1 of pair()
         corners = []
         for boxes in vehicle_boxes:
             pts = []
@@ -148,44 +160,67 @@ class GroundTruth:
                         for sz in (-1, 1):
                             pts.append(c + hs * (sx, sy, sz))
             corners.append(np.asarray(pts))
-        self.vehicle_corners = corners  # per vehicle (16, 3) in its own frame
+        self.vehicle_corners = corners  # per vehicle (8 per box, 3) in its own frame
+        # per vehicle its corners (padded to the most boxes by repeating its first corner, which
+        # changes no bbox) and their mean (the centre), stacked for the batch projection
+        n_pts = max((len(c) for c in corners), default=0)
+        self._corners = np.array([np.vstack([c, np.repeat(c[:1], n_pts - len(c), axis=0)])
+                                  for c in corners]).reshape(len(corners), n_pts, 3)
+        self._centres = np.array([c.mean(axis=0) for c in corners]).reshape(len(corners), 3)
+        # per vehicle its boxes as corner arrays (B, 3): low c - s/2 and high c + s/2
+        self._box_lo, self._box_hi = [], []
+        for boxes in vehicle_boxes:
+            c = np.array([b.centre for b in boxes], np.float64).reshape(-1, 3)
+            hs = np.array([b.size for b in boxes], np.float64).reshape(-1, 3) / 2
+            self._box_lo.append(c - hs)
+            self._box_hi.append(c + hs)
 
     # -- per frame ----------------------------------------------------------------------
-    def _affine_field(self, a: float, b: float, c: float) -> np.ndarray:
-        """``a xn + b yn + c`` over the image, (H, W) float32 (a ray component is affine in pixels)."""
-        return (np.float32(a) * self.xn32)[None, :] + (np.float32(b) * self.yn32 + np.float32(c))[:, None]
+    def _affine_parts(self, a: float, b: float, c: float) -> tuple[np.ndarray, np.ndarray]:
+        """``a xn + b yn + c`` (a ray component is affine in pixels) as a column part (W,) and a row part (H,),
+        float32: the field is their sum ``ax[None, :] + ay[:, None]``."""
+        return np.float32(a) * self.xn32, np.float32(b) * self.yn32 + np.float32(c)
 
     def vehicle_bboxes(self, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> list:
-        """Projected bbox (x0, y0, x1, y1) and centre (x, y) per vehicle, NaN when behind the camera."""
+        """Projected bbox (x0, y0, x1, y1) and centre (x, y) per vehicle, NaN when behind the camera.
+
+        All vehicles' box corners and centres are moved and projected in one batch.
+        """
+        if not vehicle_M:
+            return []
+        M = np.asarray(vehicle_M, np.float64)  # (V, 4, 4)
+        Mr = M[:, :3, :3]
+        # X_w = M_R X + M_t per corner, and per centre
+        Xw = np.matmul(self._corners, Mr.transpose(0, 2, 1)) + M[:, None, :3, 3]
+        centre_w = np.matmul(Mr, self._centres[:, :, None])[:, None, :, 0] + M[:, None, :3, 3]
+        p, z = project(self.K, R, C, Xw)  # (V, n, 2), (V, n)
+        pc, zc = project(self.K, R, C, centre_w)  # (V, 1, 2), (V, 1): a row each, as one point is projected
+        pc = pc[:, 0]
+        lo, hi = p.min(axis=1), p.max(axis=1)
+        behind = (z <= 0).any(axis=1) | (zc[:, 0] <= 0)
         out = []
-        for corners, M in zip(self.vehicle_corners, vehicle_M):
-            Xw = corners @ M[:3, :3].T + M[:3, 3]
-            p, z = project(self.K, R, C, Xw)
-            centre_w = M[:3, :3] @ corners.mean(axis=0) + M[:3, 3]
-            pc, zc = project(self.K, R, C, centre_w)
-            if (z <= 0).any() or zc <= 0:
+        for v in range(len(M)):
+            if behind[v]:
                 out.append(((np.nan,) * 4, (np.nan, np.nan)))
             else:
-                out.append(((p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()), (pc[0], pc[1])))
+                out.append(((lo[v, 0], lo[v, 1], hi[v, 0], hi[v, 1]), (pc[v, 0], pc[v, 1])))
         return out
 
     def surface(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list) -> FrameSurface:
         """Classify the pixels of a rendered frame and give each its exact depth."""
-        D = np.asarray(depth, np.float32)
+        from scenes._truth_kernels import surface_depth, vehicle_window
+
+        D = np.ascontiguousarray(depth, np.float32)
+        rel, abs_m = np.float32(SURFACE_TOL_REL), np.float32(SURFACE_TOL_ABS_M)
         # ground z = 0: Z = C_z / (g . d) with g = R^T (0, 0, -1) the world's down in camera axes
         g = -R[2, :]
-        gd = self._affine_field(g[0], g[1], g[2])
-        Zg = np.full_like(gd, np.inf)
-        np.divide(np.float32(C[2]), gd, out=Zg, where=gd > 0)
-        tol = D * np.float32(SURFACE_TOL_REL)
-        tol += np.float32(SURFACE_TOL_ABS_M)
-        Z = np.where(np.abs(D - Zg) <= tol, Zg, D)
-        Z[D <= 0] = np.inf
+        gx, gy = self._affine_parts(g[0], g[1], g[2])
+        Z = np.empty((self.h, self.w), np.float32)
+        surface_depth(D, gx, gy, np.float32(C[2]), rel, abs_m, Z)
         instances = np.zeros((self.h, self.w), np.uint16)
-        best_err = np.full((self.h, self.w), np.inf, np.float32)
-        windows = []
-        for vid, ((bbox, _), boxes, M) in enumerate(
-                zip(self.vehicle_bboxes(R, C, vehicle_M), self.vehicle_boxes, vehicle_M), start=1):
+        bboxes = self.vehicle_bboxes(R, C, vehicle_M)
+        pixels = []
+        for vid, ((bbox, _), boxes, M) in enumerate(zip(bboxes, self.vehicle_boxes, vehicle_M), start=1):
             x0, y0, x1, y1 = bbox
             if not np.isfinite(x0):
                 continue
@@ -193,49 +228,56 @@ class GroundTruth:
             r0, r1 = max(0, int(np.floor(y0))), min(self.h, int(np.ceil(y1)) + 1)
             if c0 >= c1 or r0 >= r1:
                 continue
-            Zv = self._ray_boxes(R, C, M, boxes, r0, r1, c0, c1).astype(np.float32)
-            Dw = D[r0:r1, c0:c1]
-            err = np.abs(Dw - Zv)
+            # the boxes in the vehicle's frame: camera centre o and ray axes A there
+            Minv_R = M[:3, :3].T
+            o = Minv_R @ (C - M[:3, 3])
+            A = Minv_R @ R
+            Zv = np.empty((r1 - r0, c1 - c0), np.float32)
+            err = np.empty_like(Zv)
+            hit = np.empty(Zv.shape, bool)
+            if not vehicle_window(D, r0, c0, self.xn[c0:c1], self.yn[r0:r1], A, o, self._box_lo[vid - 1],
+                                  self._box_hi[vid - 1], rel, abs_m, Zv, err, hit):
+                continue
             # where two vehicles claim a pixel, the one whose surface agrees better with the render wins
-            hit = ((err <= SURFACE_TOL_REL * Dw + SURFACE_TOL_ABS_M) & (Dw > 0)
-                   & (err < best_err[r0:r1, c0:c1]))
-            instances[r0:r1, c0:c1][hit] = vid
-            Z[r0:r1, c0:c1][hit] = Zv[hit]
-            best_err[r0:r1, c0:c1][hit] = err[hit]
-            windows.append((vid, r0, r1, c0, c1))
-        pixels = []
-        for vid, r0, r1, c0, c1 in windows:
-            rows, cols = np.nonzero(instances[r0:r1, c0:c1] == vid)
+            pixels.append([vid, r0, c0, hit, err, Zv])
+        if len(pixels) > 1:
+            self._resolve_overlaps(pixels)
+        out = []
+        for vid, r0, c0, hit, _, Zv in pixels:
+            rows, cols = np.nonzero(hit)
             if rows.size:
-                pixels.append((vid, rows + r0, cols + c0))
+                instances[r0:r0 + hit.shape[0], c0:c0 + hit.shape[1]][hit] = vid
+                Z[r0:r0 + hit.shape[0], c0:c0 + hit.shape[1]][hit] = Zv[hit]
+                out.append((vid, rows + r0, cols + c0))
         return FrameSurface(depth=D, Z=Z, instances=instances, R=R, C=C, vehicle_M=vehicle_M,
-                            vehicle_pixels=pixels)
+                            vehicle_pixels=out, vehicle_bboxes=bboxes)
 
-    def _ray_boxes(self, R, C, M, boxes, r0, r1, c0, c1) -> np.ndarray:
-        """Depth of the nearest hit of each pixel ray in the window with the vehicle's boxes (slab method)."""
-        return ray_boxes_depth(R, C, M, boxes, self.xn[c0:c1][None, :], self.yn[r0:r1][:, None])
+    @staticmethod
+    def _resolve_overlaps(pixels: list) -> None:
+        """Where windows overlap, keep each pixel for the first vehicle of least error (in place).
+
+        The same rule as claiming pixels in id order with a strict ``err < best so far``:
+        a later vehicle takes a pixel only with a strictly smaller error, and loses it to a
+        still later one the same way.
+        """
+        for k, (_, ra, ca, hit_a, err_a, _) in enumerate(pixels):
+            ha, wa = hit_a.shape
+            for _, rb, cb, hit_b, err_b, _ in pixels[k + 1:]:
+                hb, wb = hit_b.shape
+                r0, r1 = max(ra, rb), min(ra + ha, rb + hb)
+                c0, c1 = max(ca, cb), min(ca + wa, cb + wb)
+                if r0 >= r1 or c0 >= c1:
+                    continue
+                sa = (slice(r0 - ra, r1 - ra), slice(c0 - ca, c1 - ca))
+                sb = (slice(r0 - rb, r1 - rb), slice(c0 - cb, c1 - cb))
+                both = hit_a[sa] & hit_b[sb]
+                b_wins = both & (err_b[sb] < err_a[sa])
+                hit_a[sa] &= ~b_wins
+                hit_b[sb] &= ~(both & ~b_wins)
 
     # -- per pair -----------------------------------------------------------------------
-    def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows=None, cols=None):
-        """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` (d the pixel rays).
-
-        Whole image (float32, in place) when ``rows`` is None, else the listed pixels (float64).
-        """
-        if rows is None:
-            X = self._affine_field(A[0, 0], A[0, 1], A[0, 2])
-            Y = self._affine_field(A[1, 0], A[1, 1], A[1, 2])
-            W = self._affine_field(A[2, 0], A[2, 1], A[2, 2])
-            for F, bk in ((X, b[0]), (Y, b[1]), (W, b[2])):
-                F *= Z
-                F += np.float32(bk)
-            inv = np.float32(1.0) / W
-            X *= inv
-            X *= np.float32(self.fx)
-            X += np.float32(self.cx)
-            Y *= inv
-            Y *= np.float32(self.fy)
-            Y += np.float32(self.cy)
-            return X, Y, W
+    def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows: np.ndarray, cols: np.ndarray):
+        """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` for the listed pixels (float64)."""
         xn, yn = self.xn[cols], self.yn[rows]
         Zd = Z.astype(np.float64)
         X = Zd * (A[0, 0] * xn + A[0, 1] * yn + A[0, 2]) + b[0]
@@ -244,45 +286,51 @@ class GroundTruth:
         return self.fx * X / W + self.cx, self.fy * Y / W + self.cy, W
 
     def pair(self, s0: FrameSurface, s1: FrameSurface) -> tuple[PairTruth, tuple[float, float]]:
-        """Ground truth of the pair (s0 -> s1) and the global shift (dx, dy) in px (NaN if no static pixel)."""
+        """Ground truth of the pair (s0 -> s1) and the global shift (dx, dy) in px (NaN if no static pixel).
+
+        The whole-image passes run in :mod:`scenes._truth_kernels` (float32, the operations of
+        the equations in the module docstring in their order); the vehicles' pixels in float64.
+        """
+        from scenes._truth_kernels import project_static, valid_and_shift
+
         R0, C0, R1, C1 = s0.R, s0.C, s1.R, s1.C
         A = R1.T @ R0
         b = R1.T @ (C0 - C1)
-        sky = ~np.isfinite(s0.Z)
-        has_sky = bool(sky.any())
-        Z = np.where(sky, np.float32(1.0), s0.Z) if has_sky else s0.Z
-        x1, y1, Z1 = self._project_affine(Z, A, b)
-        flow_cam = np.empty((self.h, self.w, 2), np.float32)
-        np.subtract(x1, self.xs32[None, :], out=flow_cam[..., 0])
-        np.subtract(y1, self.ys32[:, None], out=flow_cam[..., 1])
-        flow = flow_cam.copy()
+        h, w = self.h, self.w
+        parts = [self._affine_parts(A[k, 0], A[k, 1], A[k, 2]) for k in range(3)]
+        ax = np.stack([p[0] for p in parts])
+        ay = np.stack([p[1] for p in parts])
+        # scratch of this object, reused pair after pair: fresh arrays would each cost their pages'
+        # faults (~1 ms a 640x480 float32 array); what is returned is fresh
+        if self._scratch is None:
+            self._scratch = tuple(np.empty((h, w), np.float32) for _ in range(4))
+        x1, y1, Z1, D1 = self._scratch
+        flow_cam = np.empty((h, w, 2), np.float32)
+        # sky (Z = inf) is projected as if at depth 1 and made invalid below
+        project_static(s0.Z, ax, ay, b.astype(np.float32), np.float32(self.fx), np.float32(self.fy),
+                       np.float32(self.cx), np.float32(self.cy), self.xs32, self.ys32, x1, y1, Z1, flow_cam)
+        flow = flow_cam.copy()  # the static world's; the vehicles' pixels are overwritten
         for vid, rows, cols in s0.vehicle_pixels:
             M0, M1 = s0.vehicle_M[vid - 1], s1.vehicle_M[vid - 1]
             Mrel = M1 @ np.linalg.inv(M0)
             Av = R1.T @ Mrel[:3, :3] @ R0
             bv = R1.T @ (Mrel[:3, :3] @ C0 + Mrel[:3, 3] - C1)
-            xv, yv, zv = self._project_affine(s0.Z[rows, cols], Av, bv, rows=rows, cols=cols)
+            xv, yv, zv = self._project_affine(s0.Z[rows, cols], Av, bv, rows, cols)
             flow[rows, cols, 0] = xv - cols
             flow[rows, cols, 1] = yv - rows
             x1[rows, cols], y1[rows, cols], Z1[rows, cols] = xv, yv, zv
-        inside = (x1 >= 0) & (x1 <= self.w - 1) & (y1 >= 0) & (y1 <= self.h - 1) & (Z1 > 0)
-        if has_sky:
-            inside &= ~sky
-        D1 = cv2.remap(s1.depth, x1, y1, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        # not occluded: the point is not behind what frame t+1 rendered where it lands
-        limit = D1 * np.float32(1 + OCCLUSION_TOL_REL)
-        limit += np.float32(OCCLUSION_TOL_ABS_M)
-        valid = inside & (D1 > 0) & (Z1 <= limit)
-        if has_sky:
-            flow[sky] = 0.0
-            flow_cam[sky] = 0.0
-        static = valid & (s0.instances == 0)
-        n_static = int(np.count_nonzero(static))
-        if n_static:
-            m = cv2.mean(flow_cam, mask=static.view(np.uint8))
-            shift = (float(m[0]), float(m[1]))
-        else:
-            shift = (float("nan"), float("nan"))
+        cv2.remap(s1.depth, x1, y1, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE, dst=D1)
+        # valid: in frame t+1, in front of its camera, and not behind what it rendered there
+        # (Z1 <= D1 (1 + tol) + tol_abs); sky: never valid, flow 0
+        valid = np.empty((h, w), bool)
+        sums = np.zeros(3)
+        valid_and_shift(s0.Z, x1, y1, Z1, D1, s0.instances, np.float32(w - 1), np.float32(h - 1),
+                        np.float32(1 + OCCLUSION_TOL_REL), np.float32(OCCLUSION_TOL_ABS_M), flow, flow_cam,
+                        valid, sums)
+        n_static = int(sums[2])
+        # the mean as cv2.mean has it (the sums in pixel order, times 1 / n), so the figures are bit for bit theirs
+        shift = ((float(sums[0] * (1.0 / n_static)), float(sums[1] * (1.0 / n_static))) if n_static
+                 else (float("nan"), float("nan")))
         truth = PairTruth(flow=flow, flow_camera=flow_cam, valid=valid, instances=s0.instances)
         return truth, shift
 

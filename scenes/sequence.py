@@ -68,11 +68,15 @@ MANIFEST_NAME = "MANIFEST.json"
 # files up to this size are hashed whole by the quick check; larger ones by size + sampled blocks
 QUICK_FULL_HASH_BYTES = 256 * 1024
 _SAMPLE_BYTES = 64 * 1024
-# zlib level and strategy of the per-frame PNGs: level 1 with run-length matching encodes a
-# textured 640x480 frame faster than level 1's default matching, and smaller (459 vs 480 KB
-# nominal, 550 vs 613 KB noisy; benchmarks/io_speed.py)
+# zlib level, strategy and row predictor of the per-frame PNGs: level 1 with run-length matching
+# encodes a textured 640x480 frame faster than level 1's default matching, and smaller (459 vs
+# 480 KB nominal, 550 vs 613 KB noisy; benchmarks/io_speed.py); the Average predictor on every
+# row instead of libpng's per-row choice among all five costs 0.6x the time for 1.06x the bytes
+# (nominal: 16.5 vs 26 ms, 405 vs 382 KB a frame; noisy: 15.4 vs 27.2 ms, 536 vs 535 KB;
+# process time on the loaded 2-core machine)
 PNG_COMPRESSION = 1
 PNG_STRATEGY = "rle"
+PNG_FILTERS = "avg"
 # masks and instance ids: long runs of one value, no row prediction needed (~4x faster, ~2 kB)
 MASK_PNG = {"compression": 1, "strategy": "rle", "filters": "none"}
 # how ground-truth flow is stored: "npz" (compact, lossless, the default) or "flo" (Middlebury)
@@ -260,8 +264,12 @@ def render_sequence(spec: SceneSpec | str | os.PathLike, out_dir: str | os.PathL
     out_dir : path; built under a temporary name next to it, then renamed into place
     progress : callable ``(frames_done, n_frames)``, optional
     overwrite : replace an existing non-empty ``out_dir`` (refused otherwise)
-    timings : dict, optional; filled with seconds spent rendering+truth and writing (in the
-        rendering thread: what the writer threads do in parallel is not counted)
+    timings : dict, optional; filled with wall seconds of the rendering thread: ``setup_s``
+        (world, meshes, renderer), ``render_truth_s`` (frames: render, sensor, truth; from the
+        first frame, so the one-time numba load of the truth kernels is in it), ``write_s``
+        (handing files to the writers, waiting when they fall behind, the tables, preview and
+        manifest after waiting for every file), ``setup_cpu_s`` (process CPU seconds of the setup,
+        every thread), and ``n_frames``
     flow_format : {"npz", "flo"}
         ``"npz"`` (default) one lossless compact file per pair; ``"flo"`` Middlebury
         ``flow/*.flo`` and ``flow_camera/*.flo`` (about 10x the bytes), for other tools.
@@ -327,14 +335,14 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
 
     _check_flow_format(flow_format)
     n = spec.image.n_frames
-    png = {"compression": PNG_COMPRESSION, "strategy": PNG_STRATEGY}
+    png = {"compression": PNG_COMPRESSION, "strategy": PNG_STRATEGY, "filters": PNG_FILTERS}
     out = _FolderWriter(folder, threads=writer_threads)
     try:
         t_gen = t_write = 0.0
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         gen = SceneGenerator(spec)
         preview = PreviewCollector(n)
-        t_gen += time.perf_counter() - t0
+        t_setup, c_setup = time.perf_counter() - t0, time.process_time() - c0
         frames = gen.frames()
         for i in range(n):
             t0 = time.perf_counter()
@@ -377,7 +385,8 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
     finally:
         out.close()
     if timings is not None:
-        timings.update({"render_truth_s": t_gen, "write_s": t_write, "n_frames": n})
+        timings.update({"setup_s": t_setup, "setup_cpu_s": c_setup, "render_truth_s": t_gen, "write_s": t_write,
+                        "n_frames": n})
 
 
 def read_pair_flow(folder: str | os.PathLike, i: int) -> tuple[np.ndarray | None, np.ndarray | None]:

@@ -168,5 +168,10 @@ def test_png_strategy_changes_bytes_not_pixels():
         np.testing.assert_array_equal(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED), ids)
     with pytest.raises(ValueError, match=r"strategy: expected one of default, rle, filtered, huffman, got 'lz4'"):
         encode_png(img, strategy="lz4")
-    with pytest.raises(ValueError, match=r"filters: expected one of adaptive, none, got 'paeth'"):
-        encode_png(img, filters="paeth")
+    for filters in ("sub", "up", "avg", "paeth"):  # one row predictor for every row: other bytes, same pixels
+        data = encode_png(img, compression=1, strategy="rle", filters=filters)
+        assert data != rle
+        np.testing.assert_array_equal(cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED),
+                                                   cv2.COLOR_BGR2RGB), img)
+    with pytest.raises(ValueError, match=r"filters: expected one of adaptive, none, sub, up, avg, paeth, got 'lzw'"):
+        encode_png(img, filters="lzw")

@@ -144,3 +144,103 @@ def test_global_shift_and_jitter_columns(tiny_sequence):
     assert np.abs(cam[["jitter_x_px", "jitter_y_px"]].to_numpy()).max() > 0.01
     quiet = SceneGenerator(load_scene_spec("tiny", overrides=NO_JITTER))
     assert np.abs(quiet.path.jitter_px).max() < 1e-9
+
+
+# -- the numba kernels against the numpy expressions they replaced --------------------------------
+
+def _reference_surface(gt, depth, R, C, vehicle_M):
+    """scenes.ground_truth.GroundTruth.surface as whole-image numpy (float32, the kernels' order)."""
+    from scenes.ground_truth import SURFACE_TOL_ABS_M, SURFACE_TOL_REL, ray_boxes_depth
+
+    D = np.asarray(depth, np.float32)
+    g = -R[2, :]
+    gd = (np.float32(g[0]) * gt.xn32)[None, :] + (np.float32(g[1]) * gt.yn32 + np.float32(g[2]))[:, None]
+    Zg = np.full_like(gd, np.inf)
+    np.divide(np.float32(C[2]), gd, out=Zg, where=gd > 0)
+    tol = D * np.float32(SURFACE_TOL_REL)
+    tol += np.float32(SURFACE_TOL_ABS_M)
+    Z = np.where(np.abs(D - Zg) <= tol, Zg, D)
+    Z[D <= 0] = np.inf
+    instances = np.zeros(D.shape, np.uint16)
+    best = np.full(D.shape, np.inf, np.float32)
+    for vid, ((bbox, _), boxes, M) in enumerate(zip(gt.vehicle_bboxes(R, C, vehicle_M), gt.vehicle_boxes,
+                                                    vehicle_M), start=1):
+        if not np.isfinite(bbox[0]):
+            continue
+        c0, c1 = max(0, int(np.floor(bbox[0]))), min(gt.w, int(np.ceil(bbox[2])) + 1)
+        r0, r1 = max(0, int(np.floor(bbox[1]))), min(gt.h, int(np.ceil(bbox[3])) + 1)
+        if c0 >= c1 or r0 >= r1:
+            continue
+        Zv = ray_boxes_depth(R, C, M, boxes, gt.xn[c0:c1][None, :], gt.yn[r0:r1][:, None]).astype(np.float32)
+        Dw = D[r0:r1, c0:c1]
+        err = np.abs(Dw - Zv)
+        hit = (err <= SURFACE_TOL_REL * Dw + SURFACE_TOL_ABS_M) & (Dw > 0) & (err < best[r0:r1, c0:c1])
+        instances[r0:r1, c0:c1][hit] = vid
+        Z[r0:r1, c0:c1][hit] = Zv[hit]
+        best[r0:r1, c0:c1][hit] = err[hit]
+    return Z, instances
+
+
+def _reference_static_pair(gt, Z0, inst0, depth1, A, b):
+    """The static part of GroundTruth.pair as whole-image numpy: (x1, y1, Z1, valid) for a static world."""
+    import cv2
+
+    from scenes.ground_truth import OCCLUSION_TOL_ABS_M, OCCLUSION_TOL_REL
+
+    sky = ~np.isfinite(Z0)
+    Z = np.where(sky, np.float32(1.0), Z0)
+    F = [(np.float32(A[k, 0]) * gt.xn32)[None, :] + (np.float32(A[k, 1]) * gt.yn32 + np.float32(A[k, 2]))[:, None]
+         for k in range(3)]
+    for k in range(3):
+        F[k] *= Z
+        F[k] += np.float32(b[k])
+    X, Y, W = F
+    inv = np.float32(1.0) / W
+    X *= inv
+    X *= np.float32(gt.fx)
+    X += np.float32(gt.cx)
+    Y *= inv
+    Y *= np.float32(gt.fy)
+    Y += np.float32(gt.cy)
+    inside = (X >= 0) & (X <= gt.w - 1) & (Y >= 0) & (Y <= gt.h - 1) & (W > 0) & ~sky
+    D1 = cv2.remap(depth1, X, Y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    limit = D1 * np.float32(1 + OCCLUSION_TOL_REL)
+    limit += np.float32(OCCLUSION_TOL_ABS_M)
+    return X, Y, inside & (D1 > 0) & (W <= limit)
+
+
+def test_truth_kernels_give_the_numpy_expressions_bit_for_bit():
+    # the tiny world with buildings and trees (depth from the render) and its vehicles, jittering
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 3, "world.buildings.count": 4,
+                                              "vehicles.count": 5})
+    gen = SceneGenerator(spec)
+    gt = gen.truth
+    surfaces, inputs = [], []
+    for i in range(3):
+        t = float(gen.path.t_s[i])
+        Ms = gen.vehicle_matrices(t)
+        _, depth = gen.renderer.render(gen.path.R[i], gen.path.C[i], Ms)
+        s = gt.surface(depth, gen.path.R[i], gen.path.C[i], Ms)
+        Z_ref, inst_ref = _reference_surface(gt, depth, gen.path.R[i], gen.path.C[i], Ms)
+        np.testing.assert_array_equal(s.Z, Z_ref)
+        np.testing.assert_array_equal(s.instances, inst_ref)
+        assert s.vehicle_bboxes == gt.vehicle_bboxes(gen.path.R[i], gen.path.C[i], Ms)
+        surfaces.append(s)
+        inputs.append(depth)
+    assert any(s.vehicle_pixels for s in surfaces) and np.any(np.isfinite(surfaces[0].Z))
+    for s0, s1, depth1 in zip(surfaces, surfaces[1:], inputs[1:]):
+        truth, shift = gt.pair(s0, s1)
+        A, b = s1.R.T @ s0.R, s1.R.T @ (s0.C - s1.C)
+        X, Y, valid_static = _reference_static_pair(gt, s0.Z, s0.instances, depth1, A, b)
+        static = s0.instances == 0
+        sky = ~np.isfinite(s0.Z)
+        xs, ys = np.meshgrid(gt.xs32, gt.ys32)
+        u, v = X - xs, Y - ys
+        u[sky], v[sky] = 0, 0
+        np.testing.assert_array_equal(truth.flow_camera[..., 0], u)
+        np.testing.assert_array_equal(truth.flow_camera[..., 1], v)
+        np.testing.assert_array_equal(truth.flow[static], truth.flow_camera[static])
+        np.testing.assert_array_equal(truth.valid[static], valid_static[static])
+        import cv2
+        m = cv2.mean(truth.flow_camera, mask=(truth.valid & static).view(np.uint8))
+        assert shift == (m[0], m[1])
