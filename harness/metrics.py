@@ -1051,26 +1051,42 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
     cols = [*keys, "kind", "value", "sum", "count", "unit", "higher_is_better", "n_rows", "hist"]
     if df.empty:
         return pd.DataFrame(columns=cols)
+    # the groups of df.groupby(keys, sort=True, dropna=False), walked as slices of one stable sort
+    # (a pandas group iteration costs ~2 ms a group: minutes on a suite's results)
+    gid = df.groupby(keys, sort=True, dropna=False).ngroup().to_numpy()
+    order = np.argsort(gid, kind="stable")  # rows of a group keep their order: the first row is the group's
+    bounds = np.flatnonzero(np.diff(gid[order])) + 1
+    starts = np.concatenate([[0], bounds])
+    ends = np.concatenate([bounds, [len(order)]])
+    first = order[starts]
+    key_cols = {k: df[k].to_numpy(object)[first] for k in keys}
+    sums_all = df["sum"].to_numpy(np.float64)[order]
+    counts_all = df["count"].to_numpy(np.float64)[order]
+    kind = df["kind"].to_numpy(object)[first]
+    unit = df["unit"].to_numpy(object)[first]
+    hib = df["higher_is_better"].to_numpy()[first]
+    metrics = key_cols["metric"]
+    hist_col = df["hist"].to_numpy(object) if "hist" in df.columns else None
     out = []
-    for key, g in df.groupby(keys, sort=True, dropna=False):
-        key = key if isinstance(key, tuple) else (key,)
-        rec = dict(zip(keys, key))
-        metric = rec["metric"]
-        sums = g["sum"].to_numpy(np.float64)
-        counts = g["count"].to_numpy(np.float64)
+    for g, (a, b) in enumerate(zip(starts, ends)):
+        rec = {k: key_cols[k][g] for k in keys}
+        metric = metrics[g]
+        sums = sums_all[a:b]
+        counts = counts_all[a:b]
         # math.fsum is exactly rounded, so the aggregate does not depend on the order of the rows
         # (which cell finished first); a row with items but no total (NaN) makes the total NaN
         # instead of silently dropping its sum while keeping its count
-        total = math.fsum(sums[counts != 0]) if len(sums) else 0.0
+        total = math.fsum(sums[counts != 0])
         count = math.fsum(counts)
         hist = None
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
+            texts = [] if hist_col is None else hist_col[order[a:b]]
             # one parse of the group's histograms joined: decode_hist sums repeated bins
-            hist = decode_hist(" ".join(h for h in g["hist"] if isinstance(h, str) and h))
+            hist = decode_hist(" ".join(h for h in texts if isinstance(h, str) and h))
             total = float("nan")
-        rec.update(kind=g["kind"].iloc[0], value=reduce_totals(metric, total, count, hist), sum=total,
-                   count=count, unit=g["unit"].iloc[0], higher_is_better=bool(g["higher_is_better"].iloc[0]),
-                   n_rows=len(g), hist=encode_hist(hist) if hist is not None else "")
+        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist), sum=total,
+                   count=count, unit=unit[g], higher_is_better=bool(hib[g]),
+                   n_rows=int(b - a), hist=encode_hist(hist) if hist is not None else "")
         out.append(rec)
     return pd.DataFrame(out, columns=cols)

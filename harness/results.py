@@ -115,6 +115,9 @@ def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
     out = {}
     for c, dt in SCHEMA.items():
         col = df[c]
+        if _has_dtype(col, dt):  # as read from our own parquet: nothing to convert (converting costs seconds)
+            out[c] = col.reset_index(drop=True)
+            continue
         try:
             if dt == "str":
                 col = col.astype(object).where(col.notna(), "").astype(str)
@@ -128,6 +131,16 @@ def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
             raise SchemaError(f"{source}: column {c!r} cannot be {dt}: {exc}") from None
         out[c] = col.reset_index(drop=True)
     return pd.DataFrame(out, columns=list(COLUMNS))
+
+
+def _has_dtype(col: pd.Series, dt: str) -> bool:
+    """``col`` already holds ``dt`` with nothing to fill: what the conversion in :func:`check_schema` would give."""
+    if dt == "str":
+        return isinstance(col.dtype, pd.StringDtype) and col.dtype == _STR_DTYPE and not col.hasnans
+    return str(col.dtype) == dt
+
+
+_STR_DTYPE = pd.Series([""]).astype(str).dtype
 
 
 def rows_to_frame(rows: Iterable[Mapping], **cell_columns) -> pd.DataFrame:
