@@ -148,8 +148,8 @@ def _as_bytes(v) -> bytes:
 
 def _has_dtype(col: pd.Series, dt: str) -> bool:
     """``col`` already holds ``dt`` with nothing to fill: what the conversion in :func:`check_schema` would give."""
-    if dt == "bytes":
-        return False  # an object column: checked value by value
+    if dt == "bytes":  # an object column: all bytes (a C-level scan), or checked value by value
+        return col.dtype == object and (len(col) == 0 or pd.api.types.infer_dtype(col, skipna=False) == "bytes")
     if dt == "str":
         return isinstance(col.dtype, pd.StringDtype) and col.dtype == _STR_DTYPE and not col.hasnans
     return str(col.dtype) == dt
