@@ -8,7 +8,7 @@ table and the command lines it ran. Run from the project root:
     /work/venv/bin/python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
                                               [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
     /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
-    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk]
+    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
     /work/venv/bin/python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
@@ -344,8 +344,10 @@ def cmd_cores(args: argparse.Namespace) -> None:
     work = Path(tempfile.mkdtemp(prefix="aerobench-scale-cores-"))
     cache, shown, rows = work / "cache", [], []
     size = tuple(int(v) for v in args.size.split("x"))
-    data = _speedup_suite(n_cells, args.frames, size)
-    data["pipelines"] = [args.pipeline]
+    pipes = args.pipeline.split(",")
+    data = _speedup_suite(-(-n_cells // len(pipes)), args.frames, size)  # seeds x pipelines >= n_cells
+    data["pipelines"] = pipes
+    n_cells = len(data["seeds"]) * len(pipes)
     suite = work / "suite.yaml"
     suite.write_text(yaml.safe_dump(data, sort_keys=False))
     try:
@@ -540,7 +542,8 @@ def main() -> None:
     s.add_argument("--cells", type=int, default=0, help="cells in the suite (default: 2 per worker at most)")
     s.add_argument("--frames", type=int, default=30)
     s.add_argument("--size", default="640x480")
-    s.add_argument("--pipeline", default="thesis-lk")
+    s.add_argument("--pipeline", default="thesis-lk",
+                   help="pipeline, or several comma-separated (each seed runs each: a mix of cell costs)")
     s.set_defaults(fn=cmd_cores)
     s = sub.add_parser("cost")
     s.add_argument("--preset", default="nominal")
