@@ -501,6 +501,12 @@ def cmd_cost(args: argparse.Namespace) -> None:
           f"one thread; first run (render or cache hit, + a dis cell) {render_s:.0f} s; "
           f"load average {os.getloadavg()[0]:.1f}\n")
     print(_table(rows, ("pipeline", "pairs", "wall_s", *keys, "rows", "parquet_MB", "hist_Mchar")))
+    cpu = sum(r["cpu_s"] for r in out)
+    wall = sum(r["wall_s"] for r in out)
+    print(f"\nsum over the pipelines: {cpu:.0f} CPU-s ({wall:.0f} s wall, so this process got {cpu / wall:.2f} of a core)."
+          f"\nA suite of --scenes {args.scenes} such scenes x these pipelines on --workers {args.workers}: cells "
+          f"~{args.scenes * cpu / args.workers / 60:.1f} min if each worker has a core of its own "
+          f"(CPU-s x scenes / workers; each process here also paid its imports, which a pool worker pays once)")
     _print_commands(shown)
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
@@ -551,6 +557,8 @@ def main() -> None:
     s.add_argument("--pairs", type=int, default=0, help="only the first N pairs (default: all)")
     s.add_argument("--cache", default=None, help="render cache (default: a temp folder, kept)")
     s.add_argument("--json", default=None, help="also write the figures to this file")
+    s.add_argument("--scenes", type=int, default=27, help="scenes of the suite to estimate (standard: 27)")
+    s.add_argument("--workers", type=int, default=2, help="workers of the suite to estimate")
     s.set_defaults(fn=cmd_cost)
     args = p.parse_args()
     args.fn(args)
