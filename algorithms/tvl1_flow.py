@@ -29,6 +29,12 @@ central differences inside and one-sided ones at the border; a zero ``|grad|^2``
 counts as 1. Arithmetic is float32 where scikit-image's is (constants rounded to
 float32, as NumPy does with Python scalars), the warp interpolates in float64 as
 SciPy's ``map_coordinates`` does.
+
+Speed: the kernels use numba's ``error_model="numpy"`` (a division by zero gives inf
+instead of raising, which lets the loops over the columns vectorise; no divisor here can
+be zero: ``1 + f1 |g| >= 1`` and ``|grad|^2`` is replaced by 1 where it is 0), and one
+fixed-point iteration is one sweep down the rows (:func:`_iteration`). Both change no
+value: the flow stays scikit-image's bit for bit on the pairs the tests compare.
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ _NLEVEL = 10
 _MIN_SIZE = 16
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _warp_gradient(I1, v, u, I1w, gr, gc):  # pragma: no cover - numba
     """``I1w`` = I1 sampled bilinearly at (row + v, col + u), edges replicated; ``gr, gc`` = np.gradient(I1w)."""
     h, w = I1.shape
@@ -88,38 +94,98 @@ def _warp_gradient(I1, v, u, I1w, gr, gc):  # pragma: no cover - numba
                 gc[i, j] = (I1w[i, j + 1] - I1w[i, j - 1]) * half
 
 
-@numba.njit(cache=True)
-def _tv_step(f, aux, p0, p1, f1, dt):  # pragma: no cover - numba
-    """One dual projection and primal update of one flow component, in place on ``f``, ``p0``, ``p1``.
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _tv_row(f, aux, p0, p1, i, f1, dt):  # pragma: no cover - numba
+    """One dual projection and primal update of row ``i`` of one flow component, in place.
 
-    Row by row, in two sweeps per row, which gives the result of whole-array steps: the
-    forward differences of row i read ``f`` on rows i and i+1, not yet updated; the
-    divergence of row i reads ``p`` on rows i and i-1, both updated already. Each sweep has
-    no dependence between columns, so it vectorises.
+    p <- (p - tau g) / (1 + (tau / theta) |g|), g = forward differences of ``f`` (0 past the
+    last row / column); then f = aux - div p (backward differences, p = 0 outside). Row i reads
+    ``f`` on rows i and i+1 (not yet updated in this step) and ``p`` on rows i (updated here)
+    and i-1 (updated before), which is what the whole-array step computes. The border cases
+    are peeled off the loops, so that the loops over the columns vectorise.
     """
     h, w = f.shape
     one = np.float32(1.0)
     zero = np.float32(0.0)
-    for i in range(h):
-        last = i == h - 1
-        for j in range(w):
-            fij = f[i, j]
-            g0 = zero if last else f[i + 1, j] - fij
-            g1 = f[i, j + 1] - fij if j < w - 1 else zero
+    if i < h - 1:
+        for j in range(w - 1):
+            g0 = f[i + 1, j] - f[i, j]
+            g1 = f[i, j + 1] - f[i, j]
             norm = np.float32(np.sqrt(g0 * g0 + g1 * g1)) * f1 + one
             p0[i, j] = (p0[i, j] - dt * g0) / norm
             p1[i, j] = (p1[i, j] - dt * g1) / norm
-        # w = w_aux + d, d = -div p: minus both components, plus the upper and left neighbours' (inside only)
-        for j in range(w):
-            d = -(p0[i, j] + p1[i, j])
-            if i > 0:
-                d += p0[i - 1, j]
-            if j > 0:
-                d += p1[i, j - 1]
-            f[i, j] = aux[i, j] + d
+        g0 = f[i + 1, w - 1] - f[i, w - 1]
+    else:
+        for j in range(w - 1):
+            g1 = f[i, j + 1] - f[i, j]
+            norm = np.float32(np.sqrt(zero * zero + g1 * g1)) * f1 + one
+            p0[i, j] = (p0[i, j] - dt * zero) / norm
+            p1[i, j] = (p1[i, j] - dt * g1) / norm
+        g0 = zero
+    norm = np.float32(np.sqrt(g0 * g0 + zero * zero)) * f1 + one
+    p0[i, w - 1] = (p0[i, w - 1] - dt * g0) / norm
+    p1[i, w - 1] = (p1[i, w - 1] - dt * zero) / norm
+    # d = -div p: minus both components, plus the upper and left neighbours' (inside only)
+    if i > 0:
+        f[i, 0] = aux[i, 0] + (-(p0[i, 0] + p1[i, 0]) + p0[i - 1, 0])
+        for j in range(1, w):
+            f[i, j] = aux[i, j] + ((-(p0[i, j] + p1[i, j]) + p0[i - 1, j]) + p1[i, j - 1])
+    else:
+        f[i, 0] = aux[i, 0] + (-(p0[i, 0] + p1[i, 0]))
+        for j in range(1, w):
+            f[i, j] = aux[i, j] + (-(p0[i, j] + p1[i, j]) + p1[i, j - 1])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _data_row(gr, gc, NI, rho0, f0, v, u, aux_v, aux_u, i):  # pragma: no cover - numba
+    """Row ``i`` of the data step: w_aux = w - rho grad / |grad|^2 where |rho| <= lambda theta |grad|^2,
+    else w - lambda theta sign(rho) grad; then w = w_aux (the TV step starts from it).
+
+    Both cases are computed and one is selected (the same values, without a branch in the loop).
+    """
+    w = v.shape[1]
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    for j in range(w):
+        a, b = gr[i, j], gc[i, j]
+        n = NI[i, j]
+        rho = rho0[i, j] + (a * v[i, j] + b * u[i, j])
+        s = f0 * (one if rho > zero else (-one if rho < zero else zero))
+        small = abs(rho) <= f0 * n
+        av = v[i, j] - (rho * a / n if small else s * a)
+        au = u[i, j] - (rho * b / n if small else s * b)
+        aux_v[i, j] = av
+        aux_u[i, j] = au
+        v[i, j] = av
+        u[i, j] = au
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _iteration(gr, gc, NI, rho0, f0, f1, dt, v, u, aux_v, aux_u, pv0, pv1, pu0, pu1):  # pragma: no cover
+    """One fixed-point iteration: the data step, then two TV steps of each component, in one sweep.
+
+    The whole-array steps run as a wavefront down the rows, so that the rows they touch are
+    still in cache: at step i, the data step of row i+1, the first TV step of row i, the
+    second of row i-1. Each reads only what the whole-array order would have given it: the
+    first TV step of row i needs the data step of rows i and i+1 (done) and its own p on row
+    i-1 (done, and not yet overwritten by the second TV step, which is one row behind); the
+    second TV step of row i-1 needs the first TV step's f on rows i-1 and i (done).
+    """
+    h = v.shape[0]
+    _data_row(gr, gc, NI, rho0, f0, v, u, aux_v, aux_u, 0)
+    for i in range(h):
+        if i + 1 < h:
+            _data_row(gr, gc, NI, rho0, f0, v, u, aux_v, aux_u, i + 1)
+        _tv_row(v, aux_v, pv0, pv1, i, f1, dt)
+        _tv_row(u, aux_u, pu0, pu1, i, f1, dt)
+        if i >= 1:
+            _tv_row(v, aux_v, pv0, pv1, i - 1, f1, dt)
+            _tv_row(u, aux_u, pu0, pu1, i - 1, f1, dt)
+    _tv_row(v, aux_v, pv0, pv1, h - 1, f1, dt)
+    _tv_row(u, aux_u, pu0, pu1, h - 1, f1, dt)
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _solve_level(I0, I1, v, u, attachment, tightness, num_warp, num_iter, tol):  # pragma: no cover - numba
     """scikit-image's ``_tvl1`` on one level, in place on ``v``, ``u`` (float32, (h, w))."""
     h, w = I0.shape
@@ -148,28 +214,10 @@ def _solve_level(I0, I1, v, u, attachment, tightness, num_warp, num_iter, tol): 
                 NI[i, j] = n if n != 0 else np.float32(1.0)
                 rho0[i, j] = I1w[i, j] - I0[i, j] - (gr[i, j] * v[i, j] + gc[i, j] * u[i, j])
         for it in range(num_iter):
-            # data step: w_aux = w - rho grad / |grad|^2, or w - lambda theta sign(rho) grad
-            for i in range(h):
-                for j in range(w):
-                    a, b = gr[i, j], gc[i, j]
-                    rho = rho0[i, j] + (a * v[i, j] + b * u[i, j])
-                    if abs(rho) <= f0 * NI[i, j]:
-                        aux_v[i, j] = v[i, j] - rho * a / NI[i, j]
-                        aux_u[i, j] = u[i, j] - rho * b / NI[i, j]
-                    else:
-                        s = f0 * np.float32(np.sign(rho))
-                        aux_v[i, j] = v[i, j] - s * a
-                        aux_u[i, j] = u[i, j] - s * b
-                    v[i, j] = aux_v[i, j]
-                    u[i, j] = aux_u[i, j]
-            if it == 0:
+            _iteration(gr, gc, NI, rho0, f0, f1, dt, v, u, aux_v, aux_u, pv0, pv1, pu0, pu1)
+            if it == 0:  # the data step of the first iteration: what scikit-image's flow_previous holds
                 first_v[:, :] = aux_v
                 first_u[:, :] = aux_u
-            # TV step, two dual iterations per component
-            for _k in range(2):
-                _tv_step(v, aux_v, pv0, pv1, f1, dt)
-            for _k in range(2):
-                _tv_step(u, aux_u, pu0, pu1, f1, dt)
         change = 0.0
         for i in range(h):
             for j in range(w):
