@@ -8,7 +8,8 @@ table and the command lines it ran. Run from the project root:
     /work/venv/bin/python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
                                               [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
     /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
-    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk]
+    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
+    /work/venv/bin/python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
   render cache, then again into a fresh run folder with the cache warm; wall times, and
@@ -31,6 +32,13 @@ table and the command lines it ran. Run from the project root:
   is missing is start-up, scheduling gaps, a serial tail or contention), and how long
   the driver's serial collection (``harness.results.collect_cells``: read, sort, write
   results.parquet, summary) takes on that run folder.
+- ``cost``: the cost model of one cell. Renders ``--preset`` (seed 1) once, then runs each
+  pipeline as one cell, in a fresh process each, exactly as a pool worker runs it, with a
+  clock on every part: the flow method (its own ``stage_ms``), the rest of the pipeline
+  (frame reading, global motion, filters, tracking), reading the ground truth, scoring
+  the pairs, scoring the sequence, the cell files, building and writing ``rows.parquet``;
+  with its size and the bytes of histograms. A suite's cell time is these figures summed
+  over its scenes and pipelines (``--json`` keeps them).
 """
 
 from __future__ import annotations
@@ -336,8 +344,10 @@ def cmd_cores(args: argparse.Namespace) -> None:
     work = Path(tempfile.mkdtemp(prefix="aerobench-scale-cores-"))
     cache, shown, rows = work / "cache", [], []
     size = tuple(int(v) for v in args.size.split("x"))
-    data = _speedup_suite(n_cells, args.frames, size)
-    data["pipelines"] = [args.pipeline]
+    pipes = args.pipeline.split(",")
+    data = _speedup_suite(-(-n_cells // len(pipes)), args.frames, size)  # seeds x pipelines >= n_cells
+    data["pipelines"] = pipes
+    n_cells = len(data["seeds"]) * len(pipes)
     suite = work / "suite.yaml"
     suite.write_text(yaml.safe_dump(data, sort_keys=False))
     try:
@@ -365,11 +375,150 @@ def cmd_cores(args: argparse.Namespace) -> None:
         shutil.rmtree(work, ignore_errors=True)
 
 
+# --------------------------------------------------------------------------- cost model
+
+
+def child_cost(seq_dir: str, pipeline_name: str, pairs: int) -> None:
+    """In this process: one cell of ``pipeline_name`` on ``seq_dir`` as the runner runs it, timed by stage.
+
+    Prints one JSON line: seconds in the pipeline (flow and the rest), the pair scoring, the
+    sequence scoring, the cell files, building the rows table and writing it, and its size.
+    """
+    import numpy as np
+
+    from algorithms.pipeline import get_pipeline
+    from harness import cell_artifacts as artifacts
+    from harness.executors import limit_threads
+    from harness.metrics import score_pair, score_sequence
+    from harness.results import rows_to_frame, write_table
+    from harness.runner import _Frames, _warm_up, point_seeds
+    from scenes import open_sequence
+
+    limit_threads(1)
+    seq = open_sequence(seq_dir)
+    pipeline = get_pipeline(pipeline_name)
+    _warm_up(pipeline)
+    frames = _Frames(seq)
+    if pairs:
+        class _Head:  # the first ``pairs + 1`` frames only
+            def __len__(self):
+                return min(len(frames), pairs + 1)
+
+            def __getitem__(self, i):
+                if i >= len(self):
+                    raise IndexError(i)
+                return frames[i]
+        frames = _Head()
+    t = dict.fromkeys(("pipeline", "flow", "score_pair", "truth_read", "score_sequence", "artifacts",
+                       "rows_to_frame", "write_table"), 0.0)
+    rows: list = []
+    work = Path(tempfile.mkdtemp(prefix="aerobench-cost-"))
+    n_pairs = 0
+    try:
+        it = pipeline.run(frames, seeds=point_seeds(seq.tracks))
+        while True:
+            t0 = time.perf_counter()
+            try:
+                est = next(it)
+            except StopIteration:
+                break
+            t["pipeline"] += time.perf_counter() - t0
+            if not hasattr(est, "flow_total"):
+                seq_est = est
+                continue
+            n_pairs += 1
+            t["flow"] += est.stage_ms.get("flow", 0.0) / 1000.0
+            t0 = time.perf_counter()
+            truth = seq.pair_truth(est.index)
+            t["truth_read"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            rows += score_pair(est, truth, frame=est.index)
+            t["score_pair"] += time.perf_counter() - t0
+            if est.index in (0, 10):
+                t0 = time.perf_counter()
+                artifacts.write_pair_flows(work, est.index, est.flow_total, est.flow_global)
+                t["artifacts"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rows += score_sequence(seq_est, seq.camera, seq.tracks)
+        t["score_sequence"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        artifacts.write_stabilisation(work, artifacts.stabilisation_table(seq_est, seq.camera))
+        artifacts.write_tracks(work, artifacts.tracks_table(seq_est, seq.tracks))
+        t["artifacts"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        table = rows_to_frame(rows, cell_id="x", scene="s", seed=1, pipeline=pipeline_name)
+        t["rows_to_frame"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        write_table(table, work / "rows.parquet")
+        t["write_table"] += time.perf_counter() - t0
+        size = (work / "rows.parquet").stat().st_size
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    t["pipeline_other"] = t["pipeline"] - t["flow"]
+    print(json.dumps({"pipeline_name": pipeline_name, "pairs": n_pairs, "rows": len(table),
+                      "rows_parquet_bytes": size, "seconds": t, "cpu_s": time.process_time(),
+                      "hist_chars": int(np.sum([len(r.get("hist") or "") for r in rows]))}))
+
+
+def cmd_cost(args: argparse.Namespace) -> None:
+    """Where a cell's time goes, per pipeline, on one rendered scene (seed 1), one process per cell."""
+    import yaml
+
+    from harness.suites import expand, parse_suite
+
+    shown: list[str] = []
+    cache = Path(args.cache) if args.cache else Path(tempfile.mkdtemp(prefix="aerobench-scale-cost-"))
+    suite = {"name": "cost", "scenes": [{"preset": args.preset}], "seeds": [1], "pipelines": ["dis"],
+             "picture_pairs": [0]}
+    path = cache / "cost-suite.yaml"
+    cache.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(suite))
+    t0 = time.perf_counter()
+    _cli(["run", str(path), "--out", str(cache / f"run-{os.getpid()}"), "--workers", "1", "--quiet", "--no-report"],
+         cache, shown)
+    render_s = time.perf_counter() - t0
+    from harness.runner import _sequence_dir
+
+    seq_dir = _sequence_dir(expand(parse_suite(suite))[0].variant, cache)
+    out = []
+    for name in args.pipelines.split(","):
+        cmd = [PY, str(Path(__file__).resolve()), "_cost", str(seq_dir), name, str(args.pairs)]
+        shown.append(" ".join(cmd))
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, env=_env(cache), capture_output=True, text=True, cwd=ROOT)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            sys.stderr.write(proc.stderr)
+            raise SystemExit(f"failed: {' '.join(cmd)}")
+        rec = json.loads(proc.stdout.strip().splitlines()[-1])
+        rec["wall_s"] = wall
+        out.append(rec)
+    keys = ("flow", "pipeline_other", "truth_read", "score_pair", "score_sequence", "artifacts", "rows_to_frame",
+            "write_table")
+    rows = [(r["pipeline_name"], r["pairs"], f"{r['wall_s']:.1f}", *(f"{r['seconds'][k]:.2f}" for k in keys),
+             r["rows"], f"{r['rows_parquet_bytes'] / 1e6:.2f}", f"{r['hist_chars'] / 1e6:.1f}") for r in out]
+    print(f"cost of one cell by stage: {args.preset} seed 1, {args.pairs or 'all'} pairs, one process per cell, "
+          f"one thread; first run (render or cache hit, + a dis cell) {render_s:.0f} s; "
+          f"load average {os.getloadavg()[0]:.1f}\n")
+    print(_table(rows, ("pipeline", "pairs", "wall_s", *keys, "rows", "parquet_MB", "hist_Mchar")))
+    cpu = sum(r["cpu_s"] for r in out)
+    wall = sum(r["wall_s"] for r in out)
+    print(f"\nsum over the pipelines: {cpu:.0f} CPU-s ({wall:.0f} s wall, so this process got {cpu / wall:.2f} of a core)."
+          f"\nA suite of --scenes {args.scenes} such scenes x these pipelines on --workers {args.workers}: cells "
+          f"~{args.scenes * cpu / args.workers / 60:.1f} min if each worker has a core of its own "
+          f"(CPU-s x scenes / workers; each process here also paid its imports, which a pool worker pays once)")
+    _print_commands(shown)
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+
+
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "_render":
         return child_render(sys.argv[2], sys.argv[3])
     if len(sys.argv) > 1 and sys.argv[1] == "_cell":
         return child_cell(sys.argv[2])
+    if len(sys.argv) > 1 and sys.argv[1] == "_cost":
+        return child_cost(sys.argv[2], sys.argv[3], int(sys.argv[4]))
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("smoke")
@@ -399,8 +548,18 @@ def main() -> None:
     s.add_argument("--cells", type=int, default=0, help="cells in the suite (default: 2 per worker at most)")
     s.add_argument("--frames", type=int, default=30)
     s.add_argument("--size", default="640x480")
-    s.add_argument("--pipeline", default="thesis-lk")
+    s.add_argument("--pipeline", default="thesis-lk",
+                   help="pipeline, or several comma-separated (each seed runs each: a mix of cell costs)")
     s.set_defaults(fn=cmd_cores)
+    s = sub.add_parser("cost")
+    s.add_argument("--preset", default="nominal")
+    s.add_argument("--pipelines", default="thesis-lk,thesis-hs,pyramidal-lk,pyramidal-hs,dis,farneback,tvl1")
+    s.add_argument("--pairs", type=int, default=0, help="only the first N pairs (default: all)")
+    s.add_argument("--cache", default=None, help="render cache (default: a temp folder, kept)")
+    s.add_argument("--json", default=None, help="also write the figures to this file")
+    s.add_argument("--scenes", type=int, default=27, help="scenes of the suite to estimate (standard: 27)")
+    s.add_argument("--workers", type=int, default=2, help="workers of the suite to estimate")
+    s.set_defaults(fn=cmd_cost)
     args = p.parse_args()
     args.fn(args)
 

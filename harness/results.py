@@ -10,9 +10,11 @@ Columns beyond docs/architecture.md:
 
 * ``kind``: "accuracy" or "timing" (the gate treats timings differently).
 * ``hist``: for quantile metrics (``epe_median``, ``epe_p95``) the row's EPE
-  histogram in the sparse text form of :func:`harness.metrics.encode_hist`
-  ("bin:count ..." over 0.01 px bins up to 100 px plus an overflow bin); empty
-  for every other metric. Aggregates of quantiles sum these histograms and read
+  histogram (0.01 px bins up to 100 px plus an overflow bin) as bytes in the
+  compact binary form of :func:`harness.metrics.encode_hist` (the counts of the
+  occupied bin range, zlib-compressed: about 0.5 kB for a 640x480 pair, where
+  schema v1's "bin:count ..." text took about 2.5 kB); empty (``b""``) for every
+  other metric. Aggregates of quantiles sum these histograms exactly and read
   the quantile off (within 0.005 px of the pooled value); ``value`` holds the
   exact per-frame quantile, ``sum`` is NaN.
 * ``schema_version``.
@@ -59,7 +61,7 @@ __all__ = [
     "RESULTS_FILE", "SUMMARY_FILE", "RUN_FILE", "ROWS_FILE",
 ]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: hist as compact binary (v1: text)
 RESULTS_FILE = "results.parquet"
 SUMMARY_FILE = "summary.csv"
 RUN_FILE = "run.json"
@@ -73,7 +75,7 @@ SCHEMA: dict[str, str] = {
     "frame": "Int64", "track_id": "Int64",
     "metric": "str", "region": "str", "motion": "str", "kind": "str",
     "value": "float64", "sum": "float64", "count": "float64",
-    "unit": "str", "higher_is_better": "bool", "hist": "str",
+    "unit": "str", "higher_is_better": "bool", "hist": "bytes",
     "status": "str", "error": "str",
     "config_hash": "str", "git_commit": "str", "git_dirty": "bool", "renderer": "str", "machine": "str",
     "schema_version": "int64",
@@ -84,7 +86,7 @@ CELL_COLUMNS = ("cell_id", "scene", "scene_hash", "seed", "pipeline", "pipeline_
                 "sweep_value", "status", "error", "config_hash", "git_commit", "git_dirty", "renderer",
                 "machine")
 SUMMARY_KEYS = ("pipeline", "scene", "sweep_param", "sweep_value")
-_DEFAULTS = {"str": "", "int64": 0, "float64": np.nan, "bool": False, "Int64": pd.NA}
+_DEFAULTS = {"str": "", "int64": 0, "float64": np.nan, "bool": False, "Int64": pd.NA, "bytes": b""}
 
 
 class ResultsError(ValueError):
@@ -115,11 +117,16 @@ def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
     out = {}
     for c, dt in SCHEMA.items():
         col = df[c]
+        if _has_dtype(col, dt):  # as read from our own parquet: nothing to convert (converting costs seconds)
+            out[c] = col.reset_index(drop=True)
+            continue
         try:
             if dt == "str":
                 col = col.astype(object).where(col.notna(), "").astype(str)
             elif dt == "bool":
                 col = col.fillna(False).astype(bool)
+            elif dt == "bytes":
+                col = pd.Series([_as_bytes(v) for v in col], index=col.index, dtype=object)
             elif dt == "Int64":
                 col = pd.to_numeric(col, errors="raise").astype("Int64")
             else:
@@ -128,6 +135,27 @@ def check_schema(df: pd.DataFrame, *, source: str = "table") -> pd.DataFrame:
             raise SchemaError(f"{source}: column {c!r} cannot be {dt}: {exc}") from None
         out[c] = col.reset_index(drop=True)
     return pd.DataFrame(out, columns=list(COLUMNS))
+
+
+def _as_bytes(v) -> bytes:
+    """A ``hist`` cell: bytes as they are; missing or "" (no histogram) -> b""; anything else is an error."""
+    if isinstance(v, (bytes, bytearray)):
+        return bytes(v)
+    if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA or (isinstance(v, str) and v == ""):
+        return b""
+    raise TypeError(f"expected bytes from harness.metrics.encode_hist, got {type(v).__name__} {str(v)[:40]!r}")
+
+
+def _has_dtype(col: pd.Series, dt: str) -> bool:
+    """``col`` already holds ``dt`` with nothing to fill: what the conversion in :func:`check_schema` would give."""
+    if dt == "bytes":  # an object column: all bytes (a C-level scan), or checked value by value
+        return col.dtype == object and (len(col) == 0 or pd.api.types.infer_dtype(col, skipna=False) == "bytes")
+    if dt == "str":
+        return isinstance(col.dtype, pd.StringDtype) and col.dtype == _STR_DTYPE and not col.hasnans
+    return str(col.dtype) == dt
+
+
+_STR_DTYPE = pd.Series([""]).astype(str).dtype
 
 
 def rows_to_frame(rows: Iterable[Mapping], **cell_columns) -> pd.DataFrame:

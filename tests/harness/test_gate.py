@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
 from harness import gate as G
+from harness import metrics as M
 from harness import results as R
 
 META = {"suite": "ci", "config_hash": "cfg", "provenance": {"machine": "box-A", "git_commit": "abc"}}
@@ -156,7 +158,7 @@ def _quantile_results(bin_index: int):
     """An epe_median row whose 100 pixels all fall in one 0.01 px bin (aggregate: the bin centre)."""
     row = {"metric": "epe_median", "frame": 0, "region": "all", "motion": "total", "kind": "accuracy",
            "value": (bin_index + 0.5) * 0.01, "sum": float("nan"), "count": 100, "unit": "px",
-           "higher_is_better": False, "hist": f"{bin_index}:100"}
+           "higher_is_better": False, "hist": M.encode_hist(np.bincount([bin_index], [100], minlength=M.HIST_NBINS))}
     return R.rows_to_frame([row], cell_id="c", scene="tiny", pipeline="thesis-lk", machine="box-A")
 
 

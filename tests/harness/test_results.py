@@ -32,6 +32,29 @@ def test_round_trip_keeps_values_and_dtypes(tmp_path):
     assert not list(tmp_path.glob(".*tmp"))  # no temporary file left behind
 
 
+def test_histograms_round_trip_compactly(tmp_path):
+    rng = np.random.default_rng(5)
+    epe = np.abs(rng.standard_t(2, 300_000)) * 0.5  # heavy tail: bins up to the overflow
+    h = M.epe_histogram(epe)
+    packed = M.encode_hist(h)
+    assert isinstance(packed, bytes) and len(packed) < len(" ".join(f"{b}:{c}" for b, c in zip(*np.nonzero(h), h[h > 0]))) / 3
+    rows = [{"metric": "epe_median", "region": "all", "motion": "total", "frame": 0, "value": 1.0, "sum": np.nan,
+             "count": float(h.sum()), "hist": packed}, {"metric": "epe_mean", "value": 1.0, "sum": 1.0, "count": 1.0}]
+    df = R.rows_to_frame(rows, cell_id="c1", scene="s", pipeline="lk")
+    R.write_table(df, tmp_path / "results.parquet")
+    back = R.read_results(tmp_path)
+    assert back["hist"].tolist() == [packed, b""]
+    np.testing.assert_array_equal(M.decode_hist(back["hist"][0]), h)
+
+
+def test_a_histogram_that_is_not_encode_hist_bytes_is_refused():
+    with pytest.raises(R.SchemaError, match="column 'hist' cannot be bytes: expected bytes from "
+                                            "harness.metrics.encode_hist, got str '3:100'"):
+        R.rows_to_frame([{"metric": "epe_median", "value": 0.0, "hist": "3:100"}])
+    with pytest.raises(ValueError, match="hist: not an encoded histogram"):
+        M.decode_hist(b"\x01\x04garbage-bytes")
+
+
 def test_older_or_foreign_tables_are_refused(tmp_path):
     df = _cell("c1", "lk", 0.5)
     pq.write_table(pa.Table.from_pandas(df, preserve_index=False), tmp_path / "results.parquet")
@@ -41,7 +64,7 @@ def test_older_or_foreign_tables_are_refused(tmp_path):
     t = pa.Table.from_pandas(old, preserve_index=False)
     t = t.replace_schema_metadata({b"aerobench.schema_version": b"0"})
     pq.write_table(t, tmp_path / "old.parquet")
-    with pytest.raises(R.SchemaError, match="schema v0, this aerobench reads v1"):
+    with pytest.raises(R.SchemaError, match="schema v0, this aerobench reads v2"):
         R.read_results(tmp_path / "old.parquet")
     with pytest.raises(R.SchemaError, match=r"missing column\(s\) \['kind'\]"):
         R.write_table(old, tmp_path / "x.parquet")

@@ -334,7 +334,7 @@ ROWS = [
         r"blocker/out"),
     Row("run-two-at-once", locked_run_dir, run_into_locked, 2,
         r"out: another aerobench run is writing into this folder"),
-    Row("results-older-schema", old_schema_run, gate_cli, 2, r"results\.parquet: results schema v0, this aerobench reads v1"),
+    Row("results-older-schema", old_schema_run, gate_cli, 2, r"results\.parquet: results schema v0, this aerobench reads v2"),
     Row("report-not-a-run", lambda tmp: None, lambda tmp, _: cli("report", tmp), 2, r"not a finished run folder"),
     # ---- gate (aerobench gate RUN --baseline FILE)
     Row("gate-missing-baseline", lambda tmp: make_gate_run(tmp, base_suite=None), gate_cli, 2,

@@ -140,7 +140,7 @@ def metric_rows(draw):
         metric = _AGG_METRICS[int(rng.integers(len(_AGG_METRICS)))]
         count = float(rng.integers(0, 5000))
         epe = rng.exponential(2.0, int(min(count, 300)))
-        hist = encode_hist(epe_histogram(epe)) if metric == "epe_median" else ""
+        hist = encode_hist(epe_histogram(epe)) if metric == "epe_median" else b""
         total = float(np.nan if metric == "epe_median" else rng.lognormal(0, 4) * (count > 0))
         out.append({"pipeline": "p", "scene": f"s{i % 3}", "metric": metric, "region": "all", "motion": "total",
                     "kind": "accuracy", "value": 0.0, "sum": total, "count": count, "unit": "px",
