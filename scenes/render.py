@@ -8,7 +8,6 @@ Never fork a process that holds a renderer (use the spawn start method).
 from __future__ import annotations
 
 import atexit
-import math
 import os
 import sys
 

@@ -17,6 +17,7 @@ import pytest
 
 from algorithms.horn_schunck_flow import horn_schunck
 from algorithms.lucas_kanade_flow import lucas_kanade
+from algorithms.tv_l1_flow import tv_l1
 from scenes.formats import read_flo
 
 EXTERNAL = Path(__file__).resolve().parents[3] / "shared" / "external"
@@ -39,6 +40,17 @@ def _load(name: str):
     if name == "Yosemite":
         known &= g0 > 0  # the black sky's ground truth is a placeholder
     return g0, g1, gt, known
+
+
+def _load_constant_flow(name: str):
+    """100x100 pairs with constant flow (1, -1)."""
+    d = EXTERNAL / "synthetic_vision_tp" / name
+    if not d.is_dir():
+        pytest.skip(f"external data missing: {d}")
+    g0 = cv2.imread(str(d / f"{name}9.png"), cv2.IMREAD_GRAYSCALE)
+    g1 = cv2.imread(str(d / f"{name}10.png"), cv2.IMREAD_GRAYSCALE)
+    gt = read_flo(d / f"correct_{name}.flo")
+    return g0, g1, gt, np.isfinite(gt).all(axis=-1)
 
 
 def _mean_epe(flow: np.ndarray, gt: np.ndarray, known: np.ndarray) -> float:
@@ -76,13 +88,19 @@ def test_small_periodic_and_square_pairs_do_not_alias(pair, name, method, params
     With four levels a 15 px window saw a 12 px coarsest image of the periodic
     mysine texture and locked onto the neighbouring period (21 px mean error).
     """
-    d = EXTERNAL / "synthetic_vision_tp" / pair
-    if not d.is_dir():
-        pytest.skip(f"external data missing: {d}")
-    g0 = cv2.imread(str(d / f"{pair}9.png"), cv2.IMREAD_GRAYSCALE)
-    g1 = cv2.imread(str(d / f"{pair}10.png"), cv2.IMREAD_GRAYSCALE)
-    gt = read_flo(d / f"correct_{pair}.flo")
-    known = np.isfinite(gt).all(axis=-1)
+    g0, g1, gt, known = _load_constant_flow(pair)
     # square: a flat square on a flat background, so only its edges carry motion
     limit_px = 0.05 if pair == "mysine" else 0.5
     assert _mean_epe(method(g0, g1, **params)[0], gt, known) <= limit_px
+
+
+@pytest.mark.parametrize("scene, limit_px", [("RubberWhale", 0.22), ("Yosemite", 0.13), ("mysine", 0.01),
+                                             ("square", 0.06)])
+def test_our_tv_l1_is_at_least_as_accurate_as_scikit_images(scene, limit_px):
+    """scikit-image's TV-L1 scores 0.26, 0.15, 0.007 and 0.047 px here (SOURCES.md: 0.27 / 0.14 on the
+    first two); ours, with its defaults, 0.188, 0.114, 0.001 and 0.047 px."""
+    loader = _load_constant_flow if scene in ("mysine", "square") else _load
+    g0, g1, gt, known = loader(scene)
+    flow, valid = tv_l1(g0, g1)
+    assert valid[known].mean() > 0.9
+    assert _mean_epe(flow, gt, known) <= limit_px

@@ -6,7 +6,6 @@ import copy
 import os
 
 import numpy as np
-import pytest
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 

@@ -11,11 +11,9 @@ old results file) follow the table as their own tests, with the same checks.
 from __future__ import annotations
 
 import contextlib
-import copy
 import errno
 import fcntl
 import io
-import json
 import os
 import re
 import shutil
