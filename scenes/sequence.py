@@ -12,8 +12,8 @@ or ``"flo"`` (Middlebury files ``flow/NNNNNN.flo`` and ``flow_camera/NNNNNN.flo`
 for tools that read them; folders written before the compact format have these).
 The reader reads both, bit for bit the same arrays.
 
-Files are encoded (PNG, zlib) and written by a few writer threads while the
-next frame renders: cv2 and zlib release the GIL. A writer's error is raised
+Files are encoded (PNG, zlib, zstd) and written by a few writer threads while the
+next frame renders: cv2, zlib and zstandard release the GIL. A writer's error is raised
 in the rendering thread at its next frame; the manifest is written only after
 every file has been written.
 """
