@@ -8,8 +8,8 @@ For each preset, side by side in one process (so machine load hits both alike):
 - ``flo``: the layout before issue 10: ``.flo`` flow and camera flow, PNG frames with
   zlib's default strategy and libpng's adaptive row filters, every file encoded and
   written in the rendering thread;
-- ``npz``: today's defaults: compact lossless flow (``flow/NNNNNN.npz``), PNG with the
-  RLE strategy and the Average row filter, files encoded by
+- ``npz``: today's defaults: compact lossless flow (``flow/NNNNNN.npz``), PNG with
+  Huffman coding only and the Average row filter, files encoded by
   :data:`scenes.sequence.WRITER_THREADS` writer threads.
 
 Reported per layout: MB of the whole folder (``frames/``, flow, masks, tables, preview,

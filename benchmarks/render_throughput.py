@@ -41,7 +41,12 @@ Measured (issue 13, 2-core machine shared with other jobs, load 4-5):
 --one-core``: render alone 36.6 frames/CPU-s, render + truth 29.0, whole render_sequence
 11.6 frames/CPU-s and 7.6 frames/s wall: file encoding (PNG frame ~16 ms, compact flow
 ~24 ms, masks ~2.5 ms a frame) costs more than render + truth, so on one core the
-sequence runs at about 0.32x the render alone.
+sequence runs at about 0.32x the render alone. Then compact flow codec 2 (zstd byte
+planes, ~11 ms a pair) and Huffman-only frame PNGs (~14-16 ms), 3 runs of ``--frames 60
+--runs 1 --only flat --one-core`` alternating with a checkout of 4a7bb3b: whole
+render_sequence 13.5 frames/CPU-s and 12.9 frames/s wall (runs 13.2-15.4) against 11.2
+and 11.1 (runs 10.7-12.4), 1.25x (per-run ratios 1.17-1.26); still about 0.4x the render
+alone: PNG deflate (~14 ms) and render + truth (~35 ms) are most of a frame's CPU.
 """
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ or ``"flo"`` (Middlebury files ``flow/NNNNNN.flo`` and ``flow_camera/NNNNNN.flo`
 for tools that read them; folders written before the compact format have these).
 The reader reads both, bit for bit the same arrays.
 
-Files are encoded (PNG, zlib) and written by a few writer threads while the
-next frame renders: cv2 and zlib release the GIL. A writer's error is raised
+Files are encoded (PNG, zlib, zstd) and written by a few writer threads while the
+next frame renders: cv2, zlib and zstandard release the GIL. A writer's error is raised
 in the rendering thread at its next frame; the manifest is written only after
 every file has been written.
 """
@@ -73,16 +73,21 @@ _SAMPLE_BYTES = 64 * 1024
 # 480 KB nominal, 550 vs 613 KB noisy; benchmarks/io_speed.py); the Average predictor on every
 # row instead of libpng's per-row choice among all five costs 0.6x the time for 1.06x the bytes
 # (nominal: 16.5 vs 26 ms, 405 vs 382 KB a frame; noisy: 15.4 vs 27.2 ms, 536 vs 535 KB;
-# process time on the loaded 2-core machine)
+# process time on the loaded 2-core machine); Huffman coding alone (no matching: the Average
+# predictor leaves little for it) instead of run-length matching: 0.88x the time for 1.05x the
+# bytes nominal (16.0 vs 18.3 ms, 426 vs 407 KB), 0.99x for the same bytes noisy (17.2 vs 17.4 ms,
+# 540 vs 541 KB; one core, medians of 30 frames; the deflate itself is the cost, PNG stays PNG)
 PNG_COMPRESSION = 1
-PNG_STRATEGY = "rle"
+PNG_STRATEGY = "huffman"
 PNG_FILTERS = "avg"
 # masks and instance ids: long runs of one value, no row prediction needed (~4x faster, ~2 kB)
 MASK_PNG = {"compression": 1, "strategy": "rle", "filters": "none"}
 # how ground-truth flow is stored: "npz" (compact, lossless, the default) or "flo" (Middlebury)
 FLOW_FORMATS = ("npz", "flo")
 # version of the folder layout; part of the render cache key, so a cache entry written in
-# another layout is never read as this one (2: compact flow, PNGs with the RLE strategy)
+# another layout is never read as this one (2: compact flow, PNGs with the RLE strategy;
+# since then, with the same layout: flow files of codec version 2 (zstd) and PNGs Huffman-coded
+# only, the same pixels and truth bit for bit, version-1 flow files still read)
 SEQUENCE_LAYOUT = 2
 # threads that encode and write files while the next frame renders
 WRITER_THREADS = 2

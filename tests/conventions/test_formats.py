@@ -126,13 +126,61 @@ def test_compact_flow_is_deterministic_small_and_a_plain_npz(tmp_path):
     assert len(data) < 0.25 * (len(encode_flo(flow)) + len(encode_flo(cam)))
     (tmp_path / "f.npz").write_bytes(data)
     with np.load(tmp_path / "f.npz") as z:  # any numpy opens it
-        assert sorted(z.files) == ["codec", "flow_camera_rowdelta", "flow_xor_bits", "flow_xor_index"]
+        assert sorted(z.files) == ["codec", "flow_camera_rowdelta_zstd", "flow_camera_shape", "flow_xor_bits",
+                                   "flow_xor_index"]
         assert z["codec"].item() == FLOW_NPZ_CODEC
-        assert z["flow_camera_rowdelta"].shape == (4, 2, 120, 160)
+        assert z["flow_camera_shape"].tolist() == [120, 160]
         assert z["flow_xor_index"].size == 10 * 14 * 2  # the moving box's pixels, both components
     back_flow, back_cam = read_flow_npz(tmp_path / "f.npz")
     np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
     np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
+
+
+def test_compact_flow_of_the_first_version_still_reads_bit_for_bit():
+    # data/flow_npz_v1.npz was written by the version-1 encoder (commit 4a7bb3b) from these fields
+    from scenes.formats import FLOW_NPZ_CODEC_V1, decode_flow_npz, encode_flow_npz, read_flow_npz
+
+    flow, cam = _smooth_pair(24, 32)
+    flow[1, 2] = np.nan
+    cam[3, 4, 1] = np.inf
+    cam[0, 0] = -0.0
+    path = Path(__file__).parent / "data" / "flow_npz_v1.npz"
+    with np.load(path) as z:
+        assert z["codec"].item() == FLOW_NPZ_CODEC_V1
+    back_flow, back_cam = read_flow_npz(path)
+    np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
+    np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
+    # and the version-1 writer, kept for this, still writes those very bytes
+    assert encode_flow_npz(flow, cam, codec=FLOW_NPZ_CODEC_V1) == path.read_bytes()
+    back_flow, back_cam = decode_flow_npz(encode_flow_npz(flow, cam))
+    np.testing.assert_array_equal(_bits(back_flow), _bits(flow))
+    np.testing.assert_array_equal(_bits(back_cam), _bits(cam))
+
+
+def test_compact_flow_with_a_damaged_zstd_frame_is_named_in_the_error(tmp_path):
+    import io
+    import zipfile
+
+    from scenes.formats import encode_flow_npz, read_flow_npz
+
+    flow, cam = _smooth_pair()
+    members = {}
+    with zipfile.ZipFile(io.BytesIO(encode_flow_npz(flow, cam))) as zf:
+        for info in zf.infolist():
+            members[info.filename] = zf.read(info)
+    frame = np.load(io.BytesIO(members["flow_camera_rowdelta_zstd.npy"]))
+    with zipfile.ZipFile(tmp_path / "bad.npz", "w") as zf:
+        for name, data in members.items():
+            if name == "flow_camera_rowdelta_zstd.npy":  # the frame without its last 8 bytes
+                buf = io.BytesIO()
+                np.save(buf, frame[:-8])
+                data = buf.getvalue()
+            zf.writestr(name, data)
+    with pytest.raises(FormatError, match=r"bad.npz: not a readable compact flow file \(ZstdError"):
+        read_flow_npz(tmp_path / "bad.npz")
+    with pytest.raises(ValueError, match=r"codec: expected one of aerobench-flow-npz-1, aerobench-flow-npz-2, "
+                                         r"got 'lz4'"):
+        encode_flow_npz(flow, cam, codec="lz4")
 
 
 def test_bad_compact_flow_files_are_named_in_the_error(tmp_path):
