@@ -56,49 +56,10 @@ def get_renderer(width_px: int, height_px: int):
                 f"Headless rendering needs EGL with Mesa: apt-get install {GL_SYSTEM_PACKAGES}; "
                 "and PYOPENGL_PLATFORM=egl") from err
         _install_frame_reader(r)
-        _cache_uniform_locations(pyrender)
         _RENDERERS[key] = r
         if not _GL_INFO:
             _GL_INFO.update(_query_gl_strings())
     return r
-
-
-_UNIFORM_LOCATIONS: dict[tuple[int, bytes | str], int] = {}
-
-
-def _cache_uniform_locations(pyrender) -> None:
-    """Let pyrender's shader programs look each uniform's location up once, not at every draw.
-
-    pyrender asks GL for the location of every uniform it sets (about 120 a frame of the
-    nominal world, 4 ms of the 40 ms render on llvmpipe through PyOpenGL). A location is fixed
-    for the life of a linked program, so it is cached per (program id, name); the cache of a
-    program is dropped when pyrender deletes it (an id may be reused). The GL calls that set
-    the values are pyrender's own, unchanged.
-    """
-    sp = pyrender.shader_program
-    if getattr(sp, "_aerobench_cached_locations", False):
-        return
-    lookup = sp.glGetUniformLocation
-
-    def get_location(program_id, name):
-        key = (int(program_id), name)
-        loc = _UNIFORM_LOCATIONS.get(key)
-        if loc is None:
-            loc = _UNIFORM_LOCATIONS[key] = lookup(program_id, name)
-        return loc
-
-    remove = sp.ShaderProgram._remove_from_context
-
-    def remove_from_context(self):
-        pid = self._program_id
-        if pid is not None:
-            for key in [k for k in _UNIFORM_LOCATIONS if k[0] == int(pid)]:
-                del _UNIFORM_LOCATIONS[key]
-        remove(self)
-
-    sp.glGetUniformLocation = get_location
-    sp.ShaderProgram._remove_from_context = remove_from_context
-    sp._aerobench_cached_locations = True
 
 
 def _install_frame_reader(offscreen) -> None:

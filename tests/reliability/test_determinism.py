@@ -75,3 +75,25 @@ def test_aggregate_is_exact_whatever_the_row_order():
         got = aggregate(shuffled, by=["pipeline"])
         assert got["value"].to_numpy().tobytes() == ref["value"].to_numpy().tobytes()
         assert got["sum"].to_numpy().tobytes() == ref["sum"].to_numpy().tobytes()
+
+
+def _second_frame(name: str, overrides: dict, out) -> np.ndarray:
+    import cv2
+
+    from scenes.sequence import render_sequence
+    from scenes.spec import load_scene_spec
+
+    return cv2.imread(str(render_sequence(load_scene_spec(name, overrides), out) / "frames" / "000001.png"))
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_a_frame_does_not_depend_on_what_the_process_rendered_before(tmp_path):
+    """Workers reuse one renderer for many scenes: `nominal` rendered after `realistic` (sun, shadow maps,
+    rolling-shutter bands: other shader programs) must give the pixels a fresh process gives. A cache of
+    uniform locations keyed by program once broke this: `standard` rendered near-black frames."""
+    two = {"image.n_frames": 2}
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as fresh:
+        expected = fresh.submit(_second_frame, "nominal", two, tmp_path / "fresh").result()
+    _second_frame("realistic", two, tmp_path / "before")
+    np.testing.assert_array_equal(_second_frame("nominal", two, tmp_path / "after"), expected)
