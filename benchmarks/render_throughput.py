@@ -36,8 +36,9 @@ that ``files`` measures render_sequence on one core.
 
 Measured (issue 13, 2-core machine shared with other jobs, load 4-5):
 ``--frames 20 --runs 5 --only flat --reference <worktree of ec6d630>``: flat nominal
-(render + truth) / render alone 0.856 (runs 0.843-0.861); this / ec6d630 render + truth
-1.137 (runs 1.020-1.246), render alone 0.873. ``--frames 60 --runs 3 --only flat
+(render + truth) / render alone 0.855 (runs 0.846-0.864); this / ec6d630 render + truth
+1.040 (runs 0.974-1.129), render alone 0.883 (measured again at load 1-4 after the uniform-location
+cache was reverted: it made frames depend on what the process rendered before; with it, 1.137). ``--frames 60 --runs 3 --only flat
 --one-core``: render alone 36.6 frames/CPU-s, render + truth 29.0, whole render_sequence
 11.6 frames/CPU-s and 7.6 frames/s wall: file encoding (PNG frame ~16 ms, compact flow
 ~24 ms, masks ~2.5 ms a frame) costs more than render + truth, so on one core the
