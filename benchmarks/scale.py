@@ -391,7 +391,8 @@ def child_cost(seq_dir: str, pipeline_name: str, pairs: int) -> None:
     from harness.executors import limit_threads
     from harness.metrics import score_pair, score_sequence
     from harness.results import rows_to_frame, write_table
-    from harness.runner import _Frames, _warm_up, point_seeds
+    from harness.cell_scoring import _Frames, point_seeds
+    from harness.cell_scoring import warm_up as _warm_up
     from scenes import open_sequence
 
     limit_threads(1)
