@@ -15,8 +15,10 @@ indexable of frames (:meth:`Pipeline.run`), streaming:
 
 Each pair's :class:`PairEstimate` is yielded as soon as its temporal window is
 complete (one pair later), then a final :class:`SequenceEstimate`. Frames are
-read with ``frames[i]`` when needed; at most two frames and three pairs of
-fields are held, whatever the sequence length.
+read with ``frames[i]`` when needed and converted to gray once for both passes
+(:class:`algorithms.shared_work.SharedWork`, bounded by bytes; several pipelines
+on the same frames share one, and with it pass 1 and the compensated frames);
+three pairs of fields are held, whatever the sequence length.
 
 Composition: with the shift ``s``, compensated frame ``I1'(x) = I1(x + s)`` and
 local flow ``w`` (``I1'(x + w) ~ I0(x)``) give ``total = s + w``. With a matrix
@@ -36,12 +38,13 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from algorithms.flow import FLOW_DTYPE, as_gray
+from algorithms.flow import FLOW_DTYPE
 from algorithms.global_motion import affine_global_motion, global_flow
 from algorithms.jitter import cumulative_path
 from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builtin_pipelines, pipeline_hash,
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
+from algorithms.shared_work import SharedWork
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
@@ -246,13 +249,18 @@ class Pipeline:
 
     # -- pass 1 -----------------------------------------------------------------------------
 
-    def _global_shifts(self, frames, n: int, correction: np.ndarray | None = None):
+    def _global_shifts(self, shared: SharedWork, n: int, correction: np.ndarray | None = None):
+        gm = self.config["global_motion"]
+        return shared.global_shifts(gm["method"], gm["params"], correction,
+                                    lambda: self._measure_shifts(shared, n, correction))
+
+    def _measure_shifts(self, shared: SharedWork, n: int, correction: np.ndarray | None):
         gm = self.config["global_motion"]
         fn, params = get_stage("global_motion", gm["method"]), gm["params"]
         shifts, valid, times = np.zeros((n - 1, 2)), np.zeros(n - 1, bool), np.zeros(n - 1)
 
         def load(i):
-            g = as_gray(frames[i], name=f"frames[{i}]")
+            g = shared.gray(i)
             if correction is not None:  # frame i displaced by correction[i]: I'(x) = I(x - c)
                 g, _, _ = _compensate(g, _translation(-correction[i]))
             return g
@@ -272,7 +280,7 @@ class Pipeline:
 
     # -- run ---------------------------------------------------------------------------------
 
-    def run(self, frames: Sequence, *, seeds: Sequence[tuple] | None = None
+    def run(self, frames: Sequence, *, seeds: Sequence[tuple] | None = None, shared: SharedWork | None = None
             ) -> Iterator[PairEstimate | SequenceEstimate]:
         """Run on ``frames`` (``len`` and ``frames[i]``), yielding a PairEstimate per pair, then a SequenceEstimate.
 
@@ -282,6 +290,11 @@ class Pipeline:
             Read on demand; at least two frames.
         seeds : sequence of (vehicle_id, x_px, y_px), optional
             Pixels of frame 0 for the thesis point tracker (``tracking.point``).
+        shared : SharedWork, optional
+            What the pipelines run on these same ``frames`` compute once (gray frames, pass-1
+            shifts, compensated frames; :mod:`algorithms.shared_work`). Without it the run has
+            one of its own, so a frame is still decoded once for both passes. The estimates
+            are the same, bit for bit, with or without it.
 
         Yields
         ------
@@ -295,6 +308,10 @@ class Pipeline:
         n = len(frames)
         if n < 2:
             raise ValueError(f"frames: expected at least 2 frames, got {n}")
+        if shared is None:
+            shared = SharedWork(frames)
+        elif shared.frames is not frames:
+            raise ValueError("shared: expected the SharedWork made for these frames (SharedWork(frames))")
         cfg = self.config
         totals: dict[str, float] = {}
         # every stage is resolved through algorithms.registry, the built-ins and plugins' alike
@@ -304,14 +321,14 @@ class Pipeline:
         point_tracker, multi_tracker = get_stage("tracking", "point"), get_stage("tracking", "multi")
 
         # pass 1: global shifts of all pairs, jitter over the whole path
-        shifts, shifts_valid, gm_ms = self._global_shifts(frames, n)
+        shifts, shifts_valid, gm_ms = self._global_shifts(shared, n)
         t0 = time.perf_counter()
         if cfg["jitter"] is not None:
             j = cfg["jitter"]
             jit = remove_jitter(
                 shifts, model=j["model"], window_frames=j["window_frames"], polyorder=j["polyorder"],
                 iterations=j["iterations"],
-                reestimate=(lambda corr: self._global_shifts(frames, n, corr)[0]) if j["iterations"] > 1 else None)
+                reestimate=(lambda corr: self._global_shifts(shared, n, corr)[0]) if j["iterations"] > 1 else None)
             cumulative, line, correction, jitter = (jit.cumulative_px, jit.flight_line_px, jit.correction_px,
                                                     jit.jitter_px)
         else:
@@ -345,7 +362,7 @@ class Pipeline:
             if comp["model"] == "none":
                 g1c, inside, fg = g1, np.ones(g0.shape, bool), global_flow(M, g0.shape)
             else:
-                g1c, fg, inside = _compensate(g1, M)
+                g1c, fg, inside = shared.compensated(t, comp["model"], M, lambda: _compensate(g1, M))
             ms["compensation"] = _ms(t0)
             t0 = time.perf_counter()
             w_local, valid = flow_fn(g0, g1c, **flow_params)
@@ -397,10 +414,10 @@ class Pipeline:
         # pass 2: pair by pair, a window of three pairs for the temporal filter
         window: list[dict] = []  # [pair t-1 (or nothing), pair t, pair t+1]
         prev_done: dict | None = None
-        g0 = as_gray(frames[0], name="frames[0]")
+        g0 = shared.gray(0)
         frame_shape = (int(g0.shape[0]), int(g0.shape[1]))
         for t in range(n - 1):
-            g1 = as_gray(frames[t + 1], name=f"frames[{t + 1}]")
+            g1 = shared.gray(t + 1)
             window.append(estimate_pair(t, g0, g1))
             g0 = g1
             if len(window) == 2:

@@ -1,6 +1,10 @@
-"""Score one cell: run its pipeline on its sequence pair by pair, score each pair at once, then the sequence.
+"""Score cells: run their pipelines on their sequence pair by pair, score each pair at once, then the sequence.
 
-Memory stays bounded by a few frames: the sequence is opened lazily, and every pair's
+:func:`score_cells` runs the cells of one sequence together, in lock-step: the
+pipelines share the decoded frames, pass 1 and compensation
+(:class:`algorithms.shared_work.SharedWork`), and each pair's ground truth is read
+once for all of them. :func:`score_cell` is one cell alone. Memory stays bounded: the
+sequence is opened lazily, gray frames are kept up to a byte budget, and every pair's
 arrays are dropped as soon as the pair is scored (and its flows written when it is a
 picture pair). What a cell is and where its files go is :mod:`harness.tasks`'.
 """
@@ -8,6 +12,7 @@ picture pair). What a cell is and where its files go is :mod:`harness.tasks`'.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +21,7 @@ import pandas as pd
 
 from harness import cell_artifacts as artifacts
 
-__all__ = ["score_cell", "point_seeds", "warm_up"]
+__all__ = ["score_cell", "score_cells", "CellOutcome", "point_seeds", "warm_up"]
 
 
 class _Frames:
@@ -88,33 +93,129 @@ def score_cell(payload: Mapping, tmp: Path) -> tuple[list[dict], str]:
     """Run one cell's pipeline on its sequence and score it; artifacts go into ``tmp``.
 
     Returns the metric rows (filtered to ``payload["metrics"]`` when given) and one line
-    naming the renderer of the sequence.
+    naming the renderer of the sequence. Raises what the cell raised.
     """
-    from algorithms.pipeline import Pipeline, SequenceEstimate
-    from harness.metrics import score_pair, score_sequence
+    (outcome,) = score_cells([payload], [tmp])
+    if outcome.error is not None:
+        raise outcome.error
+    return outcome.rows, outcome.renderer
+
+
+@dataclass
+class CellOutcome:
+    """What :func:`score_cells` gives per cell: its rows, or the exception that stopped it."""
+
+    rows: list[dict]
+    renderer: str  # one line naming the renderer of the sequence
+    error: BaseException | None
+    seconds: float  # wall time spent on this cell (its pipeline, scoring, files; shared work where it fell)
+
+
+class _CellRun:
+    """One cell of :func:`score_cells`: its pipeline's estimates as they come, its rows, its time."""
+
+    def __init__(self, payload: Mapping, tmp: Path, frames: Any, seeds: list, shared: Any):
+        from algorithms.pipeline import Pipeline
+
+        self.payload, self.tmp = payload, tmp
+        self.rows: list[dict] = []
+        self.seq_est = None
+        self.error: BaseException | None = None
+        self.pictures = set(payload["picture_pairs"])
+        self.seconds = 0.0
+        pipeline = Pipeline.from_dict(payload["pipeline_spec"])
+        warm_up(pipeline)
+        self.estimates = pipeline.run(frames, seeds=seeds, shared=shared)
+
+
+def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
+    """Run the cells of one sequence in lock-step and score them; artifacts go into their ``tmps``.
+
+    Every payload names the same ``sequence``. The pipelines share one
+    :class:`algorithms.shared_work.SharedWork` (frames decoded once, pass-1 shifts and
+    compensated frames computed once per distinct setting) and each pair's ground truth
+    is read once and scored against every pipeline's estimate of it; a pipeline's rows
+    are the rows it gives alone. A cell that raises stops alone (its outcome carries the
+    exception), the others go on. Returns one :class:`CellOutcome` per payload, in order.
+    """
+    import time
+
+    from algorithms.pipeline import SequenceEstimate
+    from algorithms.shared_work import SharedWork
+    from harness.metrics import score_pair
     from scenes import open_sequence
 
-    seq = open_sequence(payload["sequence"])
-    pipeline = Pipeline.from_dict(payload["pipeline_spec"])
-    warm_up(pipeline)
-    pictures = set(payload["picture_pairs"])
-    rows: list[dict] = []
-    seq_est = None
-    for est in pipeline.run(_Frames(seq), seeds=point_seeds(seq.tracks)):
-        if isinstance(est, SequenceEstimate):  # comes last
-            seq_est = est
+    if len(payloads) != len(tmps) or not payloads:
+        raise ValueError(f"score_cells: expected as many folders as payloads (>= 1), got {len(tmps)} "
+                         f"for {len(payloads)}")
+    paths = {str(p["sequence"]) for p in payloads}
+    if len(paths) != 1:
+        raise ValueError(f"score_cells: expected the cells of one sequence, got {sorted(paths)}")
+    seq = open_sequence(paths.pop())
+    frames = _Frames(seq)
+    shared = SharedWork(frames)
+    seeds = point_seeds(seq.tracks)
+    runs: list[_CellRun | BaseException] = []
+    for payload, tmp in zip(payloads, tmps):
+        t0 = time.perf_counter()
+        try:
+            runs.append(_CellRun(payload, tmp, frames, seeds, shared))
+            runs[-1].seconds += time.perf_counter() - t0
+        except Exception as exc:  # an invalid pipeline fails its cell only
+            runs.append(exc)
+    live = [r for r in runs if isinstance(r, _CellRun)]
+    truth_of: dict[int, Any] = {}  # the truth of the pair being scored (lock-step: one pair at a time)
+    while live:
+        for run in list(live):
+            t0 = time.perf_counter()
+            try:
+                est = next(run.estimates, None)
+                if est is None:
+                    live.remove(run)
+                elif isinstance(est, SequenceEstimate):  # comes last
+                    run.seq_est = est
+                else:
+                    if est.index not in truth_of:
+                        truth_of.clear()
+                        truth_of[est.index] = seq.pair_truth(est.index)
+                    run.rows += _as_rows(score_pair(est, truth_of[est.index], frame=est.index))
+                    if est.index in run.pictures:
+                        artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
+                del est  # the arrays of a pair live no longer than its scoring
+            except Exception as exc:
+                run.error = exc
+                live.remove(run)
+            run.seconds += time.perf_counter() - t0
+    truth_of.clear()
+    renderer = _renderer_of(seq.meta or {})
+    out: list[CellOutcome] = []
+    for run in runs:
+        if isinstance(run, BaseException):
+            out.append(CellOutcome([], renderer, run, 0.0))
             continue
-        truth = seq.pair_truth(est.index)
-        rows += _as_rows(score_pair(est, truth, frame=est.index))
-        if est.index in pictures:
-            artifacts.write_pair_flows(tmp, est.index, est.flow_total, est.flow_global)
-        del est, truth  # the arrays of a pair live no longer than its scoring
-    if seq_est is None:
+        try:
+            if run.error is not None:
+                raise run.error
+            out.append(CellOutcome(_finish(run, seq), renderer, None, run.seconds))
+        except Exception as exc:
+            out.append(CellOutcome([], renderer, exc, run.seconds))
+    return out
+
+
+def _finish(run: _CellRun, seq: Any) -> list[dict]:
+    """The sequence rows and files of a cell whose pipeline ran to the end; its rows, filtered."""
+    import time
+
+    from harness.metrics import score_sequence
+
+    t0 = time.perf_counter()
+    if run.seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
-    rows += _as_rows(score_sequence(seq_est, seq.camera, seq.tracks))
-    artifacts.write_stabilisation(tmp, artifacts.stabilisation_table(seq_est, seq.camera))
-    artifacts.write_tracks(tmp, artifacts.tracks_table(seq_est, seq.tracks))
-    if payload["metrics"] is not None:
-        keep = set(payload["metrics"])
+    rows = run.rows + _as_rows(score_sequence(run.seq_est, seq.camera, seq.tracks))
+    artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
+    artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))
+    if run.payload["metrics"] is not None:
+        keep = set(run.payload["metrics"])
         rows = [r for r in rows if r["metric"] in keep]
-    return rows, _renderer_of(seq.meta or {})
+    run.seconds += time.perf_counter() - t0
+    return rows

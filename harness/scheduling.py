@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 import sys
 from collections.abc import Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, wait
@@ -18,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from harness.suites import Cell, SceneVariant, Suite
-from harness.tasks import cell_payload, cell_task, render_task
+from harness.tasks import cell_payload, cell_task, cells_task, render_task
 
-__all__ = ["RETRY_ROUNDS", "execute", "cell_cost", "scene_cost", "say"]
+__all__ = ["RETRY_ROUNDS", "execute", "cell_cost", "scene_cost", "cell_groups", "groups_per_scene", "say"]
 
 
 def say(progress: bool, msg: str) -> None:
@@ -50,6 +51,34 @@ def cell_cost(cell: Cell) -> float:
     flow = cell.pipeline_spec.get("flow") if isinstance(cell.pipeline_spec, Mapping) else None
     method = flow.get("method") if isinstance(flow, Mapping) else None
     return scene_cost(cell.variant) * flow_cost(str(method))
+
+
+def groups_per_scene(n_scenes: int, n_cells: int, workers: int) -> int:
+    """How many tasks a scene's ``n_cells`` cells are split into: enough for two tasks a worker.
+
+    One task per scene shares the most (frames, pass 1, truth read once); a suite of
+    fewer scenes than twice the workers splits each scene so that no worker idles.
+    """
+    if n_scenes < 1 or n_cells < 1 or workers < 1:
+        raise ValueError(f"expected positive counts, got {n_scenes} scenes, {n_cells} cells, {workers} workers")
+    return max(1, min(n_cells, math.ceil(2 * workers / n_scenes)))
+
+
+def cell_groups(cells: list[Cell], n_groups: int) -> list[list[Cell]]:
+    """``cells`` (of one scene) in ``n_groups`` groups of about equal :func:`cell_cost`, longest first.
+
+    Longest cell first to the cheapest group (LPT); inside a group cells keep the suite's order.
+    """
+    n_groups = max(1, min(n_groups, len(cells)))
+    order = {id(c): k for k, c in enumerate(cells)}
+    groups: list[list[Cell]] = [[] for _ in range(n_groups)]
+    load = [0.0] * n_groups
+    for c in sorted(cells, key=lambda c: -cell_cost(c)):  # stable: ties keep the suite's order
+        k = min(range(n_groups), key=lambda g: (load[g], g))
+        groups[k].append(c)
+        load[k] += cell_cost(c)
+    groups = [sorted(g, key=lambda c: order[id(c)]) for g in groups if g]
+    return sorted(groups, key=lambda g: -sum(cell_cost(c) for c in g))
 
 
 # --------------------------------------------------------------------------- scheduling
@@ -163,37 +192,48 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
     """Run ``work`` on one executor; returns what was lost with a dead worker (to retry).
 
     Scheduling: renders go first, largest scene first (they unblock cells); a scene's
-    cells become ready when its render returns; whenever a worker frees up, the longest
-    ready cell (:func:`cell_cost`) is handed out, so the run does not end on a long cell
-    started last while the other workers idle.
+    cells become ready when its render returns, as :func:`groups_per_scene` tasks of
+    cells run together (:func:`harness.tasks.cells_task`); whenever a worker frees up,
+    the longest ready task (sum of :func:`cell_cost`) is handed out, so the run does not
+    end on a long task started last while the other workers idle.
     """
-    from harness.executors import open_executor
+    from harness.executors import default_workers, open_executor
 
     lost = _Work(renders=[], cells=[], rendered=work.rendered, reused=work.reused,
                  render_failed=work.render_failed)
     bar = ctx["bar"]
     limit = _in_flight_limit(executor, workers)
     renders = sorted(work.renders, key=lambda k: -scene_cost(ctx["variants"][k]))
-    ready: list[tuple[float, int, tuple[Cell, dict]]] = []  # a heap: the longest cell on top
+    ready: list[tuple[float, int, list[tuple[Cell, dict]]]] = []  # a heap: the longest task on top
     order = itertools.count()  # ties keep the suite's order
+    scenes = {_variant_key(c.variant) for c, _ in work.cells} | set(work.renders)
+    n_workers = workers or default_workers()
 
-    def make_ready(item: tuple[Cell, dict]) -> None:
-        heapq.heappush(ready, (-cell_cost(item[0]), next(order), item))
+    def make_ready(items: list[tuple[Cell, dict]]) -> None:
+        """Cells of one scene, ready to run: split into tasks and queued."""
+        render = {id(c): r for c, r in items}
+        n_groups = groups_per_scene(len(scenes), len(items), n_workers)
+        for group in cell_groups([c for c, _ in items], n_groups):
+            heapq.heappush(ready, (-sum(cell_cost(c) for c in group), next(order),
+                                   [(c, render[id(c)]) for c in group]))
 
+    by_scene: dict[str, list[tuple[Cell, dict]]] = {}
     for item in work.cells:
-        make_ready(item)
+        by_scene.setdefault(_variant_key(item[0].variant), []).append(item)
+    for items in by_scene.values():
+        make_ready(items)
     with open_executor(executor, workers=workers, scheduler=scheduler) as pool:
         pending: dict[Future, tuple[str, Any]] = {}
 
         def fill() -> None:
-            """Hand out tasks until the in-flight limit: renders first, then the longest cell."""
+            """Hand out tasks until the in-flight limit: renders first, then the longest cells."""
             while renders or ready:
                 if limit is not None and len(pending) >= limit:
                     return
                 if renders:
                     submit("render", renders.pop(0))
                 else:
-                    submit("cell", heapq.heappop(ready)[2])
+                    submit("cells", heapq.heappop(ready)[2])
 
         def submit(kind: str, item: Any) -> None:
             try:
@@ -201,9 +241,9 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                     v = ctx["variants"][item]
                     fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"])
                 else:
-                    fut = pool.submit(cell_task, _cell_payload(item[0], item[1], ctx))
+                    fut = pool.submit(cells_task, [_cell_payload(c, r, ctx) for c, r in item])
             except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor
-                (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                (lost.renders.append(item) if kind == "render" else lost.cells.extend(item))
                 return
             pending[fut] = (kind, item)
 
@@ -215,19 +255,21 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                 try:
                     result = fut.result()
                 except Exception:  # our tasks record their own failures: this is a lost worker
-                    (lost.renders.append(item) if kind == "render" else lost.cells.append(item))
+                    (lost.renders.append(item) if kind == "render" else lost.cells.extend(item))
                     continue
-                bar.update(1)
                 if kind == "render":
+                    bar.update(1)
                     if result["error"]:
                         lost.render_failed += 1
                     elif result["reused"]:
                         lost.reused += 1
                     else:
                         lost.rendered += 1
-                    for c in ctx["by_scene"][item]:
-                        make_ready((c, result))
-                elif result["status"] != "ok" and ctx["progress"]:
-                    bar.write(f"cell {result['cell_id']} failed: {result['error']}", file=sys.stderr)
+                    make_ready([(c, result) for c in ctx["by_scene"][item]])
+                else:
+                    bar.update(len(result))
+                    for r in result:
+                        if r["status"] != "ok" and ctx["progress"]:
+                            bar.write(f"cell {r['cell_id']} failed: {r['error']}", file=sys.stderr)
             fill()  # after a broken pool, every submit lands in ``lost`` and ``pending`` empties
     return lost

@@ -4,11 +4,12 @@ Any :class:`concurrent.futures.Executor` (local processes or Dask) can run them:
 
 1. :func:`render_task`, one per distinct scene variant: ``scenes.cached_sequence``
    renders into the shared cache, or finds the sequence already there.
-2. :func:`cell_task`, one per (scene variant, seed, pipeline), on the payload
-   :func:`cell_payload` builds: scores the cell (:func:`harness.cell_scoring.score_cell`),
-   writes its rows and artifacts into a temporary folder and renames it to
-   ``cells/<cell_id>/``. A cell that raises is recorded (``status = "failed"`` with its
-   error) and the run goes on.
+2. :func:`cells_task`, on the payloads (:func:`cell_payload`) of cells that share a
+   rendered sequence, usually all cells of a scene variant: runs them together
+   (:func:`harness.cell_scoring.score_cells`: frames, pass 1 and each pair's truth
+   computed once), writes each cell's rows and artifacts into a temporary folder and
+   renames it to ``cells/<cell_id>/``. A cell that raises is recorded (``status =
+   "failed"`` with its error) and the others go on. :func:`cell_task` is one cell.
 
 A cell's results depend only on its payload (no shared RNG).
 """
@@ -26,11 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from harness import cell_artifacts as artifacts
-from harness.cell_scoring import score_cell
+from harness.cell_scoring import CellOutcome, score_cells
 from harness.results import ROWS_FILE, rows_to_frame, write_table
 from harness.suites import Cell
 
-__all__ = ["render_task", "cell_task", "cell_payload"]
+__all__ = ["render_task", "cell_task", "cells_task", "cell_payload"]
 
 
 def _prepare_worker() -> None:
@@ -103,32 +104,76 @@ def cell_task(payload: Mapping) -> dict:
 
     Returns a small summary dict (``cell_id``, ``status``, ``error``, ``rows``).
     """
+    return cells_task([payload])[0]
+
+
+def cells_task(payloads: list[Mapping]) -> list[dict]:
+    """Run, score and write cells of one sequence together (:func:`harness.cell_scoring.score_cells`).
+
+    Each cell gets its own folder exactly as :func:`cell_task` writes it; a cell that
+    fails is recorded and the others go on. Never raises for a failure of a cell.
+    Returns one summary dict per payload, in order.
+    """
     _prepare_worker()
-    cells_dir = Path(payload["cells_dir"])
-    final = cells_dir / payload["cell_id"]
-    tmp = cells_dir / f".tmp-{payload['cell_id']}-{uuid.uuid4().hex[:8]}"
-    tmp.mkdir(parents=True)
     t0 = time.perf_counter()
-    status, error, tb, renderer = "ok", "", "", ""
-    try:
-        _import_plugins(payload.get("imports", ()))
-        if payload.get("render_error"):
-            raise RuntimeError(payload["render_error"])
-        rows, renderer = score_cell(payload, tmp)
-        if not rows:
-            raise RuntimeError("the cell produced no result rows (no metric applies?)")
-    except Exception as exc:
-        status, error, tb = "failed", f"{type(exc).__name__}: {exc}", traceback.format_exc()
+    todo: list[tuple[Mapping, Path]] = []
+    failed: dict[str, tuple[BaseException, str]] = {}  # cell_id -> (error, traceback)
+    tmps: dict[str, Path] = {}
+    for payload in payloads:
+        cells_dir = Path(payload["cells_dir"])
+        tmp = cells_dir / f".tmp-{payload['cell_id']}-{uuid.uuid4().hex[:8]}"
+        tmp.mkdir(parents=True)
+        tmps[payload["cell_id"]] = tmp
+        try:
+            _import_plugins(payload.get("imports", ()))
+            if payload.get("render_error"):
+                raise RuntimeError(payload["render_error"])
+            todo.append((payload, tmp))
+        except Exception as exc:
+            failed[payload["cell_id"]] = (exc, traceback.format_exc())
+    outcomes: dict[str, CellOutcome] = {}
+    if todo:
+        try:
+            for (payload, _), outcome in zip(todo, score_cells([p for p, _ in todo], [t for _, t in todo])):
+                outcomes[payload["cell_id"]] = outcome
+        except Exception as exc:  # the sequence itself cannot be read: every cell of it fails
+            tb = traceback.format_exc()
+            for payload, _ in todo:
+                failed[payload["cell_id"]] = (exc, tb)
+    shared_s = (time.perf_counter() - t0) - sum(o.seconds for o in outcomes.values())
+    summaries = []
+    for payload in payloads:
+        cid = payload["cell_id"]
+        outcome = outcomes.get(cid)
+        seconds = outcome.seconds if outcome is not None else 0.0
+        if outcome is not None and outcome.error is not None:
+            failed[cid] = (outcome.error, "".join(traceback.format_exception(outcome.error)))
+        elif outcome is not None and not outcome.rows:
+            failed[cid] = (RuntimeError("the cell produced no result rows (no metric applies?)"), "")
+        summaries.append(_write_cell(payload, tmps[cid], outcome, failed.get(cid),
+                                     seconds + max(shared_s, 0.0) / len(payloads)))
+    return summaries
+
+
+def _write_cell(payload: Mapping, tmp: Path, outcome: CellOutcome | None,
+                failure: tuple[BaseException, str] | None, elapsed_s: float) -> dict:
+    """Write a cell's rows, info (and error) into ``tmp`` and rename it to ``cells/<cell_id>/``."""
+    if failure is None:
+        status, error, rows, renderer = "ok", "", outcome.rows, outcome.renderer
+    else:
+        exc, tb = failure
+        status, error = "failed", f"{type(exc).__name__}: {exc}"
         rows = [{"metric": "cell_failed", "value": math.nan, "sum": math.nan, "count": 0.0}]
+        renderer = outcome.renderer if outcome is not None else ""
         artifacts.write_error(tmp, tb + payload.get("render_traceback", ""))
     table = rows_to_frame(rows, **_cell_columns(payload), renderer=renderer, status=status, error=error)
     write_table(table, tmp / ROWS_FILE)
     artifacts.write_cell_info(tmp, {
         "cell_id": payload["cell_id"], "config_hash": payload["config_hash"], "status": status,
-        "error": error, "rows": len(table), "elapsed_s": round(time.perf_counter() - t0, 3),
+        "error": error, "rows": len(table), "elapsed_s": round(elapsed_s, 3),
         "scene": payload["scene"], "seed": payload["seed"], "pipeline": payload["pipeline"],
     })
-    _rename_into_place(tmp, final)
+    _rename_into_place(tmp, Path(payload["cells_dir"]) / payload["cell_id"])
     return {"cell_id": payload["cell_id"], "status": status, "error": error, "rows": len(table)}
 
 

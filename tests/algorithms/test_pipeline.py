@@ -11,6 +11,7 @@ from algorithms.jitter import fit_flight_path, remove_jitter
 from algorithms.pipeline import _compensate, _compose
 from algorithms.pipeline import PIPELINES, PairEstimate, Pipeline, PipelineError, SequenceEstimate, get_pipeline
 from algorithms.registry import FLOW_METHODS, register_flow
+from algorithms.shared_work import SharedWork
 
 SQUARE = 255.0  # the moving square's gray value; the texture stays below it
 SIZE = 80
@@ -198,26 +199,68 @@ class _Tracked(np.ndarray):
     pass
 
 
-def _peak_bytes(n: int) -> int:
+def _peak_bytes(n: int, max_bytes: int | None = None) -> int:
     frames = Frames(n)
     p = Pipeline.from_dict(dict(BASE, tracking={"point": False, "multi": None}))
+    shared = SharedWork(frames, max_bytes=max_bytes) if max_bytes is not None else None
     gc.collect()
     tracemalloc.start()
-    for _ in p.run(frames):
+    for _ in p.run(frames, shared=shared):
         pass  # the consumer keeps nothing
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak  # the ground texture was allocated before tracing started
 
 
-def test_streaming_reads_each_frame_a_bounded_number_of_times_and_memory_does_not_grow():
+def test_streaming_reads_each_frame_once_and_memory_is_bounded_by_the_gray_frames_kept():
     frames = _Guarded(12)
     for _ in Pipeline.from_dict(BASE).run(frames):
         gc.collect()
-    assert frames.reads == 2 * 12  # pass 1 and pass 2 read each frame once
-    assert frames.max_alive <= 2
-    small, large = _peak_bytes(6), _peak_bytes(30)
+    assert frames.reads == 12  # decoded once; pass 2 takes the gray frame pass 1 kept
+    assert frames.max_alive <= 2  # the pipeline keeps gray copies, never the frames it was handed
+    # with room for two gray frames only, memory does not grow with the sequence's length
+    h, w = Frames(1)[0].shape[:2]
+    one_frame = h * w * 4
+    small, large = _peak_bytes(6, 2 * one_frame), _peak_bytes(30, 2 * one_frame)
     assert large < 1.3 * small, (small, large)
+    # by default every gray frame of a short sequence is kept: it grows by about a frame a frame
+    assert _peak_bytes(30) > _peak_bytes(6) + 20 * one_frame
+
+
+def test_pipelines_sharing_work_give_the_estimates_each_gives_alone():
+    """Shared gray frames, pass-1 shifts and compensated frames change no number (lock-step, as the runner runs)."""
+    frames = Frames(7)
+    descs = [dict(BASE, name="a"), dict(BASE, name="b", flow={"method": "horn_schunck", "params": {"levels": 2}}),
+             dict(BASE, name="c", global_motion={"method": "ncc_global_motion", "params": {"subpixel": False}})]
+    alone = [list(Pipeline.from_dict(d).run(frames, seeds=[(1, 30.0, 30.0)])) for d in descs]
+    shared = SharedWork(frames)
+    runs = [Pipeline.from_dict(d).run(frames, seeds=[(1, 30.0, 30.0)], shared=shared) for d in descs]
+    together: list[list] = [[] for _ in descs]
+    for _ in range(len(alone[0])):
+        for k, it in enumerate(runs):
+            together[k].append(next(it))
+    for a_run, t_run in zip(alone, together):
+        for a, t in zip(a_run[:-1], t_run[:-1]):
+            for name in ("flow_total", "flow_local", "flow_filtered", "flow_global", "valid", "motion_mask",
+                         "global_shift_px"):
+                assert np.array_equal(getattr(a, name), getattr(t, name)), name
+        np.testing.assert_array_equal(a_run[-1].shifts_px, t_run[-1].shifts_px)
+        assert a_run[-1].tracks.equals(t_run[-1].tracks)
+    assert shared.misses["shifts"] == 2 and shared.hits["shifts"] == 1  # a and b measure the same shifts
+    assert shared.misses["gray"] == len(frames)
+    assert shared.hits["compensated"] >= 1
+
+
+def test_shared_work_hands_out_copies_and_refuses_other_frames():
+    frames = Frames(3)
+    shared = SharedWork(frames)
+    g = shared.gray(1)
+    g[:] = -1
+    assert shared.gray(1).min() >= 0  # a caller writing into its frame changes nobody else's
+    with pytest.raises(ValueError, match="the SharedWork made for these frames"):
+        next(Pipeline.from_dict(BASE).run(Frames(3), shared=shared))
+    with pytest.raises(ValueError, match="max_bytes: expected >= 0"):
+        SharedWork(frames, max_bytes=-1)
 
 
 BAD = [
@@ -300,7 +343,7 @@ def test_jitter_iterations_remeasure_the_corrected_frames_and_two_frames_suffice
     frames = Frames(8, seed=2)
     d = dict(BASE, jitter={"model": "line", "iterations": 2}, tracking={"point": False, "multi": None})
     _, seq = _run(Pipeline.from_dict(d), frames)
-    assert frames.reads == 3 * 8  # pass 1, one re-measuring round, pass 2
+    assert frames.reads == 8  # pass 1, one re-measuring round and pass 2 all take the gray frames kept
     one = remove_jitter(seq.shifts_px)
     # the integer NCC of the corrected frames sees at most the rounding of the first correction
     assert np.abs(seq.correction_px - one.correction_px).max() <= 1.0

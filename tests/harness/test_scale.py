@@ -20,6 +20,7 @@ import pytest
 from tests.harness.harness_testdata import TINY_SUITE
 
 import harness.executors
+from algorithms.registry import register_flow
 import harness.runner as runner
 import harness.scheduling as scheduling
 import harness.tasks as tasks
@@ -107,13 +108,12 @@ class _Recorder:
             self.log.append(("render", f"{spec.image.n_frames}"))
             fut.set_result({"key": key, "path": "/nowhere", "reused": True, "error": None})
         else:
-            p = args[0]
-            self.log.append(("cell", f"{p['scene']}/{p['pipeline']}"))
-            fut.set_result({"cell_id": p["cell_id"], "status": "ok", "error": "", "rows": 1})
+            self.log.append(("cells", "+".join(f"{p['scene']}/{p['pipeline']}" for p in args[0])))
+            fut.set_result([{"cell_id": p["cell_id"], "status": "ok", "error": "", "rows": 1} for p in args[0]])
         return fut
 
 
-def test_renders_go_first_largest_scene_first_then_the_longest_cells(tmp_path, monkeypatch):
+def test_renders_go_first_largest_scene_first_then_the_longest_tasks_of_cells(tmp_path, monkeypatch):
     cells, suite = _cells([{"preset": "tiny", "label": "short", "overrides": {"image.n_frames": 3}},
                            {"preset": "tiny", "label": "long", "overrides": {"image.n_frames": 9}}],
                           ["thesis-lk", "thesis-hs", "dis"])
@@ -127,10 +127,11 @@ def test_renders_go_first_largest_scene_first_then_the_longest_cells(tmp_path, m
     cells_dir = tmp_path / "cells"
     cells_dir.mkdir()
     scheduling.execute(cells, cells_dir, tmp_path / "cache", {}, suite, "process", 2, None, False)
-    # costs (frames x method weight): long hs 36, short hs 12, long lk 9, long dis 4.5, short lk 3, short dis 1.5
+    # costs (frames x method weight): long hs 36, short hs 12, long lk 9, long dis 4.5, short lk 3, short dis 1.5;
+    # 2 scenes on 2 workers: each scene in two tasks of about equal cost, the longest task first
     assert pool.log == [("render", "9"), ("render", "3"),
-                        ("cell", "long/thesis-hs"), ("cell", "short/thesis-hs"), ("cell", "long/thesis-lk"),
-                        ("cell", "long/dis"), ("cell", "short/thesis-lk"), ("cell", "short/dis")]
+                        ("cells", "long/thesis-hs"), ("cells", "long/thesis-lk+long/dis"),
+                        ("cells", "short/thesis-hs"), ("cells", "short/thesis-lk+short/dis")]
 
 
 # --------------------------------------------------------------------------- memory
@@ -171,3 +172,78 @@ def test_a_cell_keeps_no_pair_arrays_after_scoring_the_pair(tmp_path, render_cac
     assert out["status"] == "ok", out["error"]
     assert len({i for i, _ in refs}) == 8  # every pair was scored through the watcher
     assert not leaks, leaks
+
+
+def test_groups_per_scene_gives_two_tasks_a_worker_and_never_more_than_the_cells():
+    assert scheduling.groups_per_scene(27, 7, 2) == 1  # standard on 2 workers: one task per scene
+    assert scheduling.groups_per_scene(27, 7, 14) == 2
+    assert scheduling.groups_per_scene(1, 7, 2) == 4
+    assert scheduling.groups_per_scene(1, 3, 16) == 3
+    with pytest.raises(ValueError, match="expected positive counts"):
+        scheduling.groups_per_scene(0, 7, 2)
+
+
+def test_cell_groups_balance_the_cost_and_keep_every_cell_once():
+    cells, _ = _cells([{"preset": "tiny", "overrides": {"image.n_frames": 5}}],
+                      ["thesis-lk", "thesis-hs", "pyramidal-hs", "dis", "farneback", "tv-l1"])
+    for n in (1, 2, 3, 6, 9):
+        groups = scheduling.cell_groups(cells, n)
+        assert len(groups) == min(n, len(cells))
+        assert sorted(c.cell_id for g in groups for c in g) == sorted(c.cell_id for c in cells)
+        costs = [sum(scheduling.cell_cost(c) for c in g) for g in groups]
+        assert costs == sorted(costs, reverse=True)  # the longest task first
+        # LPT: no group exceeds the mean by more than its largest cell
+        assert max(costs) <= sum(costs) / len(groups) + max(scheduling.cell_cost(c) for c in cells)
+
+
+_CALLS = {"n": 0}
+
+
+@register_flow
+def _fails_on_the_third_pair(frame0, frame1):
+    """A flow method that raises on the third pair of a sequence (a cell that fails mid-run).
+
+    The 64 x 64 frames of the numba warm-up (harness.cell_scoring.warm_up) do not count.
+    """
+    _CALLS["n"] += frame0.shape != (64, 64)
+    if _CALLS["n"] == 3:
+        raise RuntimeError("cannot do the third pair")
+    return np.zeros(frame0.shape + (2,), np.float32), np.ones(frame0.shape, bool)
+
+
+@pytest.mark.gl
+def test_cells_run_together_give_the_rows_each_gives_alone(tmp_path, render_cache):
+    """The lock-step task shares frames, pass 1 and truth; not a number may move, and a failing cell fails alone."""
+    from harness.provenance import collect
+    from harness.results import read_table
+    from scenes import cached_sequence
+
+    suite = parse_suite({**copy.deepcopy(TINY_SUITE), "scenes": [{"preset": "tiny"}],
+                         "pipelines": ["thesis-lk", "pyramidal-hs", "dis"]})
+    cells = expand(suite)
+    prov = collect()
+    prov = {k: prov[k] for k in ("git_commit", "git_dirty", "machine")}
+    seq = str(cached_sequence(cells[0].variant.spec, render_cache))
+
+    def payloads(folder):
+        out = []
+        for c in cells:
+            p = tasks.cell_payload(c, tmp_path / folder, prov, [])
+            p["sequence"] = seq
+            out.append(p)
+        return out
+
+    alone = [tasks.cell_task(p) for p in payloads("alone")]
+    together_payloads = payloads("together")
+    together_payloads[1]["pipeline_spec"] = {**together_payloads[1]["pipeline_spec"],
+                                             "flow": {"method": "_fails_on_the_third_pair", "params": {}}}
+    together = tasks.cells_task(together_payloads)
+    assert [s["status"] for s in alone] == ["ok", "ok", "ok"]
+    assert [s["status"] for s in together] == ["ok", "failed", "ok"]
+    assert "the third pair" in together[1]["error"]
+    accuracy = ["frame", "track_id", "metric", "region", "motion", "value", "sum", "count", "hist"]
+    for k in (0, 2):
+        a = read_table(tmp_path / "alone" / cells[k].cell_id / "rows.parquet")
+        t = read_table(tmp_path / "together" / cells[k].cell_id / "rows.parquet")
+        a, t = (x[x["kind"] != "timing"][accuracy].reset_index(drop=True) for x in (a, t))
+        pd.testing.assert_frame_equal(a, t)
