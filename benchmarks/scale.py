@@ -10,6 +10,7 @@ table and the command lines it ran. Run from the project root:
     /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
     /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
     /work/venv/bin/python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
+    /work/venv/bin/python benchmarks/scale.py scene --reference TREE [--presets nominal] [--workers 1] [--repeats 3]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
   render cache, then again into a fresh run folder with the cache warm; wall times, and
@@ -39,6 +40,11 @@ table and the command lines it ran. Run from the project root:
   the pairs, scoring the sequence, the cell files, building and writing ``rows.parquet``;
   with its size and the bytes of histograms. A suite's cell time is these figures summed
   over its scenes and pipelines (``--json`` keeps them).
+- ``scene``: the cells of one scene (``--presets``, seed 1, the standard's pipelines) run
+  by ``aerobench run`` of this tree and of ``--reference`` (another source tree, e.g. a
+  git worktree of an older commit), alternately, ``--repeats`` times each, warm cache, no
+  report: median wall and CPU seconds (the CLI and its workers), their ratio, and whether
+  the accuracy rows of the two are the same numbers.
 """
 
 from __future__ import annotations
@@ -323,6 +329,68 @@ def cmd_standard(args: argparse.Namespace) -> None:
         shutil.rmtree(work, ignore_errors=True)
 
 
+# --------------------------------------------------------------------------- one scene, two trees
+
+
+STANDARD_PIPELINES = "thesis-lk,thesis-hs,pyramidal-lk,pyramidal-hs,dis,farneback,tv-l1"
+
+
+def _timed_run(tree: Path, suite: Path, out: Path, cache: Path, workers: int) -> tuple[float, float]:
+    """``aerobench run`` of ``tree``'s code in a child process: (wall s, CPU s of it and its workers)."""
+    env = _env(cache)
+    env["PYTHONPATH"] = str(tree)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run([PY, "-m", "harness.cli", "run", str(suite), "--out", str(out), "--workers", str(workers),
+                           "--quiet", "--no-report"], cwd=tree, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr[-3000:])
+        raise SystemExit(f"the run of {tree} failed (exit {proc.returncode})")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def cmd_scene(args: argparse.Namespace) -> None:
+    """One scene's cells (the standard's pipelines, seed 1), this tree against ``--reference``, alternately."""
+    import yaml
+
+    import pandas as pd
+
+    ref = Path(args.reference).resolve()
+    if not (ref / "harness" / "cli.py").is_file():
+        raise SystemExit(f"--reference {ref}: expected an aerobench source tree (harness/cli.py missing)")
+    work = Path(tempfile.mkdtemp(prefix="aerobench-scale-scene-"))
+    cache = Path(args.cache) if args.cache else work / "cache"
+    suite = work / "scene.yaml"
+    suite.write_text(yaml.safe_dump({"name": "scene", "description": "one scene, the standard pipelines",
+                                     "scenes": [{"preset": p} for p in args.presets.split(",")], "seeds": [1],
+                                     "pipelines": args.pipelines.split(","), "picture_pairs": [0, 10]}))
+    trees = {"this": ROOT, "reference": ref}
+    times: dict[str, list[tuple[float, float]]] = {k: [] for k in trees}
+    try:
+        _timed_run(ROOT, suite, work / "warm", cache, args.workers)  # renders into the cache
+        for r in range(args.repeats):
+            for name, tree in (trees.items() if r % 2 == 0 else reversed(trees.items())):
+                times[name].append(_timed_run(tree, suite, work / f"{name}-{r}", cache, args.workers))
+        # the accuracy rows of the last runs must be the same numbers
+        cols = ["cell_id", "frame", "track_id", "metric", "region", "motion", "value", "sum", "count"]
+        a, b = (pd.read_parquet(work / f"{n}-{args.repeats - 1}" / "results.parquet") for n in trees)
+        a, b = (x[x["kind"] != "timing"][cols].sort_values(cols[:6]).reset_index(drop=True) for x in (a, b))
+        same = a.shape == b.shape and bool(((a["value"] == b["value"]) | (a["value"].isna() & b["value"].isna())).all())
+        med = {k: (statistics.median(w for w, _ in v), statistics.median(c for _, c in v)) for k, v in times.items()}
+        print(f"{args.presets} (seed 1) x {args.pipelines}: {args.workers} worker(s), warm cache, no report, "
+              f"{args.repeats} runs each alternated; load average {os.getloadavg()[0]:.1f}\n")
+        rows = [(k, f"{med[k][0]:.1f}", f"{med[k][1]:.1f}", " ".join(f"{w:.1f}" for w, _ in times[k])) for k in trees]
+        print(_table(rows, ("tree", "wall_s_median", "cpu_s_median", "wall_s_runs")))
+        print(f"\nthis / reference: wall {med['this'][0] / med['reference'][0]:.3f}, "
+              f"CPU {med['this'][1] / med['reference'][1]:.3f}; accuracy rows identical: {same} "
+              f"({len(a)} rows)")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 # --------------------------------------------------------------------------- many cores
 
 
@@ -552,9 +620,17 @@ def main() -> None:
     s.add_argument("--pipeline", default="thesis-lk",
                    help="pipeline, or several comma-separated (each seed runs each: a mix of cell costs)")
     s.set_defaults(fn=cmd_cores)
+    s = sub.add_parser("scene")
+    s.add_argument("--reference", required=True, help="another aerobench source tree (a git worktree)")
+    s.add_argument("--presets", default="nominal", help="scene presets, comma-separated (seed 1 each)")
+    s.add_argument("--pipelines", default=STANDARD_PIPELINES)
+    s.add_argument("--workers", type=int, default=1)
+    s.add_argument("--repeats", type=int, default=3)
+    s.add_argument("--cache", default=None, help="render cache (default: a temp folder, deleted afterwards)")
+    s.set_defaults(fn=cmd_scene)
     s = sub.add_parser("cost")
     s.add_argument("--preset", default="nominal")
-    s.add_argument("--pipelines", default="thesis-lk,thesis-hs,pyramidal-lk,pyramidal-hs,dis,farneback,tvl1")
+    s.add_argument("--pipelines", default=STANDARD_PIPELINES)
     s.add_argument("--pairs", type=int, default=0, help="only the first N pairs (default: all)")
     s.add_argument("--cache", default=None, help="render cache (default: a temp folder, kept)")
     s.add_argument("--json", default=None, help="also write the figures to this file")

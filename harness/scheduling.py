@@ -58,9 +58,12 @@ def groups_per_scene(n_scenes: int, n_cells: int, workers: int) -> int:
 
     One task per scene shares the most (frames, pass 1, truth read once); a suite of
     fewer scenes than twice the workers splits each scene so that no worker idles.
+    One worker has nobody to wait for: one task per scene.
     """
     if n_scenes < 1 or n_cells < 1 or workers < 1:
         raise ValueError(f"expected positive counts, got {n_scenes} scenes, {n_cells} cells, {workers} workers")
+    if workers == 1:
+        return 1
     return max(1, min(n_cells, math.ceil(2 * workers / n_scenes)))
 
 

@@ -179,6 +179,7 @@ def test_groups_per_scene_gives_two_tasks_a_worker_and_never_more_than_the_cells
     assert scheduling.groups_per_scene(27, 7, 14) == 2
     assert scheduling.groups_per_scene(1, 7, 2) == 4
     assert scheduling.groups_per_scene(1, 3, 16) == 3
+    assert scheduling.groups_per_scene(1, 7, 1) == 1  # one worker waits for nobody
     with pytest.raises(ValueError, match="expected positive counts"):
         scheduling.groups_per_scene(0, 7, 2)
 
