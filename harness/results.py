@@ -57,7 +57,7 @@ from scenes.formats import atomic_write_bytes
 __all__ = [
     "SCHEMA_VERSION", "SCHEMA", "COLUMNS", "CELL_COLUMNS", "SUMMARY_KEYS", "ResultsError", "SchemaError",
     "rows_to_frame", "check_schema", "write_table", "read_table", "read_results", "summarize",
-    "collect_cells", "write_run_json", "read_run_json", "aggregate",
+    "collect_cells", "CellRowsReader", "read_cell_rows", "ROW_ORDER", "write_run_json", "read_run_json", "aggregate",
     "RESULTS_FILE", "SUMMARY_FILE", "RUN_FILE", "ROWS_FILE",
 ]
 
@@ -230,19 +230,67 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def collect_cells(run_dir: str | os.PathLike) -> pd.DataFrame:
+# the order of a cell's rows in results.parquet (cells in cell_id order)
+ROW_ORDER = ("metric", "region", "motion", "frame", "track_id")
+
+
+def read_cell_rows(path: str | os.PathLike) -> pd.DataFrame:
+    """A cell's ``rows.parquet``, schema checked, its rows in :data:`ROW_ORDER` (stable, NaN first)."""
+    return read_table(path).sort_values(list(ROW_ORDER), na_position="first", kind="stable").reset_index(drop=True)
+
+
+class CellRowsReader:
+    """Reads cells' rows as they finish, so that :func:`collect_cells` at the end of a run only joins them.
+
+    The runner calls :meth:`add` for every cell a worker completed (while the others work);
+    a cell folder rewritten afterwards (a retried task) is read again by ``collect_cells``.
+    """
+
+    def __init__(self, run_dir: str | os.PathLike):
+        self.cells_dir = Path(run_dir) / "cells"
+        self.parts: dict[str, tuple[tuple[int, int], pd.DataFrame]] = {}
+
+    def add(self, cell_id: str) -> None:
+        """Read ``cells/<cell_id>/rows.parquet`` now (a missing file is left for collection to report)."""
+        path = self.cells_dir / cell_id / ROWS_FILE
+        try:
+            stamp = _stamp(path)
+            self.parts[cell_id] = (stamp, read_cell_rows(path))
+        except FileNotFoundError:
+            pass
+
+    def get(self, path: Path) -> pd.DataFrame | None:
+        """The rows read earlier for ``path``, if the file is still the one read."""
+        hit = self.parts.get(path.parent.name)
+        if hit is None or hit[0] != _stamp(path):
+            return None
+        return hit[1]
+
+
+def _stamp(path: Path) -> tuple[int, int]:
+    st = path.stat()
+    return st.st_mtime_ns, st.st_size
+
+
+def collect_cells(run_dir: str | os.PathLike, *, read: CellRowsReader | None = None) -> pd.DataFrame:
     """Concatenate ``cells/*/rows.parquet`` into ``results.parquet`` and write ``summary.csv``.
 
     Folders whose name starts with "." (cells still being written) are skipped.
-    Rows are sorted (cell, metric, region, motion, frame, track) so the file does
-    not depend on the order in which cells finished. Returns the table.
+    Rows are sorted (cell, then :data:`ROW_ORDER`: metric, region, motion, frame, track)
+    so the file does not depend on the order in which cells finished. Cells already in
+    ``read`` (read while the run went on) are not read again. Returns the table.
     """
     run_dir = Path(run_dir)
-    parts = [read_table(p) for p in sorted((run_dir / "cells").glob(f"*/{ROWS_FILE}"))
-             if not p.parent.name.startswith(".")]
+    parts = []
+    # cell folders are named by cell_id: in name order, each cell's rows in ROW_ORDER is the table's order
+    for p in sorted((run_dir / "cells").glob(f"*/{ROWS_FILE}")):
+        if p.parent.name.startswith("."):
+            continue
+        part = read.get(p) if read is not None else None
+        parts.append(part if part is not None else read_cell_rows(p))
     df = pd.concat(parts, ignore_index=True) if parts else rows_to_frame([])
-    df = df.sort_values(["cell_id", "metric", "region", "motion", "frame", "track_id"],
-                        na_position="first", kind="stable").reset_index(drop=True)
+    if not df["cell_id"].is_monotonic_increasing:  # a folder not named by its rows' cell_id
+        df = df.sort_values(["cell_id", *ROW_ORDER], na_position="first", kind="stable").reset_index(drop=True)
     write_table(df, run_dir / RESULTS_FILE)
     summary = summarize(df)
     atomic_write_bytes(run_dir / SUMMARY_FILE, summary.drop(columns=["hist"]).to_csv(index=False).encode())

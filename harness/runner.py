@@ -31,7 +31,7 @@ import pandas as pd
 from harness.cell_scoring import point_seeds
 from harness.resume import (RunFolderError, cell_complete, clean_partial, failures, open_run_dir, read_run_json,
                             remove_strays)
-from harness.results import collect_cells
+from harness.results import CellRowsReader, collect_cells
 from harness.run_folder import cell_entry, write_run
 from harness.scheduling import cell_cost, execute, say
 from harness.suites import Cell, SceneVariant, Suite, expand, load_suite
@@ -165,8 +165,9 @@ def run_suite(
         write_run(run_dir, run_info)
 
         try:
+            read = CellRowsReader(run_dir)
             rendered, reused, failed = execute(
-                todo, cells_dir, cache, provenance, suite, executor, workers, scheduler, progress
+                todo, cells_dir, cache, provenance, suite, executor, workers, scheduler, progress, read
             )
         except BaseException as exc:  # Ctrl-C, a lost scheduler: say so in run.json, keep the cells
             run_info.update(status="aborted", error=f"{type(exc).__name__}: {exc}",
@@ -176,7 +177,7 @@ def run_suite(
         say(progress, f"scenes: {rendered} rendered, {reused} reused from the cache ({cache})")
 
         remove_strays(cells_dir, cells)
-        table = collect_cells(run_dir)  # sorted rows: independent of the order cells finished
+        table = collect_cells(run_dir, read=read)  # sorted rows: independent of the order cells finished
         failed_cells = failures(cells_dir, cells)
         status = "failed" if failed_cells else "ok"
         renderers = sorted(set(table["renderer"]) - {""}) if len(table) else []

@@ -110,9 +110,11 @@ def _variant_key(v: SceneVariant) -> str:
 
 def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, suite: Suite,
             executor: str, workers: int | None, scheduler: str | None,
-            progress: bool) -> tuple[int, int, int]:
+            progress: bool, read: Any = None) -> tuple[int, int, int]:
     """Render the scenes ``todo`` needs, then run its cells as their scene becomes ready.
 
+    ``read``, a :class:`harness.results.CellRowsReader`, is given each cell a worker
+    completed, while the other workers go on (so that collection at the end only joins).
     Returns (scenes rendered, scenes reused from the cache, scenes that failed to render).
     """
     from tqdm import tqdm
@@ -130,7 +132,7 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
     bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
     ctx = {"cells_dir": cells_dir, "cache": cache, "provenance": provenance, "imports": imports,
-           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress}
+           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress, "read": read}
     work = _Work(renders=list(variants), cells=[])
     for mode in RETRY_ROUNDS:
         if not work.renders and not work.cells:
@@ -270,9 +272,12 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                         lost.rendered += 1
                     make_ready([(c, result) for c in ctx["by_scene"][item]])
                 else:
+                    fill()  # the next task first, then read this one's rows while the workers go on
                     bar.update(len(result))
                     for r in result:
                         if r["status"] != "ok" and ctx["progress"]:
                             bar.write(f"cell {r['cell_id']} failed: {r['error']}", file=sys.stderr)
+                        if ctx["read"] is not None:
+                            ctx["read"].add(r["cell_id"])
             fill()  # after a broken pool, every submit lands in ``lost`` and ``pending`` empties
     return lost

@@ -110,3 +110,36 @@ def test_run_json_round_trip_and_refusals(tmp_path):
         R.write_run_json(tmp_path, {"x": float("nan")})
     with pytest.raises(FileNotFoundError, match="no run.json"):
         R.read_run_json(tmp_path / "elsewhere")
+
+
+def test_cells_read_during_the_run_give_the_same_bytes_and_a_rewritten_cell_is_read_again(tmp_path):
+    """collect_cells with a CellRowsReader writes the file collect_cells alone writes (cells shuffled, re-written)."""
+    import hashlib
+    import os
+
+    def make(run):
+        for k, cid in enumerate(["c2", "c1", "c3"]):
+            rows = _cell(cid, "lk", 0.25 * (k + 1), frames=3).sample(frac=1.0, random_state=k)  # rows out of order
+            (run / "cells" / cid).mkdir(parents=True)
+            R.write_table(rows, run / "cells" / cid / R.ROWS_FILE)
+
+    alone, during = tmp_path / "alone", tmp_path / "during"
+    make(alone)
+    make(during)
+    reader = R.CellRowsReader(during)
+    for cid in ("c3", "c1", "c2", "missing"):
+        reader.add(cid)
+    # c1 re-written after it was read (a retried task): the reader's copy is stale and must not be used
+    new = _cell("c1", "lk", 9.0, frames=3)
+    for run in (alone, during):
+        R.write_table(new, run / "cells" / "c1" / R.ROWS_FILE)
+        os.utime(run / "cells" / "c1" / R.ROWS_FILE, ns=(1, 1))
+    a = R.collect_cells(alone)
+    b = R.collect_cells(during, read=reader)
+    pd.testing.assert_frame_equal(a, b)
+    for name in (R.RESULTS_FILE, R.SUMMARY_FILE):
+        assert hashlib.sha256((alone / name).read_bytes()).digest() == hashlib.sha256((during / name).read_bytes()).digest()
+    assert list(dict.fromkeys(a["cell_id"])) == ["c1", "c2", "c3"]
+    assert (a[a["cell_id"] == "c1"]["value"].max()) > 8  # the re-written rows, not the first ones
+    order = a[a["cell_id"] == "c2"][list(R.ROW_ORDER)].astype(str).values.tolist()
+    assert order == sorted(order, key=lambda r: r[:3])  # metric, region, motion ascending within a cell
