@@ -9,8 +9,10 @@ table and the command lines it ran. Run from the project root:
                                               [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
     /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
     /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
+                                              [--suite standard]
     /work/venv/bin/python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
     /work/venv/bin/python benchmarks/scale.py scene --reference TREE [--presets nominal] [--workers 1] [--repeats 3]
+    /work/venv/bin/python benchmarks/scale.py replay RUN [--workers 1,2,4,8,14,16,32] [--serial]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
   render cache, then again into a fresh run folder with the cache warm; wall times, and
@@ -40,6 +42,10 @@ table and the command lines it ran. Run from the project root:
   the pairs, scoring the sequence, the cell files, building and writing ``rows.parquet``;
   with its size and the bytes of histograms. A suite's cell time is these figures summed
   over its scenes and pipelines (``--json`` keeps them).
+- ``replay``: the many-core model of a finished run: its cells' measured ``elapsed_s``
+  grouped and ordered as the runner does for 1, 2, 4, ... workers, on idle cores, plus the
+  serial tail after the cells (``--serial`` measures collection and the report on a copy
+  of the run). Says where scaling stops: the longest task, and the serial tail.
 - ``scene``: the cells of one scene (``--presets``, seed 1, the standard's pipelines) run
   by ``aerobench run`` of this tree and of ``--reference`` (another source tree, e.g. a
   git worktree of an older commit), alternately, ``--repeats`` times each, warm cache, no
@@ -413,9 +419,15 @@ def cmd_cores(args: argparse.Namespace) -> None:
     cache, shown, rows = work / "cache", [], []
     size = tuple(int(v) for v in args.size.split("x"))
     pipes = args.pipeline.split(",")
-    data = _speedup_suite(-(-n_cells // len(pipes)), args.frames, size)  # seeds x pipelines >= n_cells
-    data["pipelines"] = pipes
-    n_cells = len(data["seeds"]) * len(pipes)
+    if args.suite:  # a whole suite (e.g. standard) at each worker count
+        from harness.suites import expand, load_suite
+
+        data = load_suite(args.suite).model_dump(mode="json")
+        n_cells = len(expand(load_suite(args.suite)))
+    else:
+        data = _speedup_suite(-(-n_cells // len(pipes)), args.frames, size)  # seeds x pipelines >= n_cells
+        data["pipelines"] = pipes
+        n_cells = len(data["seeds"]) * len(pipes)
     suite = work / "suite.yaml"
     suite.write_text(yaml.safe_dump(data, sort_keys=False))
     try:
@@ -435,12 +447,91 @@ def cmd_cores(args: argparse.Namespace) -> None:
             base = base or wall
             rows.append((w, f"{wall:.1f}", f"{60 * n_cells / wall:.1f}", f"{base / wall:.2f}",
                          f"{100 * busy / (w * wall):.0f}", f"{collect_s:.2f}"))
-        print(f"many cores: {n_cells} cells ({args.pipeline}, nominal {args.size} x {args.frames} frames, one seed "
-              f"each), warm cache, no report; {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}\n")
+        what = (f"suite {args.suite}" if args.suite else
+                f"{args.pipeline}, nominal {args.size} x {args.frames} frames, one seed each")
+        print(f"many cores: {n_cells} cells ({what}), warm cache, no report; {os.cpu_count()} cores, "
+              f"load average {os.getloadavg()[0]:.1f}\n")
         print(_table(rows, ("workers", "wall_s", "cells_per_min", "speedup", "busy_%", "collect_s")))
         _print_commands(shown)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- replay on N cores
+
+
+def replay_schedule(tasks: list[tuple[float, float]], workers: int) -> float:
+    """Wall time of ``tasks`` (cost the scheduler orders by, seconds it took) on ``workers`` idle workers.
+
+    The runner's policy with every task ready (a warm cache): the costliest task first to
+    the first free worker. Returns when the last task ends.
+    """
+    import heapq
+
+    free = [0.0] * workers
+    for _, seconds in sorted(tasks, key=lambda t: -t[0]):
+        start = heapq.heappop(free)
+        heapq.heappush(free, start + seconds)
+    return max(free)
+
+
+def cmd_replay(args: argparse.Namespace) -> None:
+    """A finished run's measured cell times replayed through the runner's grouping and order on N workers."""
+    from harness.results import CellRowsReader, collect_cells
+    from harness.scheduling import cell_cost, cell_groups, groups_per_scene
+    from harness.suites import expand, parse_suite
+
+    run_dir = Path(args.run).resolve()
+    run = json.loads((run_dir / "run.json").read_text())
+    cells = expand(parse_suite(run["resolved_suite"]))
+    elapsed = {}
+    for c in cells:
+        info = run_dir / "cells" / c.cell_id / "cell.json"
+        if not info.is_file():
+            raise SystemExit(f"{info}: missing; replay needs a complete run")
+        elapsed[c.cell_id] = json.loads(info.read_text())["elapsed_s"]
+    by_scene: dict[str, list] = {}
+    for c in cells:
+        by_scene.setdefault(c.variant.scene_hash, []).append(c)
+    serial = {}
+    if args.serial:
+        work = Path(tempfile.mkdtemp(prefix="aerobench-replay-"))
+        try:
+            copy = work / "run"
+            shutil.copytree(run_dir, copy, ignore=shutil.ignore_patterns("report.*"))
+            read = CellRowsReader(copy)
+            for c in cells:
+                read.add(c.cell_id)  # as the driver does while the workers run
+            t0 = time.process_time()
+            collect_cells(copy, read=read)
+            serial["collect"] = time.process_time() - t0
+            from reports import write_report
+
+            t0 = time.process_time()
+            write_report(copy)
+            serial["report"] = time.process_time() - t0
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+    tail = sum(serial.values())
+    total_cpu = sum(elapsed.values())
+    rows, base = [], None
+    for w in [int(x) for x in args.workers.split(",")]:
+        tasks = []
+        for scene_cells in by_scene.values():
+            for group in cell_groups(scene_cells, groups_per_scene(len(by_scene), len(scene_cells), w)):
+                tasks.append((sum(cell_cost(c) for c in group), sum(elapsed[c.cell_id] for c in group)))
+        cells_s = replay_schedule(tasks, w) + args.startup
+        wall = cells_s + tail
+        base = base or wall * w  # one worker's time, scaled
+        rows.append((w, len(tasks), f"{cells_s:.0f}", f"{tail:.0f}", f"{wall:.0f}", f"{60 * len(cells) / wall:.0f}",
+                     f"{100 * total_cpu / (w * cells_s):.0f}", f"{base / w / wall * 100 if w > 1 else 100:.0f}"))
+    print(f"replay of {run_dir} ({len(cells)} cells, {len(by_scene)} scenes; cells' own time {total_cpu:.0f} s; "
+          f"warm cache; + {args.startup:g} s pool start-up)\nserial tail after the cells, CPU s measured here: "
+          + (", ".join(f"{k} {v:.1f}" for k, v in serial.items()) or "not measured (--serial)") + "\n")
+    print(_table(rows, ("workers", "tasks", "cells_s", "serial_s", "wall_s", "cells_per_min", "busy_%",
+                        "efficiency_%")))
+    print("\n(a model: each worker a core of its own, cells as long as they took in that run; efficiency is "
+          "1-worker wall / (workers x wall))")
 
 
 # --------------------------------------------------------------------------- cost model
@@ -619,6 +710,7 @@ def main() -> None:
     s.add_argument("--size", default="640x480")
     s.add_argument("--pipeline", default="thesis-lk",
                    help="pipeline, or several comma-separated (each seed runs each: a mix of cell costs)")
+    s.add_argument("--suite", default=None, help="run this suite (e.g. standard) instead, at each worker count")
     s.set_defaults(fn=cmd_cores)
     s = sub.add_parser("scene")
     s.add_argument("--reference", required=True, help="another aerobench source tree (a git worktree)")
@@ -628,6 +720,12 @@ def main() -> None:
     s.add_argument("--repeats", type=int, default=3)
     s.add_argument("--cache", default=None, help="render cache (default: a temp folder, deleted afterwards)")
     s.set_defaults(fn=cmd_scene)
+    s = sub.add_parser("replay")
+    s.add_argument("run", help="a finished run folder")
+    s.add_argument("--workers", default="1,2,4,8,14,16,32")
+    s.add_argument("--startup", type=float, default=4.0, help="seconds for the pool's workers to start (imports)")
+    s.add_argument("--serial", action="store_true", help="measure collection and the report on a copy of the run")
+    s.set_defaults(fn=cmd_replay)
     s = sub.add_parser("cost")
     s.add_argument("--preset", default="nominal")
     s.add_argument("--pipelines", default=STANDARD_PIPELINES)
