@@ -368,8 +368,9 @@ def tv_l1(frame0: np.ndarray, frame1: np.ndarray, *, lambda_: float = 0.15, tau:
     0.046 on thesis) and on Yosemite; a 3x3 median ([W] uses 5x5) keeps small
     vehicles (nominal vehicles 1.27 vs 1.49 px); 15 iterations per warp instead
     of 10. [S] iterates each warp until its stopping rule holds (``epsilon``
-    0.01): many more iterations, too slow here (about 1 ms per iteration at
-    640x480) for little gain.
+    0.01): many more iterations, too slow here (about 0.75 ms per iteration at
+    640x480) for little gain. Fewer warps or iterations cost accuracy on the
+    background (``benchmarks/tv_l1_setting.md``).
 
     Parameters
     ----------
