@@ -219,9 +219,9 @@ def _iterate_wavefront(a, b, rho0, inv_g2, u1, u2, p11, p12, p21, p22, lt, th, t
     r - 1 and r are iteration k's, and no later reader of iteration k's u of
     row r remains. So sweep step s runs iteration k at row s - k, k ascending:
     every array element sees the same operations in the same order as
-    iteration after iteration over the whole image (bit-identical results),
-    but the n_iter + 1 rows in flight stay in cache instead of streaming all
-    ten arrays through memory n_iter times. Without the stopping rule only:
+    iteration after iteration over the whole image (the same bits; see the
+    module notes on fastmath), but the n_iter + 1 rows in flight stay in cache
+    instead of streaming all ten arrays through memory n_iter times. Without the stopping rule only:
     iteration k + 1 starts before iteration k's change of u is known.
     """
     h, w = u1.shape
