@@ -51,7 +51,19 @@ dropped (our choice: grad I1 = 0, rho = 0, so v = u): the smoothness term fills
 those pixels in, as in our Horn-Schunck. One pass over the rows fuses both steps: row i gets its new u
 (which needs p of rows i and i - 1, not yet updated), then row i - 1 gets its
 new p (which needs the new u of rows i - 1 and i). So one iteration reads and
-writes each array once.
+writes each array once; without the stopping rule, all iterations of a warp
+run in one sweep down the rows, iteration k + 1 one row behind iteration k
+(``_iterate_wavefront``), the same operations on every element in the same
+order as iteration after iteration.
+
+The kernels are compiled with ``fastmath``: LLVM may fuse a * b + c into one
+multiply-add, reassociate sums and replace a division by a reciprocal estimate
+in vector code, so the last bits of a result depend on how the compiler sees
+the whole loop, not on the source line alone. The wavefront still accumulates
+the change of u that only the stopping rule needs, because the row-by-row loop
+does: dropping it changed the last bits of u (measured). Then both paths agree
+bit for bit, except on rows of 9 to 16 px, where their compiled loops split
+vector and scalar code differently (within 1e-6 px; tests compare both).
 """
 
 from __future__ import annotations
@@ -173,6 +185,9 @@ def tv_l1_iterate(a: np.ndarray, b: np.ndarray, rho0: np.ndarray, inv_g2: np.nda
     lt = np.float32(lambda_ * theta)
     th = np.float32(theta)
     tau_theta = np.float32(tau / theta)
+    if epsilon == 0:
+        _iterate_wavefront(a, b, rho0, inv_g2, u1, u2, p11, p12, p21, p22, lt, th, tau_theta, n_iter)
+        return n_iter
     stop2 = epsilon * epsilon * h * w
     zeros = np.zeros(w, dtype=np.float32)
     one = np.float32(1.0)
@@ -195,10 +210,48 @@ def tv_l1_iterate(a: np.ndarray, b: np.ndarray, rho0: np.ndarray, inv_g2: np.nda
 
 
 @numba.njit(cache=True, fastmath=True, error_model="numpy")
-def _warp_terms(I0, I1w, I1xw, I1yw, map_x, map_y, u1, u2, a, b, rho0, inv_g2) -> None:
+def _iterate_wavefront(a, b, rho0, inv_g2, u1, u2, p11, p12, p21, p22, lt, th, tau_theta, n_iter) -> np.ndarray:
+    """All ``n_iter`` iterations of :func:`tv_l1_iterate` in one sweep down the rows, for a cache-sized working set.
+
+    One iteration's unit at row r is: new u of row r, then new p of row r - 1
+    (and of row h - 1 after the last row). Iteration k + 1 may run its unit at
+    row r once iteration k has run its unit at row r + 1: then the p of rows
+    r - 1 and r are iteration k's, and no later reader of iteration k's u of
+    row r remains. So sweep step s runs iteration k at row s - k, k ascending:
+    every array element sees the same operations in the same order as
+    iteration after iteration over the whole image (the same bits; see the
+    module notes on fastmath), but the n_iter + 1 rows in flight stay in cache
+    instead of streaming all ten arrays through memory n_iter times. Without the stopping rule only:
+    iteration k + 1 starts before iteration k's change of u is known.
+    """
+    h, w = u1.shape
+    zeros = np.zeros(w, dtype=np.float32)
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    change = np.zeros(n_iter, dtype=np.float32)
+    for s in range(h + n_iter - 1):
+        for k in range(max(0, s - (h - 1)), min(n_iter - 1, s) + 1):
+            r = s - k
+            if r == 0:
+                change[k] = _primal_row(a[0], b[0], rho0[0], inv_g2[0], u1[0], u2[0], p11[0], p12[0], p21[0],
+                                        p22[0], zeros, zeros, lt, th)
+            else:
+                change[k] += _primal_row(a[r], b[r], rho0[r], inv_g2[r], u1[r], u2[r], p11[r], p12[r], p21[r],
+                                         p22[r], p12[r - 1], p22[r - 1], lt, th)
+                _dual_row(u1[r - 1], u2[r - 1], u1[r], u2[r], p11[r - 1], p12[r - 1], p21[r - 1], p22[r - 1],
+                          tau_theta, one)
+            if r == h - 1:
+                _dual_row(u1[r], u2[r], u1[r], u2[r], p11[r], p12[r], p21[r], p22[r], tau_theta, zero)
+    return change
+
+
+@numba.njit(cache=True, fastmath=True, error_model="numpy")
+def _warp_terms(I0, warped, map_x, map_y, u1, u2, a, b, rho0, inv_g2) -> None:
     """Fill the per-warp terms of :func:`tv_l1_iterate`, linearised about (u1, u2).
 
-    Where ``x + u0`` falls outside frame t+1, or grad I1 vanishes, there is no data term.
+    ``warped`` (H, W, 4): I1, I1x, I1y (and an unused 4th channel) sampled at
+    ``x + u0``. Where ``x + u0`` falls outside frame t+1, or grad I1 vanishes,
+    there is no data term.
     """
     h, w = I0.shape
     zero = np.float32(0.0)
@@ -207,30 +260,52 @@ def _warp_terms(I0, I1w, I1xw, I1yw, map_x, map_y, u1, u2, a, b, rho0, inv_g2) -
     ymax = np.float32(h - 1)
     for i in range(h):
         for j in range(w):
-            ga = I1xw[i, j]
-            gb = I1yw[i, j]
+            ga = warped[i, j, 1]
+            gb = warped[i, j, 2]
             g2 = ga * ga + gb * gb
             x = map_x[i, j]
             y = map_y[i, j]
-            if x >= zero and x <= xmax and y >= zero and y <= ymax and g2 > _MIN_GRAD2:
-                a[i, j] = ga
-                b[i, j] = gb
-                # rho(u) = I1(x + u0) + grad I1 (u - u0) - I0 = rho0 + grad I1 . u
-                rho0[i, j] = I1w[i, j] - ga * u1[i, j] - gb * u2[i, j] - I0[i, j]
-                inv_g2[i, j] = one / g2
-            else:
-                a[i, j] = zero
-                b[i, j] = zero
-                rho0[i, j] = zero
-                inv_g2[i, j] = zero
+            # rho(u) = I1(x + u0) + grad I1 (u - u0) - I0 = rho0 + grad I1 . u
+            r = warped[i, j, 0] - ga * u1[i, j] - gb * u2[i, j] - I0[i, j]
+            inv = one / g2
+            # selects, not a branch, so that the loop vectorises
+            ok = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax) & (g2 > _MIN_GRAD2)
+            a[i, j] = ga if ok else zero
+            b[i, j] = gb if ok else zero
+            rho0[i, j] = r if ok else zero
+            inv_g2[i, j] = inv if ok else zero
 
 
-def _central_gradient(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """[S]: central differences (I(x+1) - I(x-1)) / 2, one-sided (edge replicated) at the border."""
-    p = cv2.copyMakeBorder(img, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
-    Ix = 0.5 * (p[1:-1, 2:] - p[1:-1, :-2])
-    Iy = 0.5 * (p[2:, 1:-1] - p[:-2, 1:-1])
-    return Ix.astype(np.float32, copy=False), Iy.astype(np.float32, copy=False)
+@numba.njit(cache=True, error_model="numpy")
+def _sample_points(u1, u2, map_x, map_y) -> None:
+    """``map = x + u0``: where each pixel of frame t samples frame t+1 (x, y: pixel indices)."""
+    h, w = u1.shape
+    for i in range(h):
+        y = np.float32(i)
+        for j in range(w):
+            map_x[i, j] = np.float32(j) + u1[i, j]
+            map_y[i, j] = y + u2[i, j]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _with_gradient(img: np.ndarray) -> np.ndarray:
+    """(H, W, 4) float32: ``img``, its central-difference gradient Ix, Iy ([S]), and zeros.
+
+    I_x = (I(x+1) - I(x-1)) / 2, one-sided (edge replicated) at the border; the
+    4th channel only makes the stack one that ``cv2.remap`` samples faster
+    than 3 channels (the same values per channel).
+    """
+    h, w = img.shape
+    out = np.zeros((h, w, 4), dtype=np.float32)
+    half = np.float32(0.5)
+    for i in range(h):
+        up = max(i - 1, 0)
+        dn = min(i + 1, h - 1)
+        for j in range(w):
+            out[i, j, 0] = img[i, j]
+            out[i, j, 1] = half * (img[i, min(j + 1, w - 1)] - img[i, max(j - 1, 0)])
+            out[i, j, 2] = half * (img[dn, j] - img[up, j])
+    return out
 
 
 def tv_l1_pyramid(image: np.ndarray, n_scales: int, zoom: float) -> list[np.ndarray]:
@@ -293,8 +368,9 @@ def tv_l1(frame0: np.ndarray, frame1: np.ndarray, *, lambda_: float = 0.15, tau:
     0.046 on thesis) and on Yosemite; a 3x3 median ([W] uses 5x5) keeps small
     vehicles (nominal vehicles 1.27 vs 1.49 px); 15 iterations per warp instead
     of 10. [S] iterates each warp until its stopping rule holds (``epsilon``
-    0.01): many more iterations, too slow here (about 1 ms per iteration at
-    640x480) for little gain.
+    0.01): many more iterations, too slow here (about 0.75 ms per iteration at
+    640x480) for little gain. Fewer warps or iterations cost accuracy on the
+    background (``benchmarks/tv_l1_setting.md``).
 
     Parameters
     ----------
@@ -371,18 +447,15 @@ def tv_l1(frame0: np.ndarray, frame1: np.ndarray, *, lambda_: float = 0.15, tau:
             sx, sy = w / u1.shape[1], h / u1.shape[0]
             u1 = cv2.resize(u1, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(sx)
             u2 = cv2.resize(u2, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(sy)
-        I1x, I1y = _central_gradient(I1)
-        I1g = np.dstack([I1, I1x, I1y])
+        I1g = _with_gradient(I1)
         p11, p12, p21, p22 = (np.zeros((h, w), dtype=np.float32) for _ in range(4))
         a, b, rho0, inv_g2 = (np.empty((h, w), dtype=np.float32) for _ in range(4))
-        xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+        map_x, map_y = np.empty((h, w), dtype=np.float32), np.empty((h, w), dtype=np.float32)
         for _ in range(int(n_warps)):
-            map_x = xs + u1
-            map_y = ys + u2
+            _sample_points(u1, u2, map_x, map_y)
             # I1 and its gradient at x + u0 (the gradient at the warped image, [S]), in one remap
             warped = cv2.remap(I1g, map_x, map_y, interpolation=interp, borderMode=cv2.BORDER_REPLICATE)
-            _warp_terms(I0, warped[..., 0], warped[..., 1], warped[..., 2], map_x, map_y, u1, u2,
-                        a, b, rho0, inv_g2)
+            _warp_terms(I0, warped, map_x, map_y, u1, u2, a, b, rho0, inv_g2)
             tv_l1_iterate(a, b, rho0, inv_g2, u1, u2, p11, p12, p21, p22, float(lambda_), float(theta),
                           float(tau), int(n_iter), float(epsilon))
             if median_px > 1:  # [W]

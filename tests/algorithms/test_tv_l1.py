@@ -9,7 +9,7 @@ from tests.algorithms.synthetic import translation, wave_texture
 
 import algorithms
 from algorithms.registry import get_flow_method
-from algorithms.tv_l1_flow import tv_l1, tv_l1_iterate
+from algorithms.tv_l1_flow import _with_gradient, tv_l1, tv_l1_iterate
 
 M = 12  # border excluded from the error of synthetic pairs, px
 
@@ -73,6 +73,45 @@ def test_kernel_equals_plain_equations():
     for ours, plain in zip(u + p, U + P):
         np.testing.assert_allclose(ours, plain, atol=2e-5)
     assert np.abs(P[0]).max() > 0.05  # the duals moved: the comparison is not of zeros
+
+
+@pytest.mark.parametrize("h, w, n, exact", [(40, 37, 15, True), (5, 40, 15, True), (30, 8, 3, True),
+                                             (1, 6, 3, True), (23, 1, 4, True), (16, 12, 15, False)])
+def test_wavefront_equals_row_by_row(h, w, n, exact):
+    """All iterations in one sweep (epsilon 0) give the same bits as iteration after iteration.
+
+    A stopping rule that never fires (epsilon 1e-30 px) takes the row-by-row loop;
+    the cases include fewer rows than iterations and a single row / column. Rows
+    of 9 to 16 px: the two compiled loops split vector and scalar code
+    differently there, and fastmath's vector reciprocal rounds unlike a division,
+    so only close (the pyramid's levels of 640x480 and 160x120 are not that narrow).
+    """
+    rng = np.random.default_rng(h * w + n)
+    a, b, rho0 = (rng.normal(0, 3, (h, w)).astype(np.float32) for _ in range(3))
+    inv_g2 = (1.0 / (a * a + b * b)).astype(np.float32)
+    u = [rng.normal(0, 0.5, (h, w)).astype(np.float32) for _ in range(2)]
+    runs = []
+    for eps in (0.0, 1e-30):
+        arrays = [x.copy() for x in u] + [np.zeros((h, w), np.float32) for _ in range(4)]
+        assert tv_l1_iterate(a, b, rho0, inv_g2, *arrays, 0.15, 0.3, 0.25, n, eps) == n
+        runs.append(arrays)
+    for sweep, rows in zip(*runs):
+        if exact:
+            np.testing.assert_array_equal(sweep, rows)
+        else:
+            np.testing.assert_allclose(sweep, rows, rtol=0, atol=1e-6)
+    assert not np.array_equal(runs[0][0], u[0])  # u moved
+
+
+def test_gradient_stack_is_central_differences_with_replicated_edges():
+    img = np.random.default_rng(3).uniform(0, 255, (6, 7)).astype(np.float32)
+    out = _with_gradient(img)
+    p = np.pad(img, 1, mode="edge")
+    assert out.shape == (6, 7, 4) and out.dtype == np.float32
+    np.testing.assert_array_equal(out[..., 0], img)
+    np.testing.assert_array_equal(out[..., 1], np.float32(0.5) * (p[1:-1, 2:] - p[1:-1, :-2]))
+    np.testing.assert_array_equal(out[..., 2], np.float32(0.5) * (p[2:, 1:-1] - p[:-2, 1:-1]))
+    np.testing.assert_array_equal(out[..., 3], 0)
 
 
 def test_epsilon_stops_early():
