@@ -220,7 +220,7 @@ def test_cells_run_together_give_the_rows_each_gives_alone(tmp_path, render_cach
     from scenes import cached_sequence
 
     suite = parse_suite({**copy.deepcopy(TINY_SUITE), "scenes": [{"preset": "tiny"}],
-                         "pipelines": ["thesis-lk", "pyramidal-hs", "dis"]})
+                         "pipelines": ["thesis-lk", "thesis-hs", "dis"]})
     cells = expand(suite)
     prov = collect()
     prov = {k: prov[k] for k in ("git_commit", "git_dirty", "machine")}
@@ -234,12 +234,12 @@ def test_cells_run_together_give_the_rows_each_gives_alone(tmp_path, render_cach
             out.append(p)
         return out
 
-    alone = [tasks.cell_task(p) for p in payloads("alone")]
+    alone = [tasks.cell_task(p) for k, p in enumerate(payloads("alone")) if k != 1]
     together_payloads = payloads("together")
     together_payloads[1]["pipeline_spec"] = {**together_payloads[1]["pipeline_spec"],
                                              "flow": {"method": "_fails_on_the_third_pair", "params": {}}}
     together = tasks.cells_task(together_payloads)
-    assert [s["status"] for s in alone] == ["ok", "ok", "ok"]
+    assert [s["status"] for s in alone] == ["ok", "ok"]
     assert [s["status"] for s in together] == ["ok", "failed", "ok"]
     assert "the third pair" in together[1]["error"]
     accuracy = ["frame", "track_id", "metric", "region", "motion", "value", "sum", "count", "hist"]
