@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import cv2
+import numba
 import numpy as np
 
 from algorithms.flow import check_flow
@@ -139,10 +140,27 @@ def temporal_filter(prev: np.ndarray | None, cur: np.ndarray, next: np.ndarray |
     ndarray, (H, W, 2) float32
     """
     c = check_flow(cur, name="cur")
-    total = 0.5 * c.astype(np.float64)
-    weight = 0.5
-    for name, nb in (("prev", prev), ("next", next)):
-        if nb is not None:
-            total += 0.25 * check_flow(nb, name=name, shape=c.shape[:2]).astype(np.float64)
-            weight += 0.25
-    return (total / weight).astype(np.float32)
+    p = None if prev is None else check_flow(prev, name="prev", shape=c.shape[:2])
+    n = None if next is None else check_flow(next, name="next", shape=c.shape[:2])
+    weight = 0.5 + (0.25 if p is not None else 0.0) + (0.25 if n is not None else 0.0)
+    out = np.empty(c.shape, dtype=np.float32)
+    _temporal_mean(c, c if p is None else p, p is not None, c if n is None else n, n is not None, weight, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _temporal_mean(c, p, use_p, n, use_n, weight, out) -> None:
+    """``out = (1/2 c [+ 1/4 p] [+ 1/4 n]) / weight`` in float64, rounded to float32, in one pass.
+
+    The float64 operations of the numpy form, in its order, per element.
+    """
+    h, w, k = c.shape
+    for i in range(h):
+        for j in range(w):
+            for m in range(k):
+                t = 0.5 * np.float64(c[i, j, m])
+                if use_p:
+                    t += 0.25 * np.float64(p[i, j, m])
+                if use_n:
+                    t += 0.25 * np.float64(n[i, j, m])
+                out[i, j, m] = np.float32(t / weight)

@@ -75,3 +75,17 @@ def test_stages_are_registered():
     assert get_stage("threshold", "threshold_flow") is threshold_flow
     assert get_stage("spatial", "spatial_filter") is spatial_filter
     assert get_stage("temporal", "temporal_filter") is temporal_filter
+
+
+def test_temporal_filter_is_the_float64_formula_bit_for_bit():
+    # the fused kernel must round exactly as (1/2 P_t + 1/4 P_t-1 + 1/4 P_t+1) / weight in float64 does
+    rng = np.random.default_rng(5)
+    a, b, c = (rng.normal(0, 3, (6, 7, 2)).astype(np.float32) for _ in range(3))
+    for prev, nxt, weight in [(a, c, 1.0), (None, c, 0.75), (a, None, 0.75), (None, None, 0.5)]:
+        total = 0.5 * b.astype(np.float64)
+        for nb in (prev, nxt):
+            if nb is not None:
+                total += 0.25 * nb.astype(np.float64)
+        want = (total / weight).astype(np.float32)
+        got = temporal_filter(prev, b, nxt)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
