@@ -164,8 +164,12 @@ def _compensate(g1: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 def _compose(M: np.ndarray, w_local: np.ndarray, is_shift: bool) -> np.ndarray:
     """total(x) = M(x + w(x)) - x (for a shift: s + w)."""
-    if is_shift:  # one pass: each component plus its float32 shift
-        return w_local.astype(np.float32, copy=False) + np.array([M[0, 2], M[1, 2]], dtype=np.float32)
+    if is_shift:  # each component plus its float32 shift, written once
+        w32 = w_local.astype(np.float32, copy=False)
+        out = np.empty(w32.shape, dtype=np.float32)
+        np.add(w32[..., 0], np.float32(M[0, 2]), out=out[..., 0])
+        np.add(w32[..., 1], np.float32(M[1, 2]), out=out[..., 1])
+        return out
     h, w = w_local.shape[:2]
     xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     px, py = xs + w_local[..., 0], ys + w_local[..., 1]
