@@ -14,6 +14,9 @@ tree the malloc settings of ``keep_freed_memory``). The frames of the first ``--
 read into memory once per child, so the timing is :meth:`Pipeline.run` alone (global motion, jitter,
 compensation, flow, filters, detection, tracking), in CPU seconds (``time.process_time``).
 
+``--default-malloc`` runs this tree without :func:`harness.executors.keep_freed_memory` (glibc's
+default malloc, as the reference), to tell the code changes from the memory setting.
+
 ``speed``: per pipeline, after one untimed warm-up run in each child, the two children run the
 pipeline alternately (ours, reference, ours, ...) ``--repeats`` times; the table gives the medians
 in CPU ms per pair and the ratio reference / ours (above 1: ours is faster). A busy machine slows
@@ -54,9 +57,11 @@ SEQ_FIELDS = ("shifts_px", "shifts_valid", "cumulative_px", "flight_line_px", "c
 
 
 def _child(seq_dir: str, pairs: int) -> None:
-    from harness.executors import limit_threads
+    import harness.executors as executors
 
-    limit_threads(1)  # as the runner's workers start (in both trees)
+    if os.environ.get("PIPELINE_SPEED_DEFAULT_MALLOC"):  # --default-malloc: leave glibc's malloc as it is
+        executors.keep_freed_memory = lambda: False
+    executors.limit_threads(1)  # as the runner's workers start (in both trees)
     from algorithms.pipeline import get_pipeline
     from harness.cell_scoring import point_seeds
     from harness.cell_scoring import warm_up as _warm_up
@@ -99,8 +104,10 @@ def _child(seq_dir: str, pairs: int) -> None:
 class _Tree:
     """A child process importing the code of ``root``."""
 
-    def __init__(self, root: Path, seq: str, pairs: int):
+    def __init__(self, root: Path, seq: str, pairs: int, default_malloc: bool = False):
         env = dict(os.environ, PYTHONPATH=str(root))
+        if default_malloc:
+            env["PIPELINE_SPEED_DEFAULT_MALLOC"] = "1"
         self.root = root
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "_child", seq, str(pairs)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, text=True,
@@ -166,10 +173,13 @@ def main() -> int:
     ap.add_argument("--pipelines", default=STANDARD)
     ap.add_argument("--pairs", type=int, default=None, help="first pairs only (0: all; default 20 / 0)")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--default-malloc", action="store_true",
+                    help="this tree without harness.executors.keep_freed_memory (the code changes alone)")
     args = ap.parse_args()
     pairs = args.pairs if args.pairs is not None else (20 if args.mode == "speed" else 0)
     names = [p for p in args.pipelines.split(",") if p]
-    ours, ref = _Tree(HERE, args.seq, pairs), _Tree(Path(args.ref).resolve(), args.seq, pairs)
+    ours = _Tree(HERE, args.seq, pairs, default_malloc=args.default_malloc)
+    ref = _Tree(Path(args.ref).resolve(), args.seq, pairs)
     try:
         if args.mode == "check":
             problems = []
