@@ -19,7 +19,7 @@ import numpy as np
 from algorithms.flow import check_flow
 from algorithms.registry import register_stage
 
-__all__ = ["threshold_flow", "spatial_filter", "temporal_filter", "SPATIAL_KERNEL"]
+__all__ = ["threshold_flow", "zero_outside", "spatial_filter", "temporal_filter", "SPATIAL_KERNEL"]
 
 # eq. 4.11: P_new = 1/2 P + 1/16 (N1 + ... + N8); the weights sum to 1.
 SPATIAL_KERNEL = np.array([[1, 1, 1], [1, 8, 1], [1, 1, 1]], dtype=np.float32) / 16.0
@@ -94,8 +94,41 @@ def threshold_flow(flow: np.ndarray, *, direction=None, tolerance_deg: float = 4
         if vm.shape != f.shape[:2]:
             raise ValueError(f"valid: expected shape {f.shape[:2]}, got {vm.shape}")
         mask &= vm
-    out = np.where(mask[..., None], f, np.float32(0)).astype(np.float32)
-    return out, mask
+    return zero_outside(f, mask), mask
+
+
+def zero_outside(flow: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """A float32 copy of ``flow`` with the vectors outside ``mask`` set to zero (deleted, as the thesis does).
+
+    The values of ``np.where(mask[..., None], flow, np.float32(0)).astype(np.float32)``, in
+    one pass (numpy's where over a last axis of 2 was ten times slower).
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+    mask : ndarray, (H, W) bool
+
+    Returns
+    -------
+    ndarray, (H, W, 2) float32
+    """
+    f = np.asarray(flow)
+    m = np.asarray(mask)
+    if f.ndim != 3 or f.shape[2] != 2 or m.shape != f.shape[:2] or m.dtype != bool:
+        raise ValueError(f"flow and mask: expected (H, W, 2) and (H, W) bool, got {f.shape} and {m.shape} {m.dtype}")
+    out = np.empty(f.shape, dtype=np.float32)
+    _zero_outside(np.ascontiguousarray(f, dtype=np.float32).reshape(-1, 2), np.ascontiguousarray(m).reshape(-1),
+                  out.reshape(-1, 2))
+    return out
+
+
+@numba.njit(cache=True)
+def _zero_outside(f, m, out) -> None:
+    zero = np.float32(0.0)
+    for k in range(m.size):
+        keep = m[k]
+        out[k, 0] = f[k, 0] if keep else zero
+        out[k, 1] = f[k, 1] if keep else zero
 
 
 @register_stage("spatial")

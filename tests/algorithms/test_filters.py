@@ -89,3 +89,21 @@ def test_temporal_filter_is_the_float64_formula_bit_for_bit():
         want = (total / weight).astype(np.float32)
         got = temporal_filter(prev, b, nxt)
         assert got.dtype == np.float32 and np.array_equal(got, want)
+
+
+def test_zero_outside_is_numpy_where_bit_for_bit():
+    from algorithms.filters import zero_outside
+
+    rng = np.random.default_rng(6)
+    f = rng.normal(0, 3, (5, 8, 2)).astype(np.float32)
+    f[0, 0] = (-0.0, np.nan)  # kept as they are where the mask holds
+    f[1, 1] = (np.inf, -0.0)
+    m = rng.random((5, 8)) > 0.4
+    m[0, 0] = m[1, 1] = True
+    for flow in (f, f.astype(np.float64), f[:, ::-1]):
+        want = np.where(m[..., None], flow, np.float32(0)).astype(np.float32)
+        got = zero_outside(flow, m)
+        assert got.dtype == np.float32 and np.array_equal(got, want, equal_nan=True)
+        assert np.array_equal(np.signbit(got), np.signbit(want))
+    with pytest.raises(ValueError, match=r"expected \(H, W, 2\) and \(H, W\) bool"):
+        zero_outside(f, m[:, :4])
