@@ -101,7 +101,7 @@ def zero_outside(flow: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """A float32 copy of ``flow`` with the vectors outside ``mask`` set to zero (deleted, as the thesis does).
 
     The values of ``np.where(mask[..., None], flow, np.float32(0)).astype(np.float32)``, in
-    one pass (numpy's where over a last axis of 2 was ten times slower).
+    one pass (numpy's where over a last axis of 2 was 25 times slower at 640x480).
 
     Parameters
     ----------
@@ -117,18 +117,21 @@ def zero_outside(flow: np.ndarray, mask: np.ndarray) -> np.ndarray:
     if f.ndim != 3 or f.shape[2] != 2 or m.shape != f.shape[:2] or m.dtype != bool:
         raise ValueError(f"flow and mask: expected (H, W, 2) and (H, W) bool, got {f.shape} and {m.shape} {m.dtype}")
     out = np.empty(f.shape, dtype=np.float32)
-    _zero_outside(np.ascontiguousarray(f, dtype=np.float32).reshape(-1, 2), np.ascontiguousarray(m).reshape(-1),
-                  out.reshape(-1, 2))
+    _zero_outside(np.ascontiguousarray(f, dtype=np.float32).reshape(-1), np.ascontiguousarray(m).reshape(-1),
+                  out.reshape(-1))
     return out
 
 
 @numba.njit(cache=True)
 def _zero_outside(f, m, out) -> None:
+    """Flat ``f``, ``out`` (2 n,) float32 and ``m`` (n,) bool (2-D indexing was 8x slower)."""
     zero = np.float32(0.0)
     for k in range(m.size):
         keep = m[k]
-        out[k, 0] = f[k, 0] if keep else zero
-        out[k, 1] = f[k, 1] if keep else zero
+        a = f[2 * k]
+        b = f[2 * k + 1]
+        out[2 * k] = a if keep else zero
+        out[2 * k + 1] = b if keep else zero
 
 
 @register_stage("spatial")
