@@ -13,8 +13,8 @@ scikit-image or the pipeline:
   its function would shadow the function on the package), ``tv_l1`` (our TV-L1, in
   ``tv_l1_flow``), ``farneback``, ``dis``, ``tvl1`` (scikit-image's), ``ilk``
 * global motion: ``ncc_global_motion``, ``affine_global_motion``, ``global_flow``
-* jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``spatial_filter``,
-  ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
+* jitter removal: ``remove_jitter``; clean-up: ``threshold_flow``, ``zero_outside``,
+  ``spatial_filter``, ``temporal_filter``; Kalman: ``scalar_kalman``, ``THESIS_KALMAN``,
   ``ConstantVelocityKalman``, ``kalman_cv_filter``; tracking: ``detect_moving_objects``,
   ``PointTracker``, ``MultiTargetTracker``, the point's image correlation ``ncc_refine``,
   ``point_template``, ``CorrelationMatch``, ``CORRELATION_DEFAULTS``
@@ -41,7 +41,7 @@ for _module, _names in {
     "algorithms.global_motion": ("GlobalMotion", "GlobalModel", "ncc_global_motion", "affine_global_motion",
                                  "global_flow"),
     "algorithms.jitter": ("JitterResult", "cumulative_path", "fit_flight_path", "remove_jitter"),
-    "algorithms.filters": ("threshold_flow", "spatial_filter", "temporal_filter"),
+    "algorithms.filters": ("threshold_flow", "zero_outside", "spatial_filter", "temporal_filter"),
     "algorithms.kalman": ("THESIS_KALMAN", "scalar_kalman", "ConstantVelocityKalman", "CVFilterResult",
                           "kalman_cv_filter"),
     "algorithms.tracking": ("TRACK_COLUMNS", "detect_moving_objects", "PointTracker", "MultiTargetTracker",

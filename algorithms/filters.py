@@ -13,12 +13,13 @@ from __future__ import annotations
 import math
 
 import cv2
+import numba
 import numpy as np
 
 from algorithms.flow import check_flow
 from algorithms.registry import register_stage
 
-__all__ = ["threshold_flow", "spatial_filter", "temporal_filter", "SPATIAL_KERNEL"]
+__all__ = ["threshold_flow", "zero_outside", "spatial_filter", "temporal_filter", "SPATIAL_KERNEL"]
 
 # eq. 4.11: P_new = 1/2 P + 1/16 (N1 + ... + N8); the weights sum to 1.
 SPATIAL_KERNEL = np.array([[1, 1, 1], [1, 8, 1], [1, 1, 1]], dtype=np.float32) / 16.0
@@ -93,8 +94,44 @@ def threshold_flow(flow: np.ndarray, *, direction=None, tolerance_deg: float = 4
         if vm.shape != f.shape[:2]:
             raise ValueError(f"valid: expected shape {f.shape[:2]}, got {vm.shape}")
         mask &= vm
-    out = np.where(mask[..., None], f, np.float32(0)).astype(np.float32)
-    return out, mask
+    return zero_outside(f, mask), mask
+
+
+def zero_outside(flow: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """A float32 copy of ``flow`` with the vectors outside ``mask`` set to zero (deleted, as the thesis does).
+
+    The values of ``np.where(mask[..., None], flow, np.float32(0)).astype(np.float32)``, in
+    one pass (numpy's where over a last axis of 2 was 25 times slower at 640x480).
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+    mask : ndarray, (H, W) bool
+
+    Returns
+    -------
+    ndarray, (H, W, 2) float32
+    """
+    f = np.asarray(flow)
+    m = np.asarray(mask)
+    if f.ndim != 3 or f.shape[2] != 2 or m.shape != f.shape[:2] or m.dtype != bool:
+        raise ValueError(f"flow and mask: expected (H, W, 2) and (H, W) bool, got {f.shape} and {m.shape} {m.dtype}")
+    out = np.empty(f.shape, dtype=np.float32)
+    _zero_outside(np.ascontiguousarray(f, dtype=np.float32).reshape(-1), np.ascontiguousarray(m).reshape(-1),
+                  out.reshape(-1))
+    return out
+
+
+@numba.njit(cache=True)
+def _zero_outside(f, m, out) -> None:
+    """Flat ``f``, ``out`` (2 n,) float32 and ``m`` (n,) bool (2-D indexing was 8x slower)."""
+    zero = np.float32(0.0)
+    for k in range(m.size):
+        keep = m[k]
+        a = f[2 * k]
+        b = f[2 * k + 1]
+        out[2 * k] = a if keep else zero
+        out[2 * k + 1] = b if keep else zero
 
 
 @register_stage("spatial")
@@ -139,10 +176,26 @@ def temporal_filter(prev: np.ndarray | None, cur: np.ndarray, next: np.ndarray |
     ndarray, (H, W, 2) float32
     """
     c = check_flow(cur, name="cur")
-    total = 0.5 * c.astype(np.float64)
-    weight = 0.5
-    for name, nb in (("prev", prev), ("next", next)):
-        if nb is not None:
-            total += 0.25 * check_flow(nb, name=name, shape=c.shape[:2]).astype(np.float64)
-            weight += 0.25
-    return (total / weight).astype(np.float32)
+    p = None if prev is None else check_flow(prev, name="prev", shape=c.shape[:2])
+    n = None if next is None else check_flow(next, name="next", shape=c.shape[:2])
+    weight = 0.5 + (0.25 if p is not None else 0.0) + (0.25 if n is not None else 0.0)
+    out = np.empty(c.shape, dtype=np.float32)
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in (c, c if p is None else p, c if n is None else n)]
+    _temporal_mean(flat[0], flat[1], p is not None, flat[2], n is not None, weight, out.reshape(-1))
+    return out
+
+
+@numba.njit(cache=True)
+def _temporal_mean(c, p, use_p, n, use_n, weight, out) -> None:
+    """``out = (1/2 c [+ 1/4 p] [+ 1/4 n]) / weight`` in float64, rounded to float32, in one pass.
+
+    The float64 operations of the numpy form, in its order, per element; 1-D arrays (one
+    flat loop vectorises, a loop over the last axis of 2 did not).
+    """
+    for k in range(c.size):
+        t = 0.5 * np.float64(c[k])
+        if use_p:
+            t += 0.25 * np.float64(p[k])
+        if use_n:
+            t += 0.25 * np.float64(n[k])
+        out[k] = np.float32(t / weight)

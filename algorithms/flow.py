@@ -140,12 +140,14 @@ def warp_backward(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.n
     """
     f = check_flow(flow, shape=np.asarray(image).shape[:2])
     h, w = f.shape[:2]
-    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    map_x = xs + f[..., 0]
-    map_y = ys + f[..., 1]
+    map_x = np.arange(w, dtype=np.float32)[None, :] + f[..., 0]  # a row and a column broadcast, no meshgrid
+    map_y = np.arange(h, dtype=np.float32)[:, None] + f[..., 1]
     src = np.asarray(image).astype(np.float32, copy=False)
     warped = cv2.remap(src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    inside = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
+    inside = map_x >= 0
+    inside &= map_x <= w - 1
+    inside &= map_y >= 0
+    inside &= map_y <= h - 1
     return warped, inside
 
 

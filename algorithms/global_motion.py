@@ -207,6 +207,12 @@ def affine_global_motion(frame0: np.ndarray, frame1: np.ndarray, *, model: str =
     return GlobalModel(H, model, float(score), bool(np.isfinite(score) and np.all(np.isfinite(H))))
 
 
+def is_translation(M: np.ndarray) -> bool:
+    """Whether the ``(3, 3)`` matrix ``M`` is exactly a translation (identity linear part, last row 0 0 1)."""
+    return bool(M[0, 0] == 1.0 and M[0, 1] == 0.0 and M[1, 0] == 0.0 and M[1, 1] == 1.0
+                and M[2, 0] == 0.0 and M[2, 1] == 0.0 and M[2, 2] == 1.0)
+
+
 def global_flow(motion: GlobalMotion | GlobalModel | np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """The flow field ``(H, W, 2)`` float32 that a global model induces at each pixel centre.
 
@@ -229,11 +235,18 @@ def global_flow(motion: GlobalMotion | GlobalModel | np.ndarray, shape: tuple[in
     M = motion.matrix if isinstance(motion, GlobalModel) else np.asarray(motion, dtype=np.float64)
     if M.shape != (3, 3) or not np.all(np.isfinite(M)):
         raise ValueError(f"motion: expected a finite (3, 3) matrix, got {M.shape} {M.dtype}")
+    flow = np.empty((h, w, 2), dtype=FLOW_DTYPE)
+    if is_translation(M):
+        # M x = x + t exactly (1 * x + 0 * y = x, Z = 0 * x + 0 * y + 1 = 1): u depends on x only, v on y
+        # only, so one row and one column, broadcast, give the values of the 2-D expressions below
+        xs, ys = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
+        flow[..., 0] = ((xs + M[0, 2]) - xs).astype(FLOW_DTYPE)[None, :]
+        flow[..., 1] = ((ys + M[1, 2]) - ys).astype(FLOW_DTYPE)[:, None]
+        return flow
     xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     X = M[0, 0] * xs + M[0, 1] * ys + M[0, 2]
     Y = M[1, 0] * xs + M[1, 1] * ys + M[1, 2]
     Z = M[2, 0] * xs + M[2, 1] * ys + M[2, 2]
-    flow = np.empty((h, w, 2), dtype=FLOW_DTYPE)
     flow[..., 0] = X / Z - xs
     flow[..., 1] = Y / Z - ys
     return flow

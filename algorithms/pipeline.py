@@ -151,18 +151,27 @@ def _compensate(g1: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     else:
         warped = cv2.warpPerspective(g1, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                      borderMode=cv2.BORDER_REPLICATE)
-    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    X, Y = xs + fg[..., 0], ys + fg[..., 1]
+    from algorithms.global_motion import is_translation
+
+    xs, ys = np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)
+    if is_translation(M):
+        # fg's u depends on x only and v on y only: test one row and one column, the same float32 sums
+        X, Y = xs + fg[0, :, 0], ys + fg[:, 0, 1]
+        inside = (((Y >= -1e-3) & (Y <= h - 1 + 1e-3))[:, None]
+                  & ((X >= -1e-3) & (X <= w - 1 + 1e-3))[None, :])
+        return warped, fg, inside
+    X, Y = xs[None, :] + fg[..., 0], ys[:, None] + fg[..., 1]
     inside = (X >= -1e-3) & (X <= w - 1 + 1e-3) & (Y >= -1e-3) & (Y <= h - 1 + 1e-3)
     return warped, fg, inside
 
 
 def _compose(M: np.ndarray, w_local: np.ndarray, is_shift: bool) -> np.ndarray:
     """total(x) = M(x + w(x)) - x (for a shift: s + w)."""
-    if is_shift:
-        out = w_local.astype(np.float32, copy=True)
-        out[..., 0] += np.float32(M[0, 2])
-        out[..., 1] += np.float32(M[1, 2])
+    if is_shift:  # each component plus its float32 shift, written once
+        w32 = w_local.astype(np.float32, copy=False)
+        out = np.empty(w32.shape, dtype=np.float32)
+        np.add(w32[..., 0], np.float32(M[0, 2]), out=out[..., 0])
+        np.add(w32[..., 1], np.float32(M[1, 2]), out=out[..., 1])
         return out
     h, w = w_local.shape[:2]
     xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))

@@ -78,7 +78,11 @@ def target_inside(flow: np.ndarray) -> np.ndarray:
     h, w = flow.shape[:2]
     xs = np.arange(w, dtype=np.float32)[None, :] + flow[..., 0]
     ys = np.arange(h, dtype=np.float32)[:, None] + flow[..., 1]
-    return (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
+    inside = xs >= 0
+    inside &= xs <= w - 1
+    inside &= ys >= 0
+    inside &= ys <= h - 1
+    return inside
 
 
 def median_flow(flow: np.ndarray, size_px: int) -> np.ndarray:

@@ -94,7 +94,9 @@ def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
         raise ValueError(f"mask: expected (H, W) bool, got {tuple(m.shape)} {m.dtype}")
     if connectivity not in (4, 8):
         raise ValueError(f"connectivity: expected 4 or 8, got {connectivity}")
-    n, _, stats, centroids = cv2.connectedComponentsWithStats(m.astype(np.uint8), connectivity=connectivity)
+    # a bool array's bytes are 0 / 1: the uint8 view is the image astype would copy
+    n, _, stats, centroids = cv2.connectedComponentsWithStats(np.ascontiguousarray(m).view(np.uint8),
+                                                              connectivity=connectivity)
     out = [(float(centroids[i, 0]), float(centroids[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
            for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area_px]
     return sorted(out, key=lambda d: -d[2])

@@ -75,3 +75,35 @@ def test_stages_are_registered():
     assert get_stage("threshold", "threshold_flow") is threshold_flow
     assert get_stage("spatial", "spatial_filter") is spatial_filter
     assert get_stage("temporal", "temporal_filter") is temporal_filter
+
+
+def test_temporal_filter_is_the_float64_formula_bit_for_bit():
+    # the fused kernel must round exactly as (1/2 P_t + 1/4 P_t-1 + 1/4 P_t+1) / weight in float64 does
+    rng = np.random.default_rng(5)
+    a, b, c = (rng.normal(0, 3, (6, 7, 2)).astype(np.float32) for _ in range(3))
+    for prev, nxt, weight in [(a, c, 1.0), (None, c, 0.75), (a, None, 0.75), (None, None, 0.5)]:
+        total = 0.5 * b.astype(np.float64)
+        for nb in (prev, nxt):
+            if nb is not None:
+                total += 0.25 * nb.astype(np.float64)
+        want = (total / weight).astype(np.float32)
+        got = temporal_filter(prev, b, nxt)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
+
+
+def test_zero_outside_is_numpy_where_bit_for_bit():
+    from algorithms.filters import zero_outside
+
+    rng = np.random.default_rng(6)
+    f = rng.normal(0, 3, (5, 8, 2)).astype(np.float32)
+    f[0, 0] = (-0.0, np.nan)  # kept as they are where the mask holds
+    f[1, 1] = (np.inf, -0.0)
+    m = rng.random((5, 8)) > 0.4
+    m[0, 0] = m[1, 1] = True
+    for flow in (f, f.astype(np.float64), f[:, ::-1]):
+        want = np.where(m[..., None], flow, np.float32(0)).astype(np.float32)
+        got = zero_outside(flow, m)
+        assert got.dtype == np.float32 and np.array_equal(got, want, equal_nan=True)
+        assert np.array_equal(np.signbit(got), np.signbit(want))
+    with pytest.raises(ValueError, match=r"expected \(H, W, 2\) and \(H, W\) bool"):
+        zero_outside(f, m[:, :4])

@@ -84,3 +84,16 @@ def test_global_flow_of_shift_and_matrix():
     np.testing.assert_allclose(global_flow(M, (4, 5)), affine_field(M, (4, 5)), atol=1e-5)
     with pytest.raises(ValueError, match=r"\(3, 3\) matrix"):
         global_flow(np.eye(2), (4, 5))
+
+
+def test_global_flow_of_a_translation_matrix_is_the_general_formula_bit_for_bit():
+    # the translation path builds one row and one column; the general projective expression on the
+    # full grid must give exactly the same float32 values (the pipeline's flow_global)
+    rng = np.random.default_rng(3)
+    ys, xs = np.meshgrid(np.arange(7, dtype=np.float64), np.arange(9, dtype=np.float64), indexing="ij")
+    for tx, ty in [(0.0, 0.0), (-0.0, 3.0), (1.0 / 3.0, -2.7), *rng.normal(0, 20, (20, 2))]:
+        M = np.array([[1.0, 0.0, tx], [0.0, 1.0, ty], [0.0, 0.0, 1.0]])
+        Z = M[2, 0] * xs + M[2, 1] * ys + M[2, 2]
+        want = np.stack([(M[0, 0] * xs + M[0, 1] * ys + M[0, 2]) / Z - xs,
+                         (M[1, 0] * xs + M[1, 1] * ys + M[1, 2]) / Z - ys], axis=-1).astype(np.float32)
+        assert np.array_equal(global_flow(M, (7, 9)), want)

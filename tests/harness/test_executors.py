@@ -26,6 +26,31 @@ def test_process_pool_spawns():
     assert method == "spawn"  # a forked child could inherit a GL context
 
 
+def _page_faults_per_flow_call() -> float:
+    import resource
+
+    import numpy as np
+
+    from algorithms.lucas_kanade_flow import lucas_kanade
+
+    f0 = np.random.default_rng(0).random((240, 320)).astype(np.float32) * 255
+    f1 = np.roll(f0, 1, axis=1)
+    lucas_kanade(f0, f1, window=11, levels=3, iterations=2)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(5):
+        lucas_kanade(f0, f1, window=11, levels=3, iterations=2)
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 5
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc")
+def test_workers_reuse_freed_memory_instead_of_faulting_fresh_pages():
+    # glibc's default hands a pyramidal LK call of 320x240 about 1000 fresh pages (each a page
+    # fault) every time; a worker keeps freed memory (harness.executors.keep_freed_memory)
+    with open_executor("process", workers=1) as pool:
+        faults = pool.submit(_page_faults_per_flow_call).result(timeout=120)
+    assert faults < 50
+
+
 @pytest.mark.parametrize("kwargs, match", [
     ({"kind": "threads"}, r"unknown executor 'threads'; valid: process, dask, dask-local"),
     ({"kind": "process", "workers": 0}, r"workers: expected a positive number, got 0"),
