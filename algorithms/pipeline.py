@@ -39,7 +39,8 @@ import numpy as np
 import pandas as pd
 
 from algorithms.flow import FLOW_DTYPE
-from algorithms.global_motion import affine_global_motion, global_flow
+from algorithms.filters import zero_outside
+from algorithms.global_motion import affine_global_motion, global_flow, is_translation
 from algorithms.jitter import cumulative_path
 from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builtin_pipelines, pipeline_hash,
                                       resolve_pipeline)
@@ -151,7 +152,6 @@ def _compensate(g1: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     else:
         warped = cv2.warpPerspective(g1, M, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                      borderMode=cv2.BORDER_REPLICATE)
-    from algorithms.global_motion import is_translation
 
     xs, ys = np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)
     if is_translation(M):
@@ -384,7 +384,7 @@ class Pipeline:
             if thr is not None:
                 cleaned, _ = threshold_flow(w_local, valid=valid, **thr)
             else:
-                cleaned = np.where(valid[..., None], w_local, np.float32(0)).astype(np.float32)
+                cleaned = zero_outside(w_local, valid)  # np.where's values, one pass
             ms["threshold"] = _ms(t0)
             t0 = time.perf_counter()
             if cfg["spatial"]:
