@@ -19,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["pair_totals", "values_in_bins", "acos"]
+__all__ = ["pair_totals", "values_in_bins", "truth_local", "acos", "acos_array"]
 
 # A pixel's EPE is computed as sqrt(du^2 + dv^2), within 2 ulp of hypot's (libm hypot costs
 # more than the rest of the pass). Where that could change a decision (a histogram bin edge,
@@ -122,6 +122,8 @@ def _bin_exact(du, dv, bin_px, nbins):  # pragma: no cover - numba
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _fl(epe, du, dv, tu, tv):  # pragma: no cover - numba
     """KITTI Fl of a pixel with EPE > 3 px: also > 5 % of |w_true| (1.0 or 0.0)."""
+    if tu * tu + tv * tv < 3599.0:  # 0.05 |w_true| < 3 px < EPE, without the hypot
+        return 1.0
     limit = 0.05 * math.hypot(tu, tv)
     if abs(epe - limit) <= _EDGE * limit:
         epe = math.hypot(du, dv)
@@ -129,12 +131,12 @@ def _fl(epe, du, dv, tu, tv):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def _run_totals(stats, b, epe, ang, fl, ve, x0, x1):  # pragma: no cover - numba
+def _run_totals(stats, b, epe, ang, ve, x0, x1):  # pragma: no cover - numba
     """Add the totals of the pixels x0 .. x1 - 1 of a row (one pattern ``b``) to ``stats[b]``.
 
     The sums are reassociated (SIMD): they differ from a sequential sum by rounding only.
     """
-    s1 = s2 = sa = k1 = k3 = k5 = kf = kc = 0.0
+    s1 = s2 = sa = k1 = k3 = k5 = kc = 0.0
     for x in range(x0, x1):
         v = epe[x]
         s1 += v
@@ -143,7 +145,6 @@ def _run_totals(stats, b, epe, ang, fl, ve, x0, x1):  # pragma: no cover - numba
         k1 += 1.0 if v > 1.0 else 0.0
         k3 += 1.0 if v > 3.0 else 0.0
         k5 += 1.0 if v > 5.0 else 0.0
-        kf += fl[x]
         kc += 1.0 if ve[x] else 0.0
     stats[b, N] += x1 - x0
     stats[b, S_EPE] += s1
@@ -152,16 +153,15 @@ def _run_totals(stats, b, epe, ang, fl, ve, x0, x1):  # pragma: no cover - numba
     stats[b, K1] += k1
     stats[b, K3] += k3
     stats[b, K5] += k5
-    stats[b, KFL] += kf
     stats[b, KCOV] += kc
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _count_row(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, fl, stats, hist, bins):  # pragma: no cover
+def _count_row(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, stats, hist, bins):  # pragma: no cover
     """Count the scored pixels of a row of one motion from its per-pixel errors (epe, ang, k, edge)."""
     w = bits.size
     for x in range(w):
-        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, outlier limit, Fl)
+        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, Fl)
             if motion == 0:
                 tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
                 du, dv = np.float64(e[x, 0]) - tu, np.float64(e[x, 1]) - tv
@@ -171,7 +171,7 @@ def _count_row(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, fl, 
             if edge[x]:
                 epe[x], k[x] = _bin_exact(du, dv, bin_px, nbins)
             if epe[x] > 3.0:
-                fl[x] = _fl(epe[x], du, dv, tu, tv)
+                stats[bits[x], KFL] += _fl(epe[x], du, dv, tu, tv)
     for x in range(w):
         bins[x] = k[x]
         hist[bits[x], k[x]] += 1  # pattern 0 (not scored) is counted too, and ignored
@@ -182,7 +182,7 @@ def _count_row(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, fl, 
         while x1 < w and bits[x1] == b:
             x1 += 1
         if b != 0:
-            _run_totals(stats, b, epe, ang, fl, ve, x0, x1)
+            _run_totals(stats, b, epe, ang, ve, x0, x1)
         x0 = x1
 
 
@@ -201,8 +201,8 @@ def pair_totals(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist
     """
     h, w = bits.shape
     per_bin = 1.0 / bin_px
-    epe_t, ang_t, k_t, edge_t, fl_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_), np.empty(w)
-    epe_l, ang_l, k_l, edge_l, fl_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_), np.empty(w)
+    epe_t, ang_t, k_t, edge_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    epe_l, ang_l, k_l, edge_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
     bad = 0
     for y in range(h):
         # errors of every pixel of the row (NaN where the truth is unknown), branch-free; the
@@ -217,17 +217,15 @@ def pair_totals(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist
             epe_t[x] = epe = _epe(eu, ev, tu, tv)
             k_t[x], edge_t[x] = _bin(epe, per_bin, nbins)
             ang_t[x] = _cos(eu, ev, tu, tv)
-            fl_t[x] = 0.0
             eu, ev, tu, tv = np.float64(l0), np.float64(l1), np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
             epe_l[x] = epe = _epe(eu, ev, tu, tv)
             k_l[x], edge_l[x] = _bin(epe, per_bin, nbins)
             ang_l[x] = _cos(eu, ev, tu, tv)
-            fl_l[x] = 0.0
         _acos_deg(ang_t)
         _acos_deg(ang_l)
-        _count_row(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t, fl_t,
+        _count_row(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t,
                    stats[0], hist[0], bins[0, y])
-        _count_row(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l, fl_l,
+        _count_row(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l,
                    stats[1], hist[1], bins[1, y])
     return bad
 
@@ -243,25 +241,39 @@ def values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, target, start, ou
     fill = start.copy()
     h, w = bits.shape
     _, n_regions, n_q = target.shape
-    for y in range(h):
-        for x in range(w):
-            for m in range(2):
-                b = bits[y, x] if m == 0 else bits_l[y, x]
-                if b == 0:
-                    continue
+    for m in range(2):
+        bm = bits if m == 0 else bits_l
+        tm = t if m == 0 else tl
+        tgt = is_target[m]
+        for y in range(h):
+            for x in range(w):
                 k = bins[m, y, x]
-                if not is_target[m, k]:
+                b = bm[y, x]
+                if not tgt[k] or b == 0:
                     continue
                 if m == 0:
                     eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
-                    tu, tv = np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
                 else:
                     eu, ev = np.float64(e[y, x, 0] - g[y, x, 0]), np.float64(e[y, x, 1] - g[y, x, 1])
-                    tu, tv = np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
-                epe = math.hypot(eu - tu, ev - tv)
+                epe = math.hypot(eu - np.float64(tm[y, x, 0]), ev - np.float64(tm[y, x, 1]))
                 for r in range(n_regions):
                     if (b >> r) & 1:
                         for j in range(n_q):
                             if target[m, r, j] == k:
                                 out[fill[m, r, j]] = epe
                                 fill[m, r, j] += 1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def truth_local(t, cam, valid, t_local, ok, ok_local):  # pragma: no cover - numba
+    """t_local = t - cam in float32 (as numpy); ok, ok_local: valid and both components finite in t, t_local."""
+    h, w = valid.shape
+    for y in range(h):
+        for x in range(w):
+            t0, t1 = t[y, x, 0], t[y, x, 1]
+            l0, l1 = t0 - cam[y, x, 0], t1 - cam[y, x, 1]
+            t_local[y, x, 0] = l0
+            t_local[y, x, 1] = l1
+            v = valid[y, x]
+            ok[y, x] = v and math.isfinite(t0) and math.isfinite(t1)
+            ok_local[y, x] = v and math.isfinite(l0) and math.isfinite(l1)

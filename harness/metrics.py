@@ -541,10 +541,15 @@ def prepare_pair_truth(truth, *, regions: Iterable[str] = REGIONS, boundary_px: 
     vt0 = np.asarray(truth.valid, bool)
     if vt0.shape != t.shape[:2]:
         raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt0.shape}")
-    # local motion: the camera's field taken out of the truth
-    t_local = check_flow(t - np.asarray(truth.flow_camera, np.float32), name="flow_true", allow_nan=True)
-    vt = vt0 & _finite_uv(t)
-    vt_local = vt0 & _finite_uv(t_local)
+    from harness._flow_kernels import truth_local  # numba: on the first scoring, not with the module
+
+    # local motion: the camera's field taken out of the truth (float32, as t - np.float32(flow_camera))
+    cam = np.asarray(truth.flow_camera, np.float32)
+    if cam.shape != t.shape:  # as numpy's t - cam broadcasts it
+        cam = np.broadcast_to(cam, t.shape)
+    t_local = np.empty_like(t)
+    vt, vt_local = np.empty(vt0.shape, bool), np.empty(vt0.shape, bool)
+    truth_local(t, np.ascontiguousarray(cam), np.ascontiguousarray(vt0), t_local, vt, vt_local)
     masks = region_masks(vt, truth.instances, boundary_px=boundary_px, regions=regions)
     bits = _region_bits(masks) if regions else np.zeros(vt.shape, np.uint8)
     if np.array_equal(vt, vt_local):  # the regions depend on the scored pixels only
@@ -552,10 +557,11 @@ def prepare_pair_truth(truth, *, regions: Iterable[str] = REGIONS, boundary_px: 
     else:
         masks_local = region_masks(vt_local, truth.instances, boundary_px=boundary_px, regions=regions)
         bits_local = _region_bits(masks_local) if regions else bits
+    same = bits_local is bits
     bits = _read_only(np.ascontiguousarray(bits))
-    bits_local = bits if bits_local is bits or bits_local is None else _read_only(np.ascontiguousarray(bits_local))
+    bits_local = bits if same else _read_only(np.ascontiguousarray(bits_local))
     return PreparedTruth(regions=regions, boundary_px=int(boundary_px), flow=_read_only(t),
-                         flow_local=_read_only(np.ascontiguousarray(t_local)), bits=bits, bits_local=bits_local)
+                         flow_local=_read_only(t_local), bits=bits, bits_local=bits_local)
 
 
 def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.ndarray, *, frame: int | None,
