@@ -158,6 +158,23 @@ def _values_in_bins_before(e, t, bits, bin_idx, is_target, target, start, out):
                             fill[r, j] += 1
 
 
+def _quantile_targets_before(hist, qs):
+    cum = np.cumsum(hist, axis=1)
+    target = np.full((hist.shape[0], len(qs)), -1, np.int64)
+    rank = np.zeros_like(target)
+    for r in range(hist.shape[0]):
+        n = int(cum[r, -1])
+        if n == 0:
+            continue
+        for j, q in enumerate(qs):
+            k = M._rank_index(q, n)
+            b = int(np.searchsorted(cum[r], k + 1))
+            target[r, j] = b
+            rank[r, j] = k - (int(cum[r, b - 1]) if b else 0)
+    sizes = np.where(target >= 0, hist[np.arange(hist.shape[0])[:, None], np.maximum(target, 0)], 0)
+    return target, rank, sizes
+
+
 def _score_field_before(e, t, masks, ve, *, motion, frame, bits=None):
     names = list(masks)
     if bits is None:
@@ -180,8 +197,7 @@ def _score_field_before(e, t, masks, ve, *, motion, frame, bits=None):
             stats[j] += by_code[c]
             hist[j] += hist_code[c]
     # quantiles: the bin from the histogram, the value among that bin's samples
-    target, rank, sizes = M._quantile_targets(hist[None], (0.5, 0.95))
-    target, rank, sizes = target[0], rank[0], sizes[0]
+    target, rank, sizes = _quantile_targets_before(hist, (0.5, 0.95))
     start = np.zeros_like(sizes)
     start.ravel()[1:] = np.cumsum(sizes.ravel())[:-1]
     values = np.empty(int(sizes.sum()))

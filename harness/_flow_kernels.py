@@ -277,3 +277,43 @@ def truth_local(t, cam, valid, t_local, ok, ok_local):  # pragma: no cover - num
             v = valid[y, x]
             ok[y, x] = v and math.isfinite(t0) and math.isfinite(t1)
             ok_local[y, x] = v and math.isfinite(l0) and math.isfinite(l1)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def region_hists(hist_code, n_code, out):  # pragma: no cover - numba
+    """out[m, r] = sum of hist_code[m, b] over the patterns b holding region r that have pixels (n_code[m, b] > 0)."""
+    n_m, n_codes, nbins = hist_code.shape
+    n_regions = out.shape[1]
+    for m in range(n_m):
+        for b in range(1, n_codes):
+            if n_code[m, b] == 0:
+                continue
+            for r in range(n_regions):
+                if (b >> r) & 1:
+                    for k in range(nbins):
+                        out[m, r, k] += hist_code[m, b, k]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def quantile_targets(hist, rank, target, start_rank, sizes):  # pragma: no cover - numba
+    """Where the samples of 0-based rank ``rank[m, r, j]`` lie in ``hist[m, r]``: their bin ``target``,
+    the number of samples in lower bins ``start_rank`` and the size of the bin ``sizes``
+    (ranks must be ascending in j; -1 marks an empty histogram: left alone)."""
+    n_m, n_regions, nbins = hist.shape
+    n_q = rank.shape[2]
+    for m in range(n_m):
+        for r in range(n_regions):
+            if rank[m, r, 0] < 0:
+                continue
+            below = 0
+            j = 0
+            for k in range(nbins):
+                c = hist[m, r, k]
+                while j < n_q and rank[m, r, j] < below + c:
+                    target[m, r, j] = k
+                    start_rank[m, r, j] = below
+                    sizes[m, r, j] = c
+                    j += 1
+                if j == n_q:
+                    break
+                below += c

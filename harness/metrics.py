@@ -441,20 +441,15 @@ def _quantile_targets(hist: np.ndarray, qs: tuple[float, ...]):
 
     ``hist`` is ``(M, R, nbins)``; the bin is -1 for an empty histogram.
     """
-    cum = np.cumsum(hist, axis=-1)
-    n = cum[..., -1]
-    target = np.full(hist.shape[:2] + (len(qs),), -1, np.int64)
-    rank = np.zeros_like(target)
-    for (m, r), total in np.ndenumerate(n):
-        if total == 0:
-            continue
-        k = np.array([_rank_index(q, int(total)) for q in qs])
-        b = np.searchsorted(cum[m, r], k + 1)  # the bin holding the sample of rank k + 1
-        target[m, r] = b
-        rank[m, r] = k - np.where(b > 0, cum[m, r, np.maximum(b - 1, 0)], 0)  # its index among that bin's samples
-    m_idx, r_idx = np.indices(hist.shape[:2])
-    sizes = np.where(target >= 0, hist[m_idx[..., None], r_idx[..., None], np.maximum(target, 0)], 0)
-    return target, rank, sizes
+    from harness._flow_kernels import quantile_targets
+
+    n = hist.sum(axis=-1)
+    rank = np.array([[[_rank_index(q, int(c)) if c else -1 for q in qs] for c in row] for row in n], np.int64)
+    rank = rank.reshape(hist.shape[:2] + (len(qs),))
+    target = np.full(rank.shape, -1, np.int64)
+    below, sizes = np.zeros_like(target), np.zeros_like(target)
+    quantile_targets(np.ascontiguousarray(hist), rank, target, below, sizes)
+    return target, np.where(target >= 0, rank - below, 0), sizes
 
 
 def _quantiles(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> np.ndarray:
@@ -573,7 +568,7 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
     one, the local motion is left unscored. When the count returned is not 0 the rows are
     meaningless: the caller raises.
     """
-    from harness._flow_kernels import pair_totals  # numba: on the first scoring, not with the module
+    from harness._flow_kernels import pair_totals, region_hists  # numba: on the first scoring, not with the module
 
     names = truth.regions
     h, w = truth.shape
@@ -586,14 +581,11 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
                       stats, hist_code, bins)
     if bad:
         return [], bad
-    member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
     hist = np.zeros((2, len(names), HIST_NBINS), np.int64)
-    for m in range(2):
-        for c in np.flatnonzero(stats[m, :, _N]):
-            for j in np.flatnonzero(member[:, c]):
-                hist[m, j] += hist_code[m, c]
+    region_hists(hist_code, stats[:, :, _N], hist)
     quant = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist, (0.5, 0.95))
     # region totals: the sum of the patterns it belongs to
+    member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
     rows: list[dict] = []
     for m, motion in enumerate(motions):
         by_code = stats[m]
