@@ -532,11 +532,13 @@ def prepare_pair_truth(truth, *, regions: Iterable[str] = REGIONS, boundary_px: 
         scored pixels (:func:`region_masks`).
     """
     regions = tuple(regions)
-    t = np.ascontiguousarray(check_flow(truth.flow, name="flow_true", allow_nan=True))
+    from harness._flow_kernels import truth_local  # numba: on the first scoring, not with the module
+
+    # read-only views: one compiled signature of the kernels whatever the caller's arrays
+    t = _read_only(np.ascontiguousarray(check_flow(truth.flow, name="flow_true", allow_nan=True)))
     vt0 = np.asarray(truth.valid, bool)
     if vt0.shape != t.shape[:2]:
         raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt0.shape}")
-    from harness._flow_kernels import truth_local  # numba: on the first scoring, not with the module
 
     # local motion: the camera's field taken out of the truth (float32, as t - np.float32(flow_camera))
     cam = np.asarray(truth.flow_camera, np.float32)
@@ -544,7 +546,7 @@ def prepare_pair_truth(truth, *, regions: Iterable[str] = REGIONS, boundary_px: 
         cam = np.broadcast_to(cam, t.shape)
     t_local = np.empty_like(t)
     vt, vt_local = np.empty(vt0.shape, bool), np.empty(vt0.shape, bool)
-    truth_local(t, np.ascontiguousarray(cam), np.ascontiguousarray(vt0), t_local, vt, vt_local)
+    truth_local(t, _read_only(np.ascontiguousarray(cam)), _read_only(np.ascontiguousarray(vt0)), t_local, vt, vt_local)
     masks = region_masks(vt, truth.instances, boundary_px=boundary_px, regions=regions)
     bits = _region_bits(masks) if regions else np.zeros(vt.shape, np.uint8)
     if np.array_equal(vt, vt_local):  # the regions depend on the scored pixels only
@@ -576,7 +578,7 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
     stats = np.zeros((2, n_codes, 9), np.float64)
     hist_code = np.zeros((2, n_codes, HIST_NBINS), np.int32)
     bins = np.empty((2, h, w), np.uint16)
-    bits_l = truth.bits_local if len(motions) > 1 else np.zeros_like(truth.bits)
+    bits_l = truth.bits_local if len(motions) > 1 else _read_only(np.zeros_like(truth.bits))
     bad = pair_totals(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, ve, HIST_BIN_PX, HIST_NBINS,
                       stats, hist_code, bins)
     if bad:
@@ -639,6 +641,7 @@ def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarr
     regions = tuple(regions)
     masks = region_masks(vt, instances, boundary_px=boundary_px, regions=regions)
     bits = np.ascontiguousarray(_region_bits(masks)) if regions else np.zeros(vt.shape, np.uint8)
+    t, e, bits, ve = _read_only(t), _read_only(e), _read_only(bits), _read_only(ve)
     truth = PreparedTruth(regions=regions, boundary_px=boundary_px, flow=t, flow_local=t, bits=bits, bits_local=bits)
     # one motion: the local one is left unscored (g = e only keeps the pass's finiteness test true)
     rows, _ = _score_motions(e, e, truth, ve, frame=frame, motions=(motion,))
@@ -728,8 +731,8 @@ def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] | None = N
     g = np.asarray(estimate.flow_global, np.float32)
     if g.shape != e.shape:  # as numpy's e - g broadcasts it
         g = np.broadcast_to(g, e.shape)
-    g = np.ascontiguousarray(g)
-    ve = _valid_est(estimate.valid, shape)
+    # read-only views: one compiled signature of the kernels whatever the caller's arrays
+    e, g, ve = _read_only(e), _read_only(np.ascontiguousarray(g)), _read_only(_valid_est(estimate.valid, shape))
     rows, bad = _score_motions(e, g, prepared, ve, frame=frame)
     if bad:  # raise check_flow's message
         check_flow(e, name="flow_est")
