@@ -458,16 +458,28 @@ def _quantiles(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> 
 
     target, rank, sizes = _quantile_targets(hist, qs)
     out = np.full(target.shape, np.nan)
-    start = np.zeros_like(sizes)
-    start.ravel()[1:] = np.cumsum(sizes.ravel())[:-1]
-    values = np.empty(int(sizes.sum()), np.float64)
+    # quantiles of a region in the same bin share one segment (an almost constant error puts
+    # most pixels in one bin: a segment may hold most of the image)
+    first = np.broadcast_to(np.arange(len(qs)), target.shape).copy()  # the first quantile of the same bin
+    for j in range(1, len(qs)):
+        for i in range(j - 1, -1, -1):
+            first[..., j] = np.where(target[..., j] == target[..., i], i, first[..., j])
+    own = (first == np.arange(len(qs))) & (target >= 0)
+    fill_target = np.where(own, target, -2)  # -2 matches no bin: nothing collected
+    fill_sizes = np.where(own, sizes, 0)
+    start = np.zeros_like(fill_sizes)
+    start.ravel()[1:] = np.cumsum(fill_sizes.ravel())[:-1]
+    values = np.empty(int(fill_sizes.sum()), np.float64)
     is_target = np.zeros((2, hist.shape[-1]), np.bool_)
     for m in range(2):
         is_target[m, target[m][target[m] >= 0]] = True
-    values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, target, start, values)
-    for idx in zip(*np.nonzero(target >= 0)):
-        seg = values[start[idx]:start[idx] + sizes[idx]]
-        out[idx] = float(np.partition(seg, rank[idx])[rank[idx]])
+    values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, fill_target, start, values)
+    for m, r in zip(*np.nonzero(target[..., 0] >= 0)):
+        for j in np.flatnonzero(own[m, r]):
+            shared = np.flatnonzero(first[m, r] == j)  # the quantiles read from this segment
+            seg = values[start[m, r, j]:start[m, r, j] + fill_sizes[m, r, j]]
+            part = np.partition(seg, rank[m, r, shared])
+            out[m, r, shared] = part[rank[m, r, shared]]
     return out
 
 
