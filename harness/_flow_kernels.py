@@ -115,8 +115,8 @@ def _bin(epe, per_bin, nbins):  # pragma: no cover - numba
 def _bin_exact(du, dv, bin_px, nbins):  # pragma: no cover - numba
     """(EPE, bin) of a pixel near a bin edge: EPE by hypot, as endpoint_error, so that the bin is its bin."""
     epe = math.hypot(du, dv)
-    k = int(math.floor(epe / bin_px))
-    return epe, (nbins - 1 if k > nbins - 1 else k)
+    kf = np.floor(epe / bin_px)  # clamped as a float: a huge EPE would overflow an integer
+    return epe, np.int32(kf if kf < nbins - 1.0 else nbins - 1.0)
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")

@@ -170,6 +170,17 @@ def test_fused_scoring_equals_the_reference_on_fast_motion():
     assert 0 < fl["sum"] < o3["sum"]  # some pixels over 3 px are within 5 % of their flow
 
 
+def test_huge_errors_go_to_the_overflow_bin():
+    """A diverged estimate (1e30 px, an exact multiple of the bin) lands in the last bin, as the reference has it."""
+    rng = np.random.default_rng(15)
+    estimate, truth = _synthetic_pair(rng)
+    estimate.flow_total[30:32, 40:44] = np.float32(1e30)
+    estimate.flow_total[60, 10] = np.float32(-3e38)
+    rows = assert_same_scores(estimate, truth, 0)
+    hist = M.decode_hist(next(r["hist"] for r in rows if r["metric"] == "epe_median" and r["region"] == "all"))
+    assert hist[-1] >= 9
+
+
 def test_perfect_estimate_scores_zero_exactly():
     """Zero error: EPE and angular error 0 in every region (arccos of exactly 1), both motions."""
     rng = np.random.default_rng(10)
