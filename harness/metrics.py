@@ -48,6 +48,7 @@ epe_histogram, encode_hist, decode_hist, add_hist, hist_quantile   quantile tota
 flow_rows, error_rows                                  flow metrics of one field in one mask
 score_flow                                             all flow rows of one pair (no PairEstimate needed)
 timing_rows                                            rows from ``stage_ms``
+prepare_pair_truth, PreparedTruth                     the truth side of score_pair, shared by estimates
 score_pair                                             PairEstimate + PairTruth -> rows
 shift_rows, jitter_rows, detrend                       global motion and stabilisation
 stabilisation_scores, stabilisation_rows               cropping ratio, distortion, stability (Liu 2013)
@@ -80,7 +81,7 @@ __all__ = [
     "REGIONS", "MOTIONS", "HIST_BIN_PX", "HIST_MAX_PX", "HIST_NBINS",
     "endpoint_error", "angular_error_deg", "boundary_mask", "region_masks",
     "epe_histogram", "encode_hist", "decode_hist", "add_hist", "hist_quantile",
-    "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair",
+    "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair", "PreparedTruth", "prepare_pair_truth",
     "shift_rows", "detrend", "jitter_rows", "stabilisation_scores", "stabilisation_rows", "position_error_px", "associate_tracks", "track_rows", "MOTCounts", "mot_counts", "mot_rows",
     "HOTA_ALPHAS", "HOTACounts", "hota_counts",
     "score_sequence",
@@ -435,42 +436,192 @@ def _error_rows_from_totals(n: int, s_epe: float, s_sq: float, s_ae: float, over
     return rows
 
 
-# columns of the per-region totals of harness._flow_kernels.field_totals
-_N, _S_EPE, _S_SQ, _S_AE, _K1, _K3, _K5, _KFL, _KCOV = range(9)
+def _quantile_targets(hist: np.ndarray, qs: tuple[float, ...]):
+    """Where the nearest-rank quantiles lie: bin, rank within the bin and size of the bin, each ``(M, R, len(qs))``.
+
+    ``hist`` is ``(M, R, nbins)``; the bin is -1 for an empty histogram.
+    """
+    from harness._flow_kernels import quantile_targets
+
+    n = hist.sum(axis=-1)
+    rank = np.array([[[_rank_index(q, int(c)) if c else -1 for q in qs] for c in row] for row in n], np.int64)
+    rank = rank.reshape(hist.shape[:2] + (len(qs),))
+    target = np.full(rank.shape, -1, np.int64)
+    below, sizes = np.zeros_like(target), np.zeros_like(target)
+    quantile_targets(np.ascontiguousarray(hist), rank, target, below, sizes)
+    return target, np.where(target >= 0, rank - below, 0), sizes
 
 
-def _quantiles_from_hist(e: np.ndarray, t: np.ndarray, bin_idx: np.ndarray, bits: np.ndarray, hist: np.ndarray,
-                         qs: tuple[float, ...]) -> np.ndarray:
-    """Exact nearest-rank quantiles ``(R, len(qs))`` of each region's EPE (NaN for an empty region)."""
-    n_regions = hist.shape[0]
-    out = np.full((n_regions, len(qs)), np.nan)
-    cum = np.cumsum(hist, axis=1)
-    target = np.full((n_regions, len(qs)), -1, np.int64)
-    rank = np.zeros((n_regions, len(qs)), np.int64)
-    for r in range(n_regions):
-        n = int(cum[r, -1])
-        if n == 0:
-            continue
-        for j, q in enumerate(qs):
-            k = _rank_index(q, n)
-            b = int(np.searchsorted(cum[r], k + 1))  # the bin holding the sample of rank k + 1
-            target[r, j] = b
-            rank[r, j] = k - (int(cum[r, b - 1]) if b else 0)  # its index among that bin's samples
-    sizes = np.where(target >= 0, hist[np.arange(n_regions)[:, None], np.maximum(target, 0)], 0)
-    start = np.zeros_like(sizes)
-    start.ravel()[1:] = np.cumsum(sizes.ravel())[:-1]
-    values = np.empty(int(sizes.sum()), np.float64)
-    is_target = np.zeros(HIST_NBINS, np.bool_)
-    is_target[target[target >= 0]] = True
+def _quantiles(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> np.ndarray:
+    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty)."""
     from harness._flow_kernels import values_in_bins
 
-    values_in_bins(e, t, bits, bin_idx, is_target, target, start, values)
-    for r in range(n_regions):
-        for j in range(len(qs)):
-            if target[r, j] >= 0:
-                seg = values[start[r, j]:start[r, j] + sizes[r, j]]
-                out[r, j] = float(np.partition(seg, rank[r, j])[rank[r, j]])
+    target, rank, sizes = _quantile_targets(hist, qs)
+    out = np.full(target.shape, np.nan)
+    # quantiles of a region in the same bin share one segment (an almost constant error puts
+    # most pixels in one bin: a segment may hold most of the image)
+    first = np.broadcast_to(np.arange(len(qs)), target.shape).copy()  # the first quantile of the same bin
+    for j in range(1, len(qs)):
+        for i in range(j - 1, -1, -1):
+            first[..., j] = np.where(target[..., j] == target[..., i], i, first[..., j])
+    own = (first == np.arange(len(qs))) & (target >= 0)
+    fill_target = np.where(own, target, -2)  # -2 matches no bin: nothing collected
+    fill_sizes = np.where(own, sizes, 0)
+    start = np.zeros_like(fill_sizes)
+    start.ravel()[1:] = np.cumsum(fill_sizes.ravel())[:-1]
+    values = np.empty(int(fill_sizes.sum()), np.float64)
+    is_target = np.zeros((2, hist.shape[-1]), np.bool_)
+    for m in range(2):
+        is_target[m, target[m][target[m] >= 0]] = True
+    values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, fill_target, start, values)
+    for m, r in zip(*np.nonzero(target[..., 0] >= 0)):
+        for j in np.flatnonzero(own[m, r]):
+            shared = np.flatnonzero(first[m, r] == j)  # the quantiles read from this segment
+            seg = values[start[m, r, j]:start[m, r, j] + fill_sizes[m, r, j]]
+            part = np.partition(seg, rank[m, r, shared])
+            out[m, r, shared] = part[rank[m, r, shared]]
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedTruth:
+    """Everything of a pair's scoring that depends on the ground truth only (:func:`prepare_pair_truth`).
+
+    Shared by every estimate of the same pair (the runner scores several pipelines against
+    one truth); its arrays are read-only views.
+
+    Attributes
+    ----------
+    regions : tuple of str
+        The regions scored, in row order.
+    boundary_px : int
+        The ``interior`` region's margin (:func:`boundary_mask`).
+    flow : (H, W, 2) float32
+        The true (total) flow, C-contiguous; NaN where unknown.
+    flow_local : (H, W, 2) float32
+        ``flow - flow_camera`` in float32: the true local motion.
+    bits, bits_local : (H, W) uint8
+        Bit j set where the pixel is scored in ``regions[j]`` for the total / local motion
+        (0: not scored). The same array when the two motions score the same pixels.
+    """
+
+    regions: tuple[str, ...]
+    boundary_px: int
+    flow: np.ndarray
+    flow_local: np.ndarray
+    bits: np.ndarray
+    bits_local: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the pair."""
+        return self.bits.shape
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+def prepare_pair_truth(truth, *, regions: Iterable[str] = REGIONS, boundary_px: int = 3) -> PreparedTruth:
+    """The truth side of :func:`score_pair`, computed once for every estimate of the pair.
+
+    Parameters
+    ----------
+    truth : PairTruth
+        ``flow``, ``flow_camera`` (H, W, 2) float, ``valid`` (H, W) bool, ``instances`` (H, W) int or None.
+    regions : iterable of str
+        Regions to score (at most 8), from :data:`REGIONS`.
+    boundary_px : int
+        Margin of the ``interior`` region, px.
+
+    Returns
+    -------
+    PreparedTruth
+        Scored pixels of the total motion: valid and finite in ``flow``; of the local motion:
+        valid and finite in ``flow - flow_camera``. Each motion's regions are built from its
+        scored pixels (:func:`region_masks`).
+    """
+    regions = tuple(regions)
+    from harness._flow_kernels import truth_local  # numba: on the first scoring, not with the module
+
+    # read-only views: one compiled signature of the kernels whatever the caller's arrays
+    t = _read_only(np.ascontiguousarray(check_flow(truth.flow, name="flow_true", allow_nan=True)))
+    vt0 = np.asarray(truth.valid, bool)
+    if vt0.shape != t.shape[:2]:
+        raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt0.shape}")
+
+    # local motion: the camera's field taken out of the truth (float32, as t - np.float32(flow_camera))
+    cam = np.asarray(truth.flow_camera, np.float32)
+    if cam.shape != t.shape:  # as numpy's t - cam broadcasts it
+        cam = np.broadcast_to(cam, t.shape)
+    t_local = np.empty_like(t)
+    vt, vt_local = np.empty(vt0.shape, bool), np.empty(vt0.shape, bool)
+    truth_local(t, _read_only(np.ascontiguousarray(cam)), _read_only(np.ascontiguousarray(vt0)), t_local, vt, vt_local)
+    masks = region_masks(vt, truth.instances, boundary_px=boundary_px, regions=regions)
+    bits = _region_bits(masks) if regions else np.zeros(vt.shape, np.uint8)
+    if np.array_equal(vt, vt_local):  # the regions depend on the scored pixels only
+        bits_local = bits
+    else:
+        masks_local = region_masks(vt_local, truth.instances, boundary_px=boundary_px, regions=regions)
+        bits_local = _region_bits(masks_local) if regions else bits
+    same = bits_local is bits
+    bits = _read_only(np.ascontiguousarray(bits))
+    bits_local = bits if same else _read_only(np.ascontiguousarray(bits_local))
+    return PreparedTruth(regions=regions, boundary_px=int(boundary_px), flow=_read_only(t),
+                         flow_local=_read_only(t_local), bits=bits, bits_local=bits_local)
+
+
+def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.ndarray, *, frame: int | None,
+                   motions: tuple[str, ...] = MOTIONS) -> tuple[list[dict], int]:
+    """Flow rows of both motions in every region, and the number of non-finite estimate pixels.
+
+    e, g : (H, W, 2) float32 C-contiguous estimate and global field (local estimate = e - g);
+    ve : (H, W) bool. ``motions`` names motion 0 (total) and, if two, motion 1 (local); with
+    one, the local motion is left unscored. When the count returned is not 0 the rows are
+    meaningless: the caller raises.
+    """
+    from harness._flow_kernels import pair_totals, region_hists  # numba: on the first scoring, not with the module
+
+    names = truth.regions
+    h, w = truth.shape
+    n_codes = 1 << len(names)
+    stats = np.zeros((2, n_codes, 9), np.float64)
+    hist_code = np.zeros((2, n_codes, HIST_NBINS), np.int32)
+    bins = np.empty((2, h, w), np.uint16)
+    bits_l = truth.bits_local if len(motions) > 1 else _read_only(np.zeros_like(truth.bits))
+    bad = pair_totals(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, ve, HIST_BIN_PX, HIST_NBINS,
+                      stats, hist_code, bins)
+    if bad:
+        return [], bad
+    hist = np.zeros((2, len(names), HIST_NBINS), np.int64)
+    region_hists(hist_code, stats[:, :, _N], hist)
+    quant = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist, (0.5, 0.95))
+    # region totals: the sum of the patterns it belongs to
+    member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
+    rows: list[dict] = []
+    for m, motion in enumerate(motions):
+        by_code = stats[m]
+        used = np.flatnonzero(by_code[:, _N])
+        for j, r in enumerate(names):
+            st = np.zeros(9)
+            for c in used:
+                if member[j, c]:
+                    st += by_code[c]
+            n = int(st[_N])
+            rows += _error_rows_from_totals(n, float(st[_S_EPE]), float(st[_S_SQ]), float(st[_S_AE]),
+                                            [int(st[_K1]), int(st[_K3]), int(st[_K5])], int(st[_KFL]),
+                                            float(quant[m, j, 0]), float(quant[m, j, 1]), hist[m, j],
+                                            region=r, motion=motion, frame=frame)
+            k = int(st[_KCOV])
+            rows.append(_row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
+                             frame=frame))
+    return rows, 0
+
+
+# columns of the pattern totals of harness._flow_kernels.pair_totals
+_N, _S_EPE, _S_SQ, _S_AE, _K1, _K3, _K5, _KFL, _KCOV = range(9)
 
 
 def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarray, *,
@@ -492,15 +643,31 @@ def score_flow(flow_est: np.ndarray, flow_true: np.ndarray, valid_true: np.ndarr
     :func:`flow_rows` on each region's mask (sums to rounding, ~1e-15 relative;
     counts, quantiles and histograms exactly).
     """
-    t = check_flow(flow_true, name="flow_true", allow_nan=True)
-    e = check_flow(flow_est, name="flow_est", shape=t.shape[:2])
+    t = np.ascontiguousarray(check_flow(flow_true, name="flow_true", allow_nan=True))
+    e = np.ascontiguousarray(check_flow(flow_est, name="flow_est", shape=t.shape[:2]))
     vt = np.asarray(valid_true, bool)
     if vt.shape != t.shape[:2]:
         raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt.shape}")
     vt = vt & _finite_uv(t)
-    ve = np.ones(vt.shape, bool) if valid_est is None else np.asarray(valid_est, bool)
+    ve = _valid_est(valid_est, vt.shape)
+    regions = tuple(regions)
     masks = region_masks(vt, instances, boundary_px=boundary_px, regions=regions)
-    return _score_field(e, t, masks, ve, motion=motion, frame=frame)
+    bits = np.ascontiguousarray(_region_bits(masks)) if regions else np.zeros(vt.shape, np.uint8)
+    t, e, bits, ve = _read_only(t), _read_only(e), _read_only(bits), _read_only(ve)
+    truth = PreparedTruth(regions=regions, boundary_px=boundary_px, flow=t, flow_local=t, bits=bits, bits_local=bits)
+    # one motion: the local one is left unscored (g = e only keeps the pass's finiteness test true)
+    rows, _ = _score_motions(e, e, truth, ve, frame=frame, motions=(motion,))
+    return rows
+
+
+def _valid_est(valid, shape: tuple[int, int]) -> np.ndarray:
+    """The method's valid mask as C-contiguous (H, W) bool (all True when None)."""
+    if valid is None:
+        return np.ones(shape, bool)
+    ve = np.ascontiguousarray(valid, bool)
+    if ve.shape != shape:
+        raise ValueError(f"valid_est: expected shape {shape}, got {ve.shape}")
+    return ve
 
 
 def _finite_uv(flow: np.ndarray) -> np.ndarray:
@@ -519,51 +686,6 @@ def _region_bits(masks: Mapping[str, np.ndarray]) -> np.ndarray:
     return bits
 
 
-def _score_field(e: np.ndarray, t: np.ndarray, masks: Mapping[str, np.ndarray], ve: np.ndarray, *,
-                 motion: str, frame: int | None, bits: np.ndarray | None = None) -> list[dict]:
-    """Rows of checked float32 fields ``e``, ``t`` in the regions ``masks`` (subsets of the scored pixels).
-
-    ``bits`` is :func:`_region_bits` of ``masks`` when the caller has it already.
-    """
-    names = list(masks)
-    if bits is None:
-        bits = _region_bits(masks) if names else np.zeros(ve.shape, np.uint8)
-    by_code = np.zeros((1 << len(names), 9), np.float64)
-    hist_code = np.zeros((1 << len(names), HIST_NBINS), np.int64)
-    e = np.ascontiguousarray(e, np.float32)
-    t = np.ascontiguousarray(t, np.float32)
-    bin_idx = np.empty(ve.shape, np.int32)
-    cos = np.empty(ve.size, np.float64)
-    code = np.empty(ve.size, np.int64)
-    from harness._flow_kernels import field_totals  # numba: imported on the first scoring, not with the module
-
-    m = field_totals(e, t, bits, np.ascontiguousarray(ve, np.bool_), HIST_BIN_PX, HIST_NBINS, by_code, hist_code,
-                     bin_idx, cos, code)
-    # angular error (Barron 1994) from the cosines, as angular_error_deg computes it
-    by_code[:, _S_AE] = np.bincount(code[:m], weights=np.degrees(np.arccos(cos[:m])), minlength=len(by_code))
-    member = (np.arange(1 << len(names))[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
-    used = np.flatnonzero(by_code[:, _N])
-    stats = np.zeros((len(names), 9), np.float64)
-    hist = np.zeros((len(names), HIST_NBINS), np.int64)
-    for c in used:
-        for j in np.flatnonzero(member[:, c]):
-            stats[j] += by_code[c]
-            hist[j] += hist_code[c]
-    quant = _quantiles_from_hist(e, t, bin_idx, bits, hist, (0.5, 0.95))
-    rows: list[dict] = []
-    for j, r in enumerate(names):
-        st = stats[j]
-        n = int(st[_N])
-        rows += _error_rows_from_totals(n, float(st[_S_EPE]), float(st[_S_SQ]), float(st[_S_AE]),
-                                        [int(st[_K1]), int(st[_K3]), int(st[_K5])], int(st[_KFL]),
-                                        float(quant[j, 0]), float(quant[j, 1]), hist[j],
-                                        region=r, motion=motion, frame=frame)
-        k = int(st[_KCOV])
-        rows.append(_row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
-                         frame=frame))
-    return rows
-
-
 def timing_rows(stage_ms: Mapping[str, float], *, frame: int | None = None) -> list[dict]:
     """One ``time_<stage>_ms`` row per stage (``motion`` "cost"), and ``time_total_ms`` if absent."""
     rows = []
@@ -577,40 +699,61 @@ def timing_rows(stage_ms: Mapping[str, float], *, frame: int | None = None) -> l
     return rows
 
 
-def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] = REGIONS, boundary_px: int = 3,
-               timings: bool = True) -> list[dict]:
+def score_pair(estimate, truth, *, frame: int, regions: Iterable[str] | None = None,
+               boundary_px: int | None = None, timings: bool = True, prepared: PreparedTruth | None = None
+               ) -> list[dict]:
     """All rows of one frame pair: flow metrics (total and local motion) and stage timings.
+
+    Both motions and every region are scored in one pass over the pixels
+    (:mod:`harness._flow_kernels`); the values equal :func:`flow_rows` on each region's
+    mask (sums to rounding, ~1e-15 relative, the angular error's arccos being the pass's
+    own, within 1 ulp of numpy's; counts, quantiles and histograms exactly). To score
+    several estimates of one pair, prepare the truth once::
+
+        prepared = prepare_pair_truth(truth)
+        rows = [score_pair(est, truth, frame=f, prepared=prepared) for est in estimates]
 
     Parameters
     ----------
     estimate : PairEstimate
         Uses ``flow_total``, ``flow_global`` (H, W, 2), ``valid`` (H, W) and ``stage_ms``.
-    truth : PairTruth
+    truth : PairTruth or None
         ``flow``, ``flow_camera`` (H, W, 2), ``valid`` (H, W) bool, ``instances`` (H, W) uint16.
+        With ``prepared`` it is only checked for its size (and may be None).
     frame : int
         Index of the first frame of the pair.
+    regions : iterable of str, optional
+        Regions to score (default :data:`REGIONS`); with ``prepared``, must be its regions if given.
+    boundary_px : int, optional
+        Margin of the ``interior`` region (default 3); with ``prepared``, must be its margin if given.
+    prepared : PreparedTruth, optional
+        :func:`prepare_pair_truth` of ``truth``, shared by several estimates of the pair: the
+        rows are the same as without it.
     """
-    regions = tuple(regions)
-    t = check_flow(truth.flow, name="flow_true", allow_nan=True)
-    e = check_flow(estimate.flow_total, name="flow_est", shape=t.shape[:2])
-    vt0 = np.asarray(truth.valid, bool)
-    if vt0.shape != t.shape[:2]:
-        raise ValueError(f"valid_true: expected shape {t.shape[:2]}, got {vt0.shape}")
-    ve = np.ones(vt0.shape, bool) if estimate.valid is None else np.asarray(estimate.valid, bool)
-    # local motion: the global model's field taken out of the estimate, the camera's out of the truth
-    e_local = check_flow(np.asarray(estimate.flow_total, np.float32) - np.asarray(estimate.flow_global, np.float32),
-                         name="flow_est", shape=t.shape[:2])
-    t_local = check_flow(t - np.asarray(truth.flow_camera, np.float32), name="flow_true", allow_nan=True)
-    vt = vt0 & _finite_uv(t)
-    vt_local = vt0 & _finite_uv(t_local)
-    masks = region_masks(vt, truth.instances, boundary_px=boundary_px, regions=regions)
-    # the regions depend on the scored pixels only: the same for both motions unless the camera flow has NaN
-    masks_local = masks if np.array_equal(vt, vt_local) else region_masks(
-        vt_local, truth.instances, boundary_px=boundary_px, regions=regions)
-    bits = _region_bits(masks)
-    rows = _score_field(e, t, masks, ve, motion="total", frame=frame, bits=bits)
-    rows += _score_field(e_local, t_local, masks_local, ve, motion="local", frame=frame,
-                         bits=bits if masks_local is masks else None)
+    if prepared is None:
+        if truth is None:
+            raise ValueError("score_pair: expected a PairTruth or prepared=prepare_pair_truth(truth), got neither")
+        prepared = prepare_pair_truth(truth, regions=REGIONS if regions is None else regions,
+                                      boundary_px=3 if boundary_px is None else boundary_px)
+    else:
+        if regions is not None and tuple(regions) != prepared.regions:
+            raise ValueError(f"regions: expected those of prepared {prepared.regions}, got {tuple(regions)}")
+        if boundary_px is not None and boundary_px != prepared.boundary_px:
+            raise ValueError(f"boundary_px: expected that of prepared ({prepared.boundary_px}), got {boundary_px}")
+        if truth is not None and np.shape(truth.flow)[:2] != prepared.shape:
+            raise ValueError(f"truth: expected the size of prepared {prepared.shape}, got {np.shape(truth.flow)[:2]}")
+    shape = prepared.shape
+    # finiteness of the estimate (total and local) is tested in the pass itself
+    e = np.ascontiguousarray(check_flow(estimate.flow_total, name="flow_est", shape=shape, allow_nan=True))
+    g = np.asarray(estimate.flow_global, np.float32)
+    if g.shape != e.shape:  # as numpy's e - g broadcasts it
+        g = np.broadcast_to(g, e.shape)
+    # read-only views: one compiled signature of the kernels whatever the caller's arrays
+    e, g, ve = _read_only(e), _read_only(np.ascontiguousarray(g)), _read_only(_valid_est(estimate.valid, shape))
+    rows, bad = _score_motions(e, g, prepared, ve, frame=frame)
+    if bad:  # raise check_flow's message
+        check_flow(e, name="flow_est")
+        check_flow(e - g, name="flow_est")
     if timings and getattr(estimate, "stage_ms", None):
         rows += timing_rows(estimate.stage_ms, frame=frame)
     return rows
@@ -773,6 +916,31 @@ def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
 _ASSOC_COLUMNS = ["frame", "vehicle_id", "track_id", "dist_px", "switch"]
 
 
+def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame):
+    """Per frame with a visible vehicle or a finite estimate, ascending: ``(frame, vehicle_ids, P, track_ids, Q)``.
+
+    vehicle_ids (V,) int64 and P (V, 2) ``x_px, y_px`` of the visible rows of ``truth``;
+    track_ids (T,) int64 and Q (T, 2) ``x_filt_px, y_filt_px`` of the rows of ``est`` with a
+    finite position; each in table order (as ``groupby("frame")`` gives them), from numpy
+    arrays taken once (a per-frame DataFrame selection costs ~1 ms each).
+    """
+    vis = np.asarray(truth["visible"].to_numpy(), bool)
+    vf = truth["frame"].to_numpy()[vis]
+    vv = truth["vehicle_id"].to_numpy(np.int64)[vis]
+    vp = np.stack([truth["x_px"].to_numpy(np.float64)[vis], truth["y_px"].to_numpy(np.float64)[vis]], 1)
+    ex, ey = est["x_filt_px"].to_numpy(np.float64), est["y_filt_px"].to_numpy(np.float64)
+    ok = np.isfinite(ex) & np.isfinite(ey)
+    ef = est["frame"].to_numpy()[ok]
+    et = est["track_id"].to_numpy(np.int64)[ok]
+    eq = np.stack([ex[ok], ey[ok]], 1)
+    ov, oe = np.argsort(vf, kind="stable"), np.argsort(ef, kind="stable")
+    vf_s, ef_s = vf[ov], ef[oe]
+    for f in np.union1d(vf, ef):
+        iv = ov[np.searchsorted(vf_s, f, "left"):np.searchsorted(vf_s, f, "right")]
+        ie = oe[np.searchsorted(ef_s, f, "left"):np.searchsorted(ef_s, f, "right")]
+        yield f, vv[iv], vp[iv], et[ie], eq[ie]
+
+
 def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
     """Frame by frame CLEAR-MOT correspondences (Bernardin and Stiefelhagen 2008, sec. 2.1.1).
 
@@ -787,17 +955,8 @@ def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
     """
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
-    vis = truth[truth["visible"].astype(bool)]
-    est = est[np.isfinite(est["x_filt_px"].to_numpy(np.float64)) & np.isfinite(est["y_filt_px"].to_numpy(np.float64))]
-    vis_by_f = {f: g for f, g in vis.groupby("frame")}
-    est_by_f = {f: g for f, g in est.groupby("frame")}
     last: dict[int, int] = {}   # vehicle -> last matched track ever (Bernardin's M_{t-1}, carried on)
-    for f in sorted(set(vis_by_f) | set(est_by_f)):
-        g, e = vis_by_f.get(f), est_by_f.get(f)
-        vids = g["vehicle_id"].to_numpy(np.int64) if g is not None else np.zeros(0, np.int64)
-        tids = e["track_id"].to_numpy(np.int64) if e is not None else np.zeros(0, np.int64)
-        P = g[["x_px", "y_px"]].to_numpy(np.float64) if g is not None else np.zeros((0, 2))
-        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64) if e is not None else np.zeros((0, 2))
+    for f, vids, P, tids, Q in _points_by_frame(est, truth):
         D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
         match: dict[int, int] = {}
         switch: dict[int, bool] = {}
@@ -1048,22 +1207,15 @@ def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0
     """
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
-    vis = truth[truth["visible"].astype(bool)]
-    est = est[np.isfinite(est["x_filt_px"].to_numpy(np.float64)) & np.isfinite(est["y_filt_px"].to_numpy(np.float64))]
-    vids = np.unique(vis["vehicle_id"].to_numpy(np.int64))
-    tids = np.unique(est["track_id"].to_numpy(np.int64))
+    by_frame = list(_points_by_frame(est, truth))
+    vids = np.unique(np.concatenate([v for _, v, _, _, _ in by_frame] + [np.zeros(0, np.int64)]))
+    tids = np.unique(np.concatenate([t for _, _, _, t, _ in by_frame] + [np.zeros(0, np.int64)]))
     na = len(HOTA_ALPHAS)
     tp, fn, fp = np.zeros(na), np.zeros(na), np.zeros(na)
     loc = np.zeros(na)
-    vis_by_f = {f: g for f, g in vis.groupby("frame")}
-    est_by_f = {f: g for f, g in est.groupby("frame")}
     frames = []
-    for f in sorted(set(vis_by_f) | set(est_by_f)):
-        g, e = vis_by_f.get(f), est_by_f.get(f)
-        a = np.searchsorted(vids, g["vehicle_id"].to_numpy(np.int64)) if g is not None else np.zeros(0, np.int64)
-        b = np.searchsorted(tids, e["track_id"].to_numpy(np.int64)) if e is not None else np.zeros(0, np.int64)
-        P = g[["x_px", "y_px"]].to_numpy(np.float64) if g is not None else np.zeros((0, 2))
-        Q = e[["x_filt_px", "y_filt_px"]].to_numpy(np.float64) if e is not None else np.zeros((0, 2))
+    for _f, v, P, t, Q in by_frame:
+        a, b = np.searchsorted(vids, v), np.searchsorted(tids, t)
         D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
         frames.append((a, b, np.maximum(0.0, 1.0 - D / gate_px)))
     # pass 1: global alignment score of every (vehicle, track) pair

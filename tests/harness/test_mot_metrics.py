@@ -96,3 +96,31 @@ def test_perfect_tracks_score_one_and_an_empty_gate_is_refused():
     assert (c.mota, c.motp_px, c.idf1, c.switches) == (1.0, 0.0, 1.0, 0)
     with pytest.raises(ValueError, match="gate_px: expected > 0"):
         M.mot_counts(est, truth, gate_px=0.0)
+
+
+def test_frames_are_grouped_as_pandas_groupby_groups_them():
+    """The numpy frame grouping under every CLEAR-MOT / HOTA count gives groupby's groups: shuffled
+    rows, invisible vehicles, NaN estimates, frames with only vehicles or only tracks."""
+    est, truth = _scenario(np.random.default_rng(3))
+    est = est.sample(frac=1.0, random_state=4).reset_index(drop=True)
+    truth = truth.sample(frac=1.0, random_state=5).reset_index(drop=True)
+    est.loc[est.index[:6], "x_filt_px"] = np.nan  # not predictions
+    est = pd.concat([est, pd.DataFrame([{"frame": 77, "track_id": 5, "x_filt_px": 1.0, "y_filt_px": 2.0,
+                                         "source": "multi"}])], ignore_index=True)
+    vis = truth[truth["visible"].astype(bool)]
+    fin = est[np.isfinite(est["x_filt_px"]) & np.isfinite(est["y_filt_px"])]
+    vg, eg = dict(list(vis.groupby("frame"))), dict(list(fin.groupby("frame")))
+    got = list(M._points_by_frame(est, truth))
+    assert [int(f) for f, *_ in got] == sorted(set(vg) | set(eg))
+    for f, vids, P, tids, Q in got:
+        g, e = vg.get(f), eg.get(f)
+        np.testing.assert_array_equal(vids, [] if g is None else g["vehicle_id"].to_numpy())
+        np.testing.assert_array_equal(P.reshape(-1, 2), np.zeros((0, 2)) if g is None else g[["x_px", "y_px"]])
+        np.testing.assert_array_equal(tids, [] if e is None else e["track_id"].to_numpy())
+        np.testing.assert_array_equal(Q.reshape(-1, 2), np.zeros((0, 2)) if e is None else e[["x_filt_px", "y_filt_px"]])
+    # and the counts still equal py-motmetrics on the shuffled table
+    c = M.mot_counts(est, truth, gate_px=5.0)
+    s = mm.metrics.create().compute(_oracle(fin, truth, 5.0), metrics=["num_switches", "mota", "idf1"],
+                                    name="x").iloc[0]
+    assert c.switches == s["num_switches"]
+    assert c.mota == pytest.approx(s["mota"], abs=1e-12) and c.idf1 == pytest.approx(s["idf1"], abs=1e-12)

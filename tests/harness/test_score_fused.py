@@ -1,9 +1,12 @@
 """The one-pass flow scoring gives the numbers of the per-region numpy scoring it replaced.
 
 The reference below is the scoring as it was before the fused pass (one boolean mask
-and one ``np.partition`` per region and motion); it lives only here, as the yardstick.
-Sums may differ by rounding (summation order), to 1e-9 relative; counts, quantiles
-and histograms must be identical.
+and one ``np.partition`` per region and motion, numpy's arccos); it lives only here, as
+the yardstick. Sums may differ by rounding (summation order, and the pass's own arccos,
+within 1 ulp of numpy's), to 1e-9 relative; counts, quantiles and histograms must be
+identical. Every comparison scores the pair twice, with the truth prepared once
+(``prepare_pair_truth``, as the runner shares it between estimates) and without, and
+asks for identical rows.
 """
 
 from __future__ import annotations
@@ -93,8 +96,24 @@ def _same(a, b):
     return (math.isnan(a) and math.isnan(b)) or a == pytest.approx(b, rel=1e-9, abs=1e-12)
 
 
+def _identical(a, b):
+    """Rows equal field by field, NaN equal to NaN."""
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            x, y = ra[k], rb[k]
+            same = x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y))
+            assert same, (ra["metric"], ra["region"], ra["motion"], k, x, y)
+
+
 def assert_same_scores(estimate, truth, frame):
-    rows = [r for r in M.score_pair(estimate, truth, frame=frame) if r["kind"] == "accuracy"]
+    """The fused rows equal the reference's, with and without a prepared truth; returns the rows."""
+    all_rows = M.score_pair(estimate, truth, frame=frame)
+    prepared = M.prepare_pair_truth(truth)
+    _identical(all_rows, M.score_pair(estimate, None, frame=frame, prepared=prepared))
+    _identical(all_rows, M.score_pair(estimate, truth, frame=frame, prepared=prepared))
+    rows = [r for r in all_rows if r["kind"] == "accuracy"]
     new = {(r["metric"], r["region"], r["motion"], r["frame"]): (r["value"], r["sum"], r["count"], r["hist"])
            for r in rows}
     old = reference_score_pair(estimate, truth, frame=frame)
@@ -109,11 +128,16 @@ def assert_same_scores(estimate, truth, frame):
         assert _same(nv, v) and _same(ns, s), (key, (nv, ns), (v, s))
         if key[0] in ("epe_median", "epe_p95") or key[0].startswith(("outlier", "fl_", "coverage")):
             assert nv == v or (math.isnan(nv) and math.isnan(v)), key  # exact: ranks and counts
+    # every metric of every region and both motions
+    assert {(m, r, mo) for m, r, mo, _ in new} == {
+        (m, r, mo) for m in ("epe_mean", "epe_rms", "epe_median", "epe_p95", "ae_mean", "outlier_1px", "outlier_3px",
+                             "outlier_5px", "fl_all", "coverage") for r in M.REGIONS for mo in M.MOTIONS}
+    return all_rows
 
 
-def _synthetic_pair(rng, h=90, w=120, *, scale=1.0):
+def _synthetic_pair(rng, h=90, w=120, *, scale=1.0, speed=1.0):
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-    cam = np.stack([2.0 + 0.01 * xs, -1.0 + 0.02 * ys], -1).astype(np.float32)
+    cam = (np.stack([2.0 + 0.01 * xs, -1.0 + 0.02 * ys], -1) * speed).astype(np.float32)
     flow = cam.copy()
     instances = np.zeros((h, w), np.uint16)
     instances[20:35, 30:60] = 1
@@ -135,6 +159,95 @@ def test_fused_scoring_equals_the_reference_on_synthetic_fields(scale):
     assert_same_scores(estimate, truth, 3)
 
 
+def test_fused_scoring_equals_the_reference_on_fast_motion():
+    """Flows of 60 to 200 px: the Fl limit (5 % of |w_true|) is above 3 px and decides."""
+    rng = np.random.default_rng(9)
+    estimate, truth = _synthetic_pair(rng, scale=3.0, speed=40.0)
+    assert np.nanmax(np.hypot(truth.flow[..., 0], truth.flow[..., 1])) > 120
+    rows = assert_same_scores(estimate, truth, 1)
+    fl = next(r for r in rows if r["metric"] == "fl_all" and r["region"] == "all" and r["motion"] == "total")
+    o3 = next(r for r in rows if r["metric"] == "outlier_3px" and r["region"] == "all" and r["motion"] == "total")
+    assert 0 < fl["sum"] < o3["sum"]  # some pixels over 3 px are within 5 % of their flow
+
+
+def test_huge_errors_go_to_the_overflow_bin():
+    """A diverged estimate (1e30 px, an exact multiple of the bin) lands in the last bin, as the reference has it."""
+    rng = np.random.default_rng(15)
+    estimate, truth = _synthetic_pair(rng)
+    estimate.flow_total[30:32, 40:44] = np.float32(1e30)
+    estimate.flow_total[60, 10] = np.float32(-3e38)
+    rows = assert_same_scores(estimate, truth, 0)
+    hist = M.decode_hist(next(r["hist"] for r in rows if r["metric"] == "epe_median" and r["region"] == "all"))
+    assert hist[-1] >= 9
+
+
+def test_perfect_estimate_scores_zero_exactly():
+    """Zero error: EPE and angular error 0 in every region (arccos of exactly 1), both motions."""
+    rng = np.random.default_rng(10)
+    _, truth = _synthetic_pair(rng)
+    estimate = SimpleNamespace(flow_total=truth.flow.copy(), flow_global=truth.flow_camera.copy(), valid=None,
+                               stage_ms={})
+    estimate.flow_total[~np.isfinite(estimate.flow_total)] = 0.0
+    rows = assert_same_scores(estimate, truth, 0)
+    for r in rows:
+        if r["metric"] in ("epe_mean", "ae_mean", "epe_p95") and r["count"]:
+            assert r["value"] == 0.0, (r["metric"], r["region"], r["motion"])
+
+
+def test_own_arccos_is_within_one_ulp_of_numpys():
+    """The pass's arccos (series, SIMD) against numpy's over [-1, 1], densest near 1 (small angles)."""
+    from harness._flow_kernels import acos_array
+
+    rng = np.random.default_rng(11)
+    c = np.concatenate([np.linspace(-1.0, 1.0, 200_001), 1.0 - rng.uniform(0, 1e-3, 100_000),
+                        1.0 - rng.uniform(0, 1e-12, 10_000), -1.0 + rng.uniform(0, 1e-6, 10_000),
+                        np.nextafter([0.5, -0.5], [1.0, -1.0]), [0.5, -0.5, 0.0, -0.0]])
+    got = np.empty_like(c)
+    acos_array(c, got)
+    want = np.arccos(c)
+    assert np.all(np.abs(got - want) <= np.spacing(want)), np.max(np.abs(got - want) / np.spacing(want))
+    assert got[c == 1.0].tolist() == [0.0] * int((c == 1.0).sum())
+
+
+def test_prepared_truth_must_match_the_call():
+    rng = np.random.default_rng(12)
+    estimate, truth = _synthetic_pair(rng)
+    prepared = M.prepare_pair_truth(truth, regions=("all", "interior"), boundary_px=2)
+    rows = M.score_pair(estimate, truth, frame=0, prepared=prepared, timings=False)
+    assert {r["region"] for r in rows} == {"all", "interior"}
+    assert not prepared.flow.flags.writeable and not prepared.bits.flags.writeable
+    with pytest.raises(ValueError, match="regions: expected those of prepared"):
+        M.score_pair(estimate, truth, frame=0, prepared=prepared, regions=M.REGIONS)
+    with pytest.raises(ValueError, match=r"boundary_px: expected that of prepared \(2\), got 3"):
+        M.score_pair(estimate, truth, frame=0, prepared=prepared, boundary_px=3)
+    small = PairTruth(flow=truth.flow[:10], flow_camera=truth.flow_camera[:10], valid=truth.valid[:10],
+                      instances=truth.instances[:10])
+    with pytest.raises(ValueError, match="truth: expected the size of prepared"):
+        M.score_pair(estimate, small, frame=0, prepared=prepared)
+    with pytest.raises(ValueError, match="flow_est: expected size"):
+        M.score_pair(SimpleNamespace(flow_total=estimate.flow_total[:10], flow_global=estimate.flow_global[:10],
+                                     valid=None, stage_ms={}), None, frame=0, prepared=prepared)
+
+
+@pytest.mark.parametrize("where", ["flow_total", "flow_global"])
+def test_a_non_finite_estimate_is_rejected_in_either_motion(where):
+    rng = np.random.default_rng(13)
+    estimate, truth = _synthetic_pair(rng)
+    bad = getattr(estimate, where).copy()
+    bad[50, 60, 1] = np.inf
+    setattr(estimate, where, bad)
+    with pytest.raises(ValueError, match=r"flow_est: 1 value\(s\) are NaN or infinite"):
+        M.score_pair(estimate, truth, frame=0)
+
+
+def test_valid_est_of_the_wrong_size_is_rejected():
+    rng = np.random.default_rng(14)
+    estimate, truth = _synthetic_pair(rng)
+    estimate.valid = estimate.valid[:, :-1]
+    with pytest.raises(ValueError, match=r"valid_est: expected shape \(90, 120\), got \(90, 119\)"):
+        M.score_pair(estimate, truth, frame=0)
+
+
 def test_fused_scoring_equals_the_reference_with_nan_truth_and_empty_regions():
     rng = np.random.default_rng(8)
     estimate, truth = _synthetic_pair(rng)
@@ -151,7 +264,8 @@ def test_fused_scoring_equals_the_reference_with_nan_truth_and_empty_regions():
 @pytest.mark.gl
 @pytest.mark.slow
 def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
-    """Every pair of every cell of the smoke suite, scored both ways."""
+    """Every pair of every cell of the smoke suite, scored both ways (fused with and without a
+    prepared truth, and the reference): every metric, region and motion."""
     from algorithms.pipeline import PairEstimate, Pipeline
     from harness.cell_scoring import point_seeds
     from harness.suites import expand, load_suite
