@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 import os
 import tempfile
+import threading
 import zipfile
 import zlib
 from pathlib import Path
@@ -37,6 +38,7 @@ __all__ = [
     "atomic_write_bytes",
     "encode_flo",
     "encode_png",
+    "encode_png_fast",
     "FLOW_NPZ_CODEC",
     "FLOW_NPZ_CODEC_V1",
     "FLOW_NPZ_CODECS",
@@ -172,6 +174,57 @@ def encode_png(image: np.ndarray, *, compression: int = 3, strategy: str = "defa
     return buf.tobytes()
 
 
+# filtered bytes per deflate block of :func:`encode_png_fast`: one Huffman code per block, so
+# smaller blocks follow the image's statistics more closely for a header (~150 bytes) each
+PNG_FAST_BLOCK = 32768
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_chunk(kind: bytes, payload: bytes) -> bytes:
+    # length (big-endian, payload only), type, payload, CRC-32 of type + payload
+    return (len(payload).to_bytes(4, "big") + kind + payload
+            + zlib.crc32(payload, zlib.crc32(kind)).to_bytes(4, "big"))
+
+
+def encode_png_fast(image: np.ndarray, *, block: int = PNG_FAST_BLOCK) -> bytes:
+    """PNG bytes of uint8 RGB ``(H, W, 3)`` or gray ``(H, W)``: Average row filter, Huffman coding only.
+
+    The pixels of ``encode_png(image, compression=1, strategy="huffman", filters="avg")``,
+    in a file of about the same size (within a few per cent), at about a sixth of the time:
+    our own filter and deflate (:mod:`scenes._codec_kernels`) instead of libpng's and zlib's.
+    Any PNG reader reads it: one IHDR (8-bit RGB or gray, not interlaced), one IDAT holding
+    the zlib stream (RFC 1950: header ``78 01``, deflate blocks, Adler-32), IEND. The bytes
+    depend on the pixels and ``block`` only. The numba kernels release the GIL.
+    """
+    from scenes import _codec_kernels as K
+
+    a = np.asarray(image)
+    if a.dtype != np.uint8:
+        raise ValueError(f"image: expected uint8, got {a.dtype}")
+    if a.ndim == 3 and a.shape[2] == 3:
+        bpp, colour_type = 3, 2
+    elif a.ndim == 2:
+        bpp, colour_type = 1, 0
+    else:
+        raise ValueError(f"image: expected (H, W) or (H, W, 3), got {tuple(a.shape)}")
+    h, w = a.shape[:2]
+    if h == 0 or w == 0:
+        raise ValueError(f"image: expected at least 1x1 pixels, got {w}x{h}")
+    if not 1 <= int(block) <= 65535:
+        raise ValueError(f"block: expected 1..65535 bytes (a stored block's limit), got {block}")
+    rows = np.ascontiguousarray(a).reshape(h, w * bpp)
+    filtered = np.empty((h, w * bpp + 1), np.uint8)
+    K.avg_filter(rows, bpp, filtered)
+    raw = filtered.reshape(-1)
+    out = np.empty(K.deflate_bound(raw.size, int(block)) + 6, np.uint8)
+    out[:2] = (0x78, 0x01)  # RFC 1950: deflate, 32 KiB window; FCHECK makes 0x7801 a multiple of 31
+    n = 2 + K.deflate_huffman(raw, int(block), out[2:])
+    out[n:n + 4] = np.frombuffer(zlib.adler32(raw).to_bytes(4, "big"), np.uint8)
+    ihdr = w.to_bytes(4, "big") + h.to_bytes(4, "big") + bytes((8, colour_type, 0, 0, 0))
+    return b"".join((_PNG_SIGNATURE, _png_chunk(b"IHDR", ihdr), _png_chunk(b"IDAT", out[:n + 4].tobytes()),
+                     _png_chunk(b"IEND", b"")))
+
+
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
     """Write uint8 gray, uint8 RGB or uint16 gray as PNG (lossless, deterministic bytes)."""
     atomic_write_bytes(path, encode_png(image))
@@ -240,6 +293,17 @@ def _from_byte_planes(planes: np.ndarray) -> np.ndarray:
     return out
 
 
+_ZSTD = threading.local()
+
+
+def _zstd_compressor() -> zstandard.ZstdCompressor:
+    """This thread's compressor of the byte planes (a compressor is not shared between threads)."""
+    c = getattr(_ZSTD, "compressor", None)
+    if c is None:
+        c = _ZSTD.compressor = zstandard.ZstdCompressor(level=FLOW_NPZ_ZSTD_LEVEL)
+    return c
+
+
 def _check_field(a: np.ndarray, name: str, shape: tuple | None = None) -> np.ndarray:
     a = np.asarray(a)
     if a.ndim != 3 or a.shape[2] != 2 or a.dtype != np.float32:
@@ -287,23 +351,26 @@ def encode_flow_npz(flow: np.ndarray, flow_camera: np.ndarray, *, level: int = F
     """
     if codec not in FLOW_NPZ_CODECS:
         raise ValueError(f"codec: expected one of {', '.join(FLOW_NPZ_CODECS)}, got {codec!r}")
+    from scenes import _codec_kernels as K
+
     fc = _check_field(flow_camera, "flow_camera")
     f = _check_field(flow, "flow", fc.shape)
     bits_c = fc.view(np.uint32)
-    delta = bits_c.copy()
-    np.subtract(bits_c[:, 1:], bits_c[:, :-1], out=delta[:, 1:])  # wraps modulo 2**32
-    xor = (f.view(np.uint32) ^ bits_c).ravel()
-    index = np.flatnonzero(xor)
-    planes = _byte_planes(delta)
+    h, w = fc.shape[:2]
+    # the byte planes of the row differences (modulo 2**32), and where flow's bits differ: numba
+    # kernels, one pass each (the numpy chain, copy, subtract, XOR, nonzero, transpose, took ~6 ms)
+    planes = np.empty((4, 2, h, w), np.uint8)
+    K.flow_rowdelta_planes(bits_c, planes)
+    index, xor = K.flow_xor(f.view(np.uint32).reshape(-1), bits_c.reshape(-1))
     members: dict[str, tuple[np.ndarray, int]] = {"codec": (np.array(codec), zipfile.ZIP_DEFLATED)}
     if codec == FLOW_NPZ_CODEC_V1:
         members["flow_camera_rowdelta"] = (planes, zipfile.ZIP_DEFLATED)
     else:
-        frame = zstandard.ZstdCompressor(level=FLOW_NPZ_ZSTD_LEVEL).compress(planes.data)
+        frame = _zstd_compressor().compress(planes.data)
         members["flow_camera_rowdelta_zstd"] = (np.frombuffer(frame, np.uint8), zipfile.ZIP_STORED)
         members["flow_camera_shape"] = (np.array(fc.shape[:2], "<i8"), zipfile.ZIP_DEFLATED)
-    members["flow_xor_index"] = (index.astype("<i8"), zipfile.ZIP_DEFLATED)
-    members["flow_xor_bits"] = (xor[index].astype("<u4"), zipfile.ZIP_DEFLATED)
+    members["flow_xor_index"] = (index.astype("<i8", copy=False), zipfile.ZIP_DEFLATED)
+    members["flow_xor_bits"] = (xor.astype("<u4", copy=False), zipfile.ZIP_DEFLATED)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as zf:
         for name, (a, method) in members.items():
