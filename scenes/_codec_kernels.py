@@ -174,9 +174,19 @@ def deflate_huffman(data, block, out):  # pragma: no cover - numba
     while True:
         end = min(n, start + block)
         final = 1 if end == n else 0
-        freq = np.zeros(257, np.int64)
-        for i in range(start, end):
-            freq[data[i]] += 1
+        # four tallies, so that consecutive equal bytes do not wait on each other's increment
+        tally = np.zeros((4, 257), np.int64)
+        i = start
+        while i + 4 <= end:
+            tally[0, data[i]] += 1
+            tally[1, data[i + 1]] += 1
+            tally[2, data[i + 2]] += 1
+            tally[3, data[i + 3]] += 1
+            i += 4
+        while i < end:
+            tally[0, data[i]] += 1
+            i += 1
+        freq = tally[0] + tally[1] + tally[2] + tally[3]
         freq[256] = 1
         lit_len = _code_lengths(freq, 15)
         lit_code = _canonical_codes(lit_len)
@@ -284,17 +294,14 @@ def flow_rowdelta_planes(bits_c, planes):  # pragma: no cover - numba
     ``_byte_planes(delta)`` gives, in one pass instead of a copy, a subtraction and a transpose.
     """
     h, w, nc = bits_c.shape
-    for c in range(nc):
-        for y in range(h):
-            prev = np.uint32(0)
-            for x in range(w):
-                b = bits_c[y, x, c]
-                d = np.uint32(b - prev)
-                prev = b
+    for y in range(h):
+        for c in range(nc):
+            for x in range(w):  # no carried state: the compiler vectorises it
+                d = bits_c[y, x, c] - (bits_c[y, x - 1, c] if x > 0 else np.uint32(0))
                 planes[0, c, y, x] = np.uint8(d & np.uint32(255))
                 planes[1, c, y, x] = np.uint8((d >> np.uint32(8)) & np.uint32(255))
                 planes[2, c, y, x] = np.uint8((d >> np.uint32(16)) & np.uint32(255))
-                planes[3, c, y, x] = np.uint8(d >> np.uint32(24))
+                planes[3, c, y, x] = np.uint8((d >> np.uint32(24)) & np.uint32(255))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -318,3 +325,4 @@ def flow_xor(bits, bits_c):  # pragma: no cover - numba
             xor[j] = x
             j += 1
     return index, xor
+
