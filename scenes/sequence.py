@@ -13,7 +13,7 @@ for tools that read them; folders written before the compact format have these).
 The reader reads both, bit for bit the same arrays.
 
 Files are encoded (PNG, zlib, zstd) and written by a few writer threads while the
-next frame renders: cv2, zlib and zstandard release the GIL. A writer's error is raised
+next frame renders: our numba encoders (``nogil``), cv2, zlib and zstandard release the GIL. A writer's error is raised
 in the rendering thread at its next frame; the manifest is written only after
 every file has been written.
 """
@@ -82,7 +82,8 @@ FLOW_FORMATS = ("npz", "flo")
 # version of the folder layout; part of the render cache key, so a cache entry written in
 # another layout is never read as this one (2: compact flow, PNGs with the RLE strategy;
 # since then, with the same layout: flow files of codec version 2 (zstd) and PNGs Huffman-coded
-# only, the same pixels and truth bit for bit, version-1 flow files still read)
+# only, then frame PNGs by our own encoder: the same pixels and truth bit for bit, version-1 flow
+# files still read)
 SEQUENCE_LAYOUT = 2
 # threads that encode and write files while the next frame renders
 WRITER_THREADS = 2
