@@ -9,7 +9,7 @@ For each preset, side by side in one process (so machine load hits both alike):
   zlib's default strategy and libpng's adaptive row filters, every file encoded and
   written in the rendering thread;
 - ``npz``: today's defaults: compact lossless flow (``flow/NNNNNN.npz``), PNG with
-  Huffman coding only and the Average row filter, files encoded by
+  Huffman coding only and the Average row filter (our encoder, ``encode_png_fast``), files encoded by
   :data:`scenes.sequence.WRITER_THREADS` writer threads.
 
 Reported per layout: MB of the whole folder (``frames/``, flow, masks, tables, preview,
@@ -55,9 +55,9 @@ def folder_bytes(folder: Path) -> dict[str, int]:
 
 def render_once(spec, layout: str, tmp: Path) -> tuple[float, float, dict[str, int]]:
     """(wall s, CPU s, bytes per entry) of one render_sequence in ``layout`` ("flo" or "npz")."""
-    saved = sequence.PNG_STRATEGY, sequence.PNG_FILTERS
+    saved = sequence._frame_png
     if layout == "flo":
-        sequence.PNG_STRATEGY, sequence.PNG_FILTERS = "default", "adaptive"
+        sequence._frame_png = lambda rgb: sequence.encode_png(rgb, compression=1)  # zlib default, adaptive rows
         kw = {"flow_format": "flo", "writer_threads": 0}
     else:
         kw = {"flow_format": "npz", "writer_threads": sequence.WRITER_THREADS}
@@ -67,7 +67,7 @@ def render_once(spec, layout: str, tmp: Path) -> tuple[float, float, dict[str, i
         sequence.render_sequence(spec, out, overwrite=True, **kw)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
-        sequence.PNG_STRATEGY, sequence.PNG_FILTERS = saved
+        sequence._frame_png = saved
     return wall, cpu, folder_bytes(out)
 
 

@@ -48,6 +48,9 @@ planes, ~11 ms a pair) and Huffman-only frame PNGs (~14-16 ms), 3 runs of ``--fr
 render_sequence 13.5 frames/CPU-s and 12.9 frames/s wall (runs 13.2-15.4) against 11.2
 and 11.1 (runs 10.7-12.4), 1.25x (per-run ratios 1.17-1.26); still about 0.4x the render
 alone: PNG deflate (~14 ms) and render + truth (~35 ms) are most of a frame's CPU.
+Then our own PNG encoder and the flow kernels (scenes/_codec_kernels.py): the whole
+render_sequence call against a reference checkout, per thread, is measured by
+benchmarks/sequence_speed.py (its docstring has the figures).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ import numpy as np
 __all__ = ["surface_depth", "vehicle_window", "project_static", "valid_and_shift"]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def surface_depth(D, gx, gy, Cz, rel, abs_m, Z):  # pragma: no cover - numba
     """Depth of the seen point: the ground plane's where the render agrees with it, else the render's.
 
@@ -47,7 +47,7 @@ def surface_depth(D, gx, gy, Cz, rel, abs_m, Z):  # pragma: no cover - numba
             Z[y, x] = zg if abs(d - zg) <= tol else d
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def project_static(Z, ax, ay, b, fx, fy, cx, cy, xs, ys, x1, y1, Z1, flow_cam):  # pragma: no cover - numba
     """Where each pixel's point lands in frame t+1 if it is static: ``X1 = A (Z d) + b``, projected.
 
@@ -93,7 +93,7 @@ def project_static(Z, ax, ay, b, fx, fy, cx, cy, xs, ys, x1, y1, Z1, flow_cam): 
             flow_cam[y, x, 1] = y1[y, x] - yy
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def valid_and_shift(Z0, x1, y1, Z1, D1, instances, xmax, ymax, rel1, abs_m, flow, flow_cam, valid,
                     sums):  # pragma: no cover - numba
     """Valid mask, sky zeroed, and the sums of the camera flow over valid static pixels.
@@ -134,7 +134,7 @@ def valid_and_shift(Z0, x1, y1, Z1, D1, instances, xmax, ymax, rel1, abs_m, flow
     sums[2] = n
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _np_min(a, b):  # pragma: no cover - numba
     """numpy.minimum of two floats: NaN if either is NaN."""
     if a != a or b != b:
@@ -142,7 +142,7 @@ def _np_min(a, b):  # pragma: no cover - numba
     return a if a <= b else b
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _np_max(a, b):  # pragma: no cover - numba
     """numpy.maximum of two floats: NaN if either is NaN."""
     if a != a or b != b:
@@ -150,7 +150,7 @@ def _np_max(a, b):  # pragma: no cover - numba
     return a if a >= b else b
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def vehicle_window(D, r0, c0, xn, yn, A, o, lo, hi, rel, abs_m, Zv, err, hit):  # pragma: no cover - numba
     """Ray-box depth of a vehicle over a window of pixels, and which pixels show it.
 

@@ -13,7 +13,7 @@ for tools that read them; folders written before the compact format have these).
 The reader reads both, bit for bit the same arrays.
 
 Files are encoded (PNG, zlib, zstd) and written by a few writer threads while the
-next frame renders: cv2, zlib and zstandard release the GIL. A writer's error is raised
+next frame renders: our numba encoders (``nogil``), cv2, zlib and zstandard release the GIL. A writer's error is raised
 in the rendering thread at its next frame; the manifest is written only after
 every file has been written.
 """
@@ -43,6 +43,7 @@ from scenes.formats import (
     encode_flo,
     encode_flow_npz,
     encode_png,
+    encode_png_fast,
     read_flo,
     read_flow_npz,
     read_png,
@@ -68,18 +69,12 @@ MANIFEST_NAME = "MANIFEST.json"
 # files up to this size are hashed whole by the quick check; larger ones by size + sampled blocks
 QUICK_FULL_HASH_BYTES = 256 * 1024
 _SAMPLE_BYTES = 64 * 1024
-# zlib level, strategy and row predictor of the per-frame PNGs: level 1 with run-length matching
-# encodes a textured 640x480 frame faster than level 1's default matching, and smaller (459 vs
-# 480 KB nominal, 550 vs 613 KB noisy; benchmarks/io_speed.py); the Average predictor on every
-# row instead of libpng's per-row choice among all five costs 0.6x the time for 1.06x the bytes
-# (nominal: 16.5 vs 26 ms, 405 vs 382 KB a frame; noisy: 15.4 vs 27.2 ms, 536 vs 535 KB;
-# process time on the loaded 2-core machine); Huffman coding alone (no matching: the Average
-# predictor leaves little for it) instead of run-length matching: 0.88x the time for 1.05x the
-# bytes nominal (16.0 vs 18.3 ms, 426 vs 407 KB), 0.99x for the same bytes noisy (17.2 vs 17.4 ms,
-# 540 vs 541 KB; one core, medians of 30 frames; the deflate itself is the cost, PNG stays PNG)
-PNG_COMPRESSION = 1
-PNG_STRATEGY = "huffman"
-PNG_FILTERS = "avg"
+# the per-frame PNGs: the Average row predictor on every row and Huffman coding only (no string
+# matching: the predictor leaves little for it), by our own encoder (scenes.formats.encode_png_fast):
+# the same pixels as libpng + zlib with these settings (level 1, Z_HUFFMAN_ONLY, PNG_FILTER_AVG) and
+# files within 0.1 % of theirs (nominal 423 vs 423 KB), at about 0.4x their CPU (benchmarks/io_speed.py).
+# Before: libpng's adaptive predictor (26 ms, 382 KB nominal), then Average + run-length matching
+# (18.3 ms, 407 KB), then Average + Huffman only through zlib (16.0 ms, 426 KB; one core).
 # masks and instance ids: long runs of one value, no row prediction needed (~4x faster, ~2 kB)
 MASK_PNG = {"compression": 1, "strategy": "rle", "filters": "none"}
 # how ground-truth flow is stored: "npz" (compact, lossless, the default) or "flo" (Middlebury)
@@ -87,7 +82,8 @@ FLOW_FORMATS = ("npz", "flo")
 # version of the folder layout; part of the render cache key, so a cache entry written in
 # another layout is never read as this one (2: compact flow, PNGs with the RLE strategy;
 # since then, with the same layout: flow files of codec version 2 (zstd) and PNGs Huffman-coded
-# only, the same pixels and truth bit for bit, version-1 flow files still read)
+# only, then frame PNGs by our own encoder: the same pixels and truth bit for bit, version-1 flow
+# files still read)
 SEQUENCE_LAYOUT = 2
 # threads that encode and write files while the next frame renders
 WRITER_THREADS = 2
@@ -332,6 +328,10 @@ def _valid_png(valid: np.ndarray) -> bytes:
     return encode_png(valid.view(np.uint8) * np.uint8(255), **MASK_PNG)
 
 
+def _frame_png(rgb: np.ndarray) -> bytes:
+    return encode_png_fast(rgb)
+
+
 def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timings: dict | None, *,
                 flow_format: str = "npz", writer_threads: int = WRITER_THREADS) -> None:
     from scenes.generate import CAMERA_COLUMNS, TRACK_COLUMNS, SceneGenerator
@@ -340,7 +340,6 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
 
     _check_flow_format(flow_format)
     n = spec.image.n_frames
-    png = {"compression": PNG_COMPRESSION, "strategy": PNG_STRATEGY, "filters": PNG_FILTERS}
     out = _FolderWriter(folder, threads=writer_threads)
     try:
         t_gen = t_write = 0.0
@@ -354,7 +353,7 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
             fo = next(frames)
             t1 = time.perf_counter()
             name = f"{fo.index:06d}"
-            out.submit(f"frames/{name}.png", encode_png, fo.rgb, **png)
+            out.submit(f"frames/{name}.png", _frame_png, fo.rgb)
             out.submit(f"instances/{name}.png", encode_png, fo.instances, **MASK_PNG)
             if fo.pair is not None:
                 pname = f"{fo.pair_index:06d}"
