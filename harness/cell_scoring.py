@@ -134,7 +134,8 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     Every payload names the same ``sequence``. The pipelines share one
     :class:`algorithms.shared_work.SharedWork` (frames decoded once, pass-1 shifts and
     compensated frames computed once per distinct setting) and each pair's ground truth
-    is read once and scored against every pipeline's estimate of it; a pipeline's rows
+    is read and prepared once (:func:`harness.metrics.prepare_pair_truth`) and scored
+    against every pipeline's estimate of it; a pipeline's rows
     are the rows it gives alone. A cell that raises stops alone (its outcome carries the
     exception), the others go on. Returns one :class:`CellOutcome` per payload, in order.
     """
@@ -142,7 +143,7 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
 
     from algorithms.pipeline import SequenceEstimate
     from algorithms.shared_work import SharedWork
-    from harness.metrics import score_pair
+    from harness.metrics import prepare_pair_truth, score_pair
     from scenes import open_sequence
 
     if len(payloads) != len(tmps) or not payloads:
@@ -177,8 +178,12 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                 else:
                     if est.index not in truth_of:
                         truth_of.clear()
-                        truth_of[est.index] = seq.pair_truth(est.index)
-                    run.rows += _as_rows(score_pair(est, truth_of[est.index], frame=est.index))
+                        truth = seq.pair_truth(est.index)
+                        truth_of[est.index] = (truth, prepare_pair_truth(truth))
+                        del truth
+                    truth, prepared = truth_of[est.index]
+                    run.rows += _as_rows(score_pair(est, truth, frame=est.index, prepared=prepared))
+                    del truth, prepared
                     if est.index in run.pictures:
                         artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
                 del est  # the arrays of a pair live no longer than its scoring

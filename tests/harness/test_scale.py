@@ -152,13 +152,13 @@ def test_a_cell_keeps_no_pair_arrays_after_scoring_the_pair(tmp_path, render_cac
     refs: list[tuple[int, weakref.ref]] = []
     leaks: list[str] = []
 
-    def watched_score_pair(estimate, truth, *, frame):
+    def watched_score_pair(estimate, truth, *, frame, **kw):
         gc.collect()
         leaks.extend(f"pair {i} still alive while scoring pair {frame}" for i, r in refs
                      if i < frame - 1 and r() is not None)
         refs.extend((frame, weakref.ref(a)) for a in (estimate.flow_total, estimate.flow_local,
                                                        estimate.flow_filtered, truth.flow, truth.flow_camera))
-        rows = real_score_pair(estimate, truth, frame=frame)
+        rows = real_score_pair(estimate, truth, frame=frame, **kw)
         leaks.extend(f"row of pair {frame} holds an array ({k})" for r in rows for k, v in r.items()
                      if isinstance(v, np.ndarray) and v.size > 1)
         return rows
