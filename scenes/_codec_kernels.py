@@ -150,6 +150,25 @@ def _canonical_codes(lengths):  # pragma: no cover - numba
     return codes
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _put_bits(out, o, acc, nbits, code, length):  # pragma: no cover - numba
+    """Append ``length`` bits of ``code`` (LSB first) to the bit accumulator; flush 4 whole bytes at 32 bits.
+
+    Returns the new (o, acc, nbits).
+    """
+    acc |= code << nbits
+    nbits += length
+    if nbits >= 32:
+        out[o] = acc & 255
+        out[o + 1] = (acc >> 8) & 255
+        out[o + 2] = (acc >> 16) & 255
+        out[o + 3] = (acc >> 24) & 255
+        o += 4
+        acc >>= 32
+        nbits -= 32
+    return o, acc, nbits
+
+
 def deflate_bound(n_bytes: int, block: int) -> int:
     """Bytes :func:`deflate_huffman` may write at most for ``n_bytes`` input in blocks of ``block``."""
     n_blocks = max(1, -(-n_bytes // block))
@@ -235,39 +254,12 @@ def deflate_huffman(data, block, out):  # pragma: no cover - numba
             acc |= ((_N_LIT - 257) | (1 << 5) | ((hclen - 4) << 10)) << nbits  # HLIT, HDIST = 2 codes, HCLEN
             nbits += 14
             for j in range(hclen):
-                acc |= cl_len[cl_order[j]] << nbits
-                nbits += 3
-                if nbits >= 32:
-                    out[o] = acc & 255
-                    out[o + 1] = (acc >> 8) & 255
-                    out[o + 2] = (acc >> 16) & 255
-                    out[o + 3] = (acc >> 24) & 255
-                    o += 4
-                    acc >>= 32
-                    nbits -= 32
+                o, acc, nbits = _put_bits(out, o, acc, nbits, cl_len[cl_order[j]], 3)
             for v in seq:
-                acc |= cl_code[v] << nbits
-                nbits += cl_len[v]
-                if nbits >= 32:
-                    out[o] = acc & 255
-                    out[o + 1] = (acc >> 8) & 255
-                    out[o + 2] = (acc >> 16) & 255
-                    out[o + 3] = (acc >> 24) & 255
-                    o += 4
-                    acc >>= 32
-                    nbits -= 32
+                o, acc, nbits = _put_bits(out, o, acc, nbits, cl_code[v], cl_len[v])
             for i in range(start, end):
                 s = data[i]
-                acc |= lit_code[s] << nbits
-                nbits += lit_len[s]
-                if nbits >= 32:
-                    out[o] = acc & 255
-                    out[o + 1] = (acc >> 8) & 255
-                    out[o + 2] = (acc >> 16) & 255
-                    out[o + 3] = (acc >> 24) & 255
-                    o += 4
-                    acc >>= 32
-                    nbits -= 32
+                o, acc, nbits = _put_bits(out, o, acc, nbits, lit_code[s], lit_len[s])
             acc |= lit_code[_EOB] << nbits
             nbits += lit_len[_EOB]
             while nbits >= 8:
