@@ -42,6 +42,49 @@ def _page_faults_per_flow_call() -> float:
     return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 5
 
 
+_ORPHAN_PARENT = """
+import os, sys, time
+from harness.executors import open_executor
+with open_executor("process", workers=1) as pool:
+    print(pool.submit(os.getpid).result(), flush=True)
+    time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl(PR_SET_PDEATHSIG)")
+def test_a_worker_dies_with_its_runner():
+    """A runner killed with SIGKILL leaves no worker waiting on its queue for ever."""
+    import signal
+    import subprocess
+    import time
+    from pathlib import Path
+
+    proc = subprocess.Popen([sys.executable, "-c", _ORPHAN_PARENT], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    try:
+        worker = int(proc.stdout.readline())
+        os.kill(worker, 0)  # alive while its runner is
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                os.kill(worker, 0)
+            except ProcessLookupError:
+                break
+            if Path(f"/proc/{worker}/stat").read_text().split()[2] == "Z":  # a zombie: dead, not yet reaped
+                break
+            time.sleep(0.05)
+        else:
+            os.kill(worker, signal.SIGKILL)
+            raise AssertionError(f"worker {worker} outlived its runner by 10 s")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        proc.stdout.close()
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc")
 def test_workers_reuse_freed_memory_instead_of_faulting_fresh_pages():
     # glibc's default hands a pyramidal LK call of 320x240 about 1000 fresh pages (each a page
