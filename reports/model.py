@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from reports import lkhs
-from reports.load import RunData, load_run, scene_base
+from reports.load import RunData, load_run, scene_base, scene_bases
 from reports.tables import (Column, MetricTable, baseline_diffs, gate_view, headline_columns, metric_table, per_scene_rows,
                             region_table, sweep_curves)
 
@@ -132,7 +132,7 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
     data = load_run(run_dir)
     cols = headline_columns(data)
     diffs, note = (baseline_diffs(data, baseline, rules=rules) if baseline is not None else (None, ""))
-    bases = data.table["scene"].map(scene_base)
+    bases = scene_bases(data.table["scene"])
     per_scene = {s: metric_table(data, rows, cols, all_rows=data.table[bases == s])
                  for s, rows in per_scene_rows(data).items()}
     regions = {}

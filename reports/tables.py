@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from reports.load import RunData, pooled, primary_rows, scene_base
+from reports.load import RunData, pooled, primary_rows, scene_bases
 
 __all__ = ["HEADLINE", "Column", "MetricTable", "headline_columns", "metric_table", "format_value",
            "best_pipelines", "sweep_curves", "region_table", "baseline_diffs", "gate_view", "BASELINE_COLUMNS"]
@@ -166,7 +166,7 @@ def sweep_curves(data: RunData) -> dict[str, pd.DataFrame]:
 
 def per_scene_rows(data: RunData) -> dict[str, pd.DataFrame]:
     """Scene (variant labels without their sweep suffix) -> its ok rows."""
-    bases = data.ok["scene"].map(scene_base)
+    bases = scene_bases(data.ok["scene"])
     return {s: data.ok[bases == s] for s in dict.fromkeys(bases)}
 
 
