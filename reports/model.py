@@ -108,7 +108,9 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
                     "was run.")
     if "epe_mean" not in data.metrics:
         return [], "The run has no epe_mean rows: nothing to compare."
-    ok = data.table[data.table["cell_id"].isin(data.ok["cell_id"])]
+    # the comparisons read epe_mean rows only: select them before the cell filter, not after it
+    epe = data.table[data.table["metric"] == "epe_mean"]
+    ok = epe[epe["cell_id"].isin(data.ok["cell_id"])]
     pairs = [LkHsPair(lk, hs, lkhs.compare_pair(ok, lk, hs), lkhs.by_scene_seed(ok, lk, hs)) for lk, hs in twins]
     return pairs, ""
 
