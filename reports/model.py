@@ -110,7 +110,7 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
         return [], "The run has no epe_mean rows: nothing to compare."
     # the comparisons read epe_mean rows only: select them before the cell filter, not after it
     epe = data.table[data.table["metric"] == "epe_mean"]
-    ok = epe[epe["cell_id"].isin(data.ok["cell_id"])]
+    ok = epe[epe["cell_id"].isin(pd.unique(data.ok["cell_id"]))]  # distinct ids: isin of arrow strings loops over them
     pairs = [LkHsPair(lk, hs, lkhs.compare_pair(ok, lk, hs), lkhs.by_scene_seed(ok, lk, hs)) for lk, hs in twins]
     return pairs, ""
 
@@ -135,7 +135,9 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
     cols = headline_columns(data)
     diffs, note = (baseline_diffs(data, baseline, rules=rules) if baseline is not None else (None, ""))
     bases = scene_bases(data.table["scene"])
-    per_scene = {s: metric_table(data, rows, cols, all_rows=data.table[bases == s])
+    # all_rows only gives the cells per pipeline: filter those two columns, not the whole table
+    cell_rows = data.table[["pipeline", "cell_id"]]
+    per_scene = {s: metric_table(data, rows, cols, all_rows=cell_rows[bases == s])
                  for s, rows in per_scene_rows(data).items()}
     regions = {}
     for c in cols[:2]:

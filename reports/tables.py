@@ -62,9 +62,10 @@ def format_value(v: float) -> str:
 
 
 def _column(df: pd.DataFrame, metric: str, label: str) -> Column:
-    g = df[df["metric"] == metric]
-    unit = str(g["unit"].iloc[0]) if len(g) else ""
-    hib = bool(g["higher_is_better"].iloc[0]) if len(g) else False
+    # the first row of the metric, found without copying every column of its rows
+    at = np.flatnonzero((df["metric"] == metric).to_numpy(bool))
+    unit = str(df["unit"].iloc[at[0]]) if len(at) else ""
+    hib = bool(df["higher_is_better"].iloc[at[0]]) if len(at) else False
     return Column(label, metric, unit, hib)
 
 
