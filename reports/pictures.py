@@ -34,7 +34,8 @@ def png_data_uri(rgb: np.ndarray) -> str:
         a = cv2.cvtColor(a, cv2.COLOR_RGB2BGR)
     # zlib's run-length strategy after PNG's adaptive row filters: flow and error maps are smooth, so the
     # filtered rows are mostly runs; as small as the default strategy at level 6, a third of its CPU time
-    ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
+    ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, 1,
+                                       cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
     if not ok:
         raise ValueError("image: PNG encoding failed")
     return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
