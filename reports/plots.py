@@ -7,6 +7,7 @@ byte-identical between runs: a fixed ``svg.hashsalt``, no date metadata.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import re
 
@@ -360,6 +361,10 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
     # and shown under each panel's (transparent) axes in a nested <svg> whose viewBox is the panel's data
     # range: image pixel (col, row) covers col - 0.5 .. col + 0.5, as imshow draws it; the <svg> clips.
     img, (left, right, bottom, top) = crop
+    uri = png_data_uri(np.ascontiguousarray(img))
+    # ids are global in an HTML page holding several figures: named by the picture's content, so one name is
+    # one picture (a fixed name would show the first figure's frame in every figure)
+    frame_id = "trackframe-" + hashlib.sha1(uri.encode("ascii")).hexdigest()[:12]
     width_pt, height_pt = fig.get_size_inches() * 72.0
     uses = []
     for k in range(n):
@@ -367,10 +372,10 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
         uses.append(f'<svg x="{pos.x0 * width_pt:.6f}" y="{(1.0 - pos.y1) * height_pt:.6f}" '
                     f'width="{pos.width * width_pt:.6f}" height="{pos.height * height_pt:.6f}" '
                     f'viewBox="{x0:.6f} {y0:.6f} {x1 - x0:.6f} {y1 - y0:.6f}" preserveAspectRatio="none">'
-                    '<use xlink:href="#trackframe"/></svg>')
-    image = (f'<defs><image id="trackframe" x="{left:g}" y="{top:g}" width="{right - left:g}" '
+                    f'<use xlink:href="#{frame_id}"/></svg>')
+    image = (f'<defs><image id="{frame_id}" x="{left:g}" y="{top:g}" width="{right - left:g}" '
              f'height="{bottom - top:g}" style="image-rendering:crisp-edges;image-rendering:pixelated" '
-             f'preserveAspectRatio="none" xlink:href="{png_data_uri(np.ascontiguousarray(img))}"/></defs>')
+             f'preserveAspectRatio="none" xlink:href="{uri}"/></defs>')
     # under everything of the figure but its white background patch (the figure's first group)
     start = svg.index('<g id="figure_1">')
     at = svg.index("</g>", start) + len("</g>")
