@@ -9,6 +9,7 @@ cell artifacts and sequences through :mod:`reports.load`.
 
 from __future__ import annotations
 
+import functools
 import html
 import math
 import re
@@ -247,6 +248,22 @@ def _img(uri: str, *, cls: str = "", alt: str) -> str:
     return f'<img class="{cls}" src="{uri}" alt="{_e(alt)}">'
 
 
+# the legends are the same picture in every row: encoded once per process
+@functools.cache
+def _wheel_uri() -> str:
+    return pictures.png_data_uri(pictures.wheel_legend())
+
+
+@functools.cache
+def _colorbar_uri() -> str:
+    return pictures.png_data_uri(pictures.epe_colorbar())
+
+
+@functools.cache
+def _no_truth_uri() -> str:
+    return pictures.png_data_uri(pictures.swatch(pictures.NO_TRUTH_RGB))
+
+
 def _tile(rgb: np.ndarray, *, scale: int, alt: str, caption: str) -> str:
     """A picture tile: ``rgb`` enlarged ``scale`` x by nearest neighbour, with its caption."""
     uri = pictures.png_data_uri(pictures.upscale_nearest(rgb, scale))
@@ -275,7 +292,7 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
     for pipe, flow in ests.items():
         tiles.append(_tile(pictures.flow_row(flow, max_magnitude=max_mag), scale=scale, alt=f"{pipe} {what} flow",
                            caption=pipe) if flow is not None else _empty_tile(f"{pipe}: no {what} flow saved"))
-    tiles.append(f"<figure>{_img(pictures.png_data_uri(pictures.wheel_legend()), cls='legend', alt='colour wheel')}"
+    tiles.append(f"<figure>{_img(_wheel_uri(), cls='legend', alt='colour wheel')}"
                  f"<figcaption>hue = direction (+x right, +y down), full saturation = {max_mag:.2f} px"
                  "</figcaption></figure>")
     out = [f"<div class=\"gallery flow\">{''.join(tiles)}</div>"]
@@ -296,10 +313,10 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
         rgb, mean = pictures.epe_map(flow, truth, max_epe_px=err_max, valid=valid)
         etiles.append(_tile(rgb, scale=scale, alt=f"{pipe} {what} endpoint error",
                             caption=f"{pipe}: mean EPE {format_value(mean)} px"))
-    bar = _img(pictures.png_data_uri(pictures.epe_colorbar()), cls="bar", alt="EPE colour scale")
+    bar = _img(_colorbar_uri(), cls="bar", alt="EPE colour scale")
     etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {err_max:.2f} px (largest 99th percentile "
                   "of the row; brighter is worse; black = zero error)</figcaption></figure>")
-    no_truth = _img(pictures.png_data_uri(pictures.swatch(pictures.NO_TRUTH_RGB)), cls="swatch", alt="teal swatch")
+    no_truth = _img(_no_truth_uri(), cls="swatch", alt="teal swatch")
     etiles.append(f"<figure>{no_truth}<figcaption>teal = no ground truth (occluded or leaving the view)"
                   "</figcaption></figure>")
     out.append(f"<div class=\"gallery flow\">{''.join(etiles)}</div>")

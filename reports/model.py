@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from reports import lkhs
-from reports.load import RunData, load_run, scene_base
+from reports.load import RunData, load_run, scene_base, scene_bases
 from reports.tables import (Column, MetricTable, baseline_diffs, gate_view, headline_columns, metric_table, per_scene_rows,
                             region_table, sweep_curves)
 
@@ -108,7 +108,9 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
                     "was run.")
     if "epe_mean" not in data.metrics:
         return [], "The run has no epe_mean rows: nothing to compare."
-    ok = data.table[data.table["cell_id"].isin(data.ok["cell_id"])]
+    # the comparisons read epe_mean rows only: select them before the cell filter, not after it
+    epe = data.table[data.table["metric"] == "epe_mean"]
+    ok = epe[epe["cell_id"].isin(pd.unique(data.ok["cell_id"]))]  # distinct ids: isin of arrow strings loops over them
     pairs = [LkHsPair(lk, hs, lkhs.compare_pair(ok, lk, hs), lkhs.by_scene_seed(ok, lk, hs)) for lk, hs in twins]
     return pairs, ""
 
@@ -132,8 +134,10 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
     data = load_run(run_dir)
     cols = headline_columns(data)
     diffs, note = (baseline_diffs(data, baseline, rules=rules) if baseline is not None else (None, ""))
-    bases = data.table["scene"].map(scene_base)
-    per_scene = {s: metric_table(data, rows, cols, all_rows=data.table[bases == s])
+    bases = scene_bases(data.table["scene"])
+    # all_rows only gives the cells per pipeline: filter those two columns, not the whole table
+    cell_rows = data.table[["pipeline", "cell_id"]]
+    per_scene = {s: metric_table(data, rows, cols, all_rows=cell_rows[bases == s])
                  for s, rows in per_scene_rows(data).items()}
     regions = {}
     for c in cols[:2]:

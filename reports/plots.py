@@ -7,6 +7,7 @@ byte-identical between runs: a fixed ``svg.hashsalt``, no date metadata.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import re
 
@@ -16,11 +17,13 @@ matplotlib.use("Agg")  # headless, set before pyplot is imported
 
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from algorithms.jitter import least_squares_line  # noqa: E402
+from reports.pictures import png_data_uri  # noqa: E402
 
 __all__ = ["pipeline_colors", "fig_to_svg", "difficulty_curves", "stabilisation_figure",
            "jitter_figure", "tracking_figure", "tracking_error_figure", "TRACKER_STYLE",
@@ -261,6 +264,16 @@ def _start_labels(vehicles: dict[int, pd.DataFrame], *, near_px: float = 6.0) ->
     return [("v" + ",".join(str(v) for v in ids), xy) for ids, xy in groups]
 
 
+def _frame_crop(frame: np.ndarray, x0: float, x1: float, y0: float, y1: float
+                ) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The whole pixels of ``frame`` (H, W, 3) that the view ``x0..x1, y0..y1`` (px, pixel centres at integers)
+    touches, and their ``extent`` for ``imshow`` (left, right, bottom, top)."""
+    h, w = frame.shape[:2]
+    c0, c1 = max(0, int(np.floor(x0 + 0.5))), min(w, int(np.ceil(x1 + 0.5)))
+    r0, r1 = max(0, int(np.floor(y0 + 0.5))), min(h, int(np.ceil(y1 + 0.5)))
+    return frame[r0:r1, c0:c1], (c0 - 0.5, c1 - 0.5, r1 - 0.5, r0 - 0.5)
+
+
 def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *, title: str,
                     truth: pd.DataFrame | None = None) -> str:
     """Trajectories over a frame, one panel per pipeline, each track drawn on its own.
@@ -289,42 +302,84 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
     x0, x1, y0, y1 = _zoom_box(every, frame)
     aspect = (y1 - y0) / (x1 - x0)
     halo = [patheffects.withStroke(linewidth=2.5, foreground="white")]
+    labels = _start_labels(vehicles)
+    polylines = {pipe: track_polylines(tr) for pipe, tr in tracks.items()}
+    legend = {"ground truth (true vehicle centre)": {"color": "#000000", "ls": "-", "lw": 1.2, "path_effects": halo}}
+    for lines in polylines.values():
+        for source, _ in lines:
+            st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
+            legend.setdefault(f"{st['name']}: raw", {"color": st["color"], "ls": "--", "marker": "o", "lw": 1.0,
+                                                     "ms": 3.5, "mfc": "none", "mew": 0.9})
+            legend.setdefault(f"{st['name']}: Kalman", {"color": st["color"], "ls": "-", "marker": "s", "lw": 1.4,
+                                                        "ms": 2.5})
+    crop = _frame_crop(frame, x0, x1, y0, y1) if frame is not None else None
     with matplotlib.rc_context(_RC):
         # rows tall enough for the zoomed image at its aspect plus a title, so panels never overlap
         fig, axes = _figure(nrows, ncols, width_in=3.8 * ncols, height_in=(3.3 * aspect + 0.55) * nrows + 0.9)
-        legend: dict[str, object] = {}
-        for k, (pipe, tr) in enumerate(tracks.items()):
+        # Constrained layout measures every artist and costs a second full draw at savefig. It is run on a
+        # skeleton instead (limits, aspect, titles, labels, legend): the lines and the image it would measure
+        # are clipped to their axes and cannot move the layout. The layout is then frozen and drawn once.
+        for k, (pipe, lines) in enumerate(polylines.items()):
             ax = axes[k // ncols][k % ncols]
             ax.grid(False)
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y1, y0)  # image rows grow downwards
             if frame is not None:
-                ax.imshow(frame, interpolation="nearest")
-            for vid, g in vehicles.items():
-                (h,) = ax.plot(g["x"], g["y"], "-", color="#000000", lw=1.2, path_effects=halo)
-                legend.setdefault("ground truth (true vehicle centre)", h)
-                ax.plot(g["x"].iloc[:1], g["y"].iloc[:1], "o", color="#000000", ms=3, path_effects=halo)
-            for text, (x, y) in _start_labels(vehicles):
+                ax.set_aspect("equal")  # the frame's pixels square
+                ax.set_facecolor("none")  # the frame goes under the axes (see below)
+            for text, (x, y) in labels:
                 ax.annotate(text, (x, y), xytext=(-3, 3), textcoords="offset points", ha="right", fontsize=7,
                             bbox=_LABEL_BOX)
-            sources = []
-            for (source, tid), g in track_polylines(tr).items():
-                st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
-                sources.append(source)
-                (hr,) = ax.plot(g["x"], g["y"], "--o", color=st["color"], lw=1.0, ms=3.5, mfc="none", mew=0.9)
-                (hk,) = ax.plot(g["x_filt"], g["y_filt"], "-s", color=st["color"], lw=1.4, ms=2.5)
-                legend.setdefault(f"{st['name']}: raw", hr)
-                legend.setdefault(f"{st['name']}: Kalman", hk)
+            for (source, tid), g in lines.items():
                 if source != "point":
+                    st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
                     ax.annotate(f"m{tid}", (float(g["x_filt"].iloc[-1]), float(g["y_filt"].iloc[-1])),
                                 xytext=(3, -3), textcoords="offset points", va="top", fontsize=7,
                                 color=st["color"], bbox=_LABEL_BOX)
-            ax.set_xlim(x0, x1)
-            ax.set_ylim(y1, y0)  # image rows grow downwards
-            ax.set_title(f"{pipe} ({' + '.join(dict.fromkeys(sources))})")
+            ax.set_title(f"{pipe} ({' + '.join(dict.fromkeys(s for s, _ in lines))})")
         for k in range(n, nrows * ncols):
             axes[k // ncols][k % ncols].set_visible(False)
-        fig.legend(list(legend.values()), list(legend.keys()), loc="outside lower center", ncols=3, frameon=False)
+        handles = [Line2D([], [], **style) for style in legend.values()]
+        fig.legend(handles, list(legend.keys()), loc="outside lower center", ncols=3, frameon=False)
         fig.suptitle(title)
-    return fig_to_svg(fig)
+        fig.get_layout_engine().execute(fig)
+        fig.set_layout_engine(None)  # no engine: savefig draws once
+        for k, (pipe, lines) in enumerate(polylines.items()):
+            ax = axes[k // ncols][k % ncols]
+            for g in vehicles.values():
+                ax.plot(g["x"], g["y"], "-", color="#000000", lw=1.2, path_effects=halo)
+                ax.plot(g["x"].iloc[:1], g["y"].iloc[:1], "o", color="#000000", ms=3, path_effects=halo)
+            for (source, tid), g in lines.items():
+                st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
+                ax.plot(g["x"], g["y"], "--o", color=st["color"], lw=1.0, ms=3.5, mfc="none", mew=0.9)
+                ax.plot(g["x_filt"], g["y_filt"], "-s", color=st["color"], lw=1.4, ms=2.5)
+    svg = fig_to_svg(fig)
+    if crop is None:
+        return svg
+    # The frame is not drawn by matplotlib: its SVG backend would resample it per panel and PNG-encode each
+    # copy at zlib's slowest settings. Instead its pixels are encoded once at their own size, defined once,
+    # and shown under each panel's (transparent) axes in a nested <svg> whose viewBox is the panel's data
+    # range: image pixel (col, row) covers col - 0.5 .. col + 0.5, as imshow draws it; the <svg> clips.
+    img, (left, right, bottom, top) = crop
+    uri = png_data_uri(np.ascontiguousarray(img))
+    # ids are global in an HTML page holding several figures: named by the picture's content, so one name is
+    # one picture (a fixed name would show the first figure's frame in every figure)
+    frame_id = "trackframe-" + hashlib.sha1(uri.encode("ascii")).hexdigest()[:12]
+    width_pt, height_pt = fig.get_size_inches() * 72.0
+    uses = []
+    for k in range(n):
+        pos = axes[k // ncols][k % ncols].get_position()  # after savefig: the box the aspect left
+        uses.append(f'<svg x="{pos.x0 * width_pt:.6f}" y="{(1.0 - pos.y1) * height_pt:.6f}" '
+                    f'width="{pos.width * width_pt:.6f}" height="{pos.height * height_pt:.6f}" '
+                    f'viewBox="{x0:.6f} {y0:.6f} {x1 - x0:.6f} {y1 - y0:.6f}" preserveAspectRatio="none">'
+                    f'<use xlink:href="#{frame_id}"/></svg>')
+    image = (f'<defs><image id="{frame_id}" x="{left:g}" y="{top:g}" width="{right - left:g}" '
+             f'height="{bottom - top:g}" style="image-rendering:crisp-edges;image-rendering:pixelated" '
+             f'preserveAspectRatio="none" xlink:href="{uri}"/></defs>')
+    # under everything of the figure but its white background patch (the figure's first group)
+    start = svg.index('<g id="figure_1">')
+    at = svg.index("</g>", start) + len("</g>")
+    return svg[:at] + image + "".join(uses) + svg[at:]
 
 
 def tracking_error_figure(errors: dict[str, pd.DataFrame], *, colors: dict[str, str], title: str) -> str:

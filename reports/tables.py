@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from reports.load import RunData, pooled, primary_rows, scene_base
+from reports.load import RunData, pooled, primary_rows, scene_bases
 
 __all__ = ["HEADLINE", "Column", "MetricTable", "headline_columns", "metric_table", "format_value",
            "best_pipelines", "sweep_curves", "region_table", "baseline_diffs", "gate_view", "BASELINE_COLUMNS"]
@@ -62,9 +62,10 @@ def format_value(v: float) -> str:
 
 
 def _column(df: pd.DataFrame, metric: str, label: str) -> Column:
-    g = df[df["metric"] == metric]
-    unit = str(g["unit"].iloc[0]) if len(g) else ""
-    hib = bool(g["higher_is_better"].iloc[0]) if len(g) else False
+    # the first row of the metric, found without copying every column of its rows
+    at = np.flatnonzero((df["metric"] == metric).to_numpy(bool))
+    unit = str(df["unit"].iloc[at[0]]) if len(at) else ""
+    hib = bool(df["higher_is_better"].iloc[at[0]]) if len(at) else False
     return Column(label, metric, unit, hib)
 
 
@@ -166,7 +167,7 @@ def sweep_curves(data: RunData) -> dict[str, pd.DataFrame]:
 
 def per_scene_rows(data: RunData) -> dict[str, pd.DataFrame]:
     """Scene (variant labels without their sweep suffix) -> its ok rows."""
-    bases = data.ok["scene"].map(scene_base)
+    bases = scene_bases(data.ok["scene"])
     return {s: data.ok[bases == s] for s in dict.fromkeys(bases)}
 
 

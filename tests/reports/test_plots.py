@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 
-from reports.plots import (difficulty_curves, pipeline_colors, stabilisation_figure, track_polylines)
+from reports.plots import (difficulty_curves, pipeline_colors, stabilisation_figure, track_polylines,
+                           tracking_figure)
 
 
 def test_each_pipeline_keeps_one_colour_and_neighbours_differ():
@@ -50,3 +53,26 @@ def test_a_track_is_its_source_and_id_and_runs_in_frame_order():
     lines = track_polylines(tr)
     assert set(lines) == {("point", 0), ("multi", 0)}  # the same id in two trackers is two tracks
     assert list(lines[("point", 0)]["x"]) == [1.0, 2.0, 3.0]
+
+
+def _tracks() -> dict[str, pd.DataFrame]:
+    frame = np.arange(4)
+    t = pd.DataFrame({"frame": frame, "source": "point", "track_id": 0, "seed_vehicle_id": 1.0,
+                      "x": 10.0 + 5 * frame, "y": 20.0 + 2 * frame, "x_filt": 10.0 + 5 * frame,
+                      "y_filt": 20.0 + 2 * frame, "x_true": 10.0 + 5 * frame, "y_true": 20.0 + 2 * frame})
+    return {"a": t, "b": t.copy()}
+
+
+def test_tracking_figures_of_different_frames_name_their_frame_pictures_apart():
+    """Several figures share one HTML page, where ids are global: each frame picture needs its own id,
+    every panel of a figure shows that figure's picture, and the picture keeps the frame's own pixels."""
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (60, 80, 3), dtype=np.uint8) for _ in range(2)]
+    svgs = [tracking_figure(f, _tracks(), title="t") for f in frames]
+    ids = [re.findall(r'<image id="([^"]+)"', s) for s in svgs]
+    assert all(len(i) == 1 for i in ids) and ids[0] != ids[1]
+    for s, (i,) in zip(svgs, ids):
+        assert s.count(f'<use xlink:href="#{i}"/>') == 2  # one per panel
+        w, h = (int(v) for v in re.search(r'<image id="[^"]+" x="[^"]+" y="[^"]+" width="([\d.]+)" '
+                                          r'height="([\d.]+)"', s).groups())
+        assert w <= 80 and h <= 60  # the frame's pixels (cropped to the view), not resampled upwards
