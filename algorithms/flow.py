@@ -190,27 +190,17 @@ def flow_to_color(flow: np.ndarray, *, max_magnitude: float | None = None,
     ndarray, (H, W, 3) uint8 RGB
     """
     f = check_flow(flow, allow_nan=True).astype(np.float64)
-    u, v = f[..., 0], f[..., 1]
-    unknown = ~(np.isfinite(u) & np.isfinite(v))
+    known = np.isfinite(f[..., 0]) & np.isfinite(f[..., 1])
     if valid is not None:
-        unknown |= ~np.asarray(valid, bool)
-    u = np.where(unknown, 0.0, u)
-    v = np.where(unknown, 0.0, v)
-    mag = np.hypot(u, v)
+        known &= np.asarray(valid, bool)
     if max_magnitude is None:
+        mag = np.hypot(np.where(known, f[..., 0], 0.0), np.where(known, f[..., 1], 0.0))
         max_magnitude = float(mag.max()) if mag.size else 0.0
     scale = max(float(max_magnitude), 1e-6)
-    r = np.minimum(mag / scale, 1.0)
-    ncols = _WHEEL.shape[0]
-    angle = np.arctan2(-v, -u) / np.pi  # -1..1, as in the reference coding
-    fk = (angle + 1.0) / 2.0 * (ncols - 1)
-    k0 = np.floor(fk).astype(int) % ncols
-    k1 = (k0 + 1) % ncols
-    frac = (fk - np.floor(fk))[..., None]
-    col = ((1 - frac) * _WHEEL[k0] + frac * _WHEEL[k1]) / 255.0
-    col = 1.0 - r[..., None] * (1.0 - col)
-    rgb = np.round(255.0 * col).astype(np.uint8)
-    rgb[unknown] = 0
+    rgb = np.empty(f.shape[:2] + (3,), np.uint8)
+    from algorithms._color_kernel import color_code  # numba: compiled on first use, not on import
+
+    color_code(np.ascontiguousarray(f), np.ascontiguousarray(known), scale, _WHEEL, rgb)
     return rgb
 
 
