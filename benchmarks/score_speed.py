@@ -80,6 +80,19 @@ N_SHARED = 7
 # --------------------------------------------------------------------------- score_pair before the two-motion pass
 # (commit 95fabaa: one numba pass per motion, numpy's arccos on a buffer of cosines), for the ratio only
 
+@numba.njit(cache=True, inline="always")
+def _add_totals_before(stats, b, n, s1, s2, k1, k3, k5, kfl, kcov):
+    """A pattern's running totals into its row of ``stats`` (column 3, the angular error, is numpy's)."""
+    stats[b, 0] += n
+    stats[b, 1] += s1
+    stats[b, 2] += s2
+    stats[b, 4] += k1
+    stats[b, 5] += k3
+    stats[b, 6] += k5
+    stats[b, 7] += kfl
+    stats[b, 8] += kcov
+
+
 @numba.njit(cache=True)
 def _field_totals_before(e, t, bits, valid_est, bin_px, nbins, stats, hist, bin_out, cos_out, code_out):
     h, w = bits.shape
@@ -93,14 +106,7 @@ def _field_totals_before(e, t, bits, valid_est, bin_px, nbins, stats, hist, bin_
                 continue
             if b != cur:
                 if cur >= 0:
-                    stats[cur, 0] += n
-                    stats[cur, 1] += s1
-                    stats[cur, 2] += s2
-                    stats[cur, 4] += k1
-                    stats[cur, 5] += k3
-                    stats[cur, 6] += k5
-                    stats[cur, 7] += kfl
-                    stats[cur, 8] += kcov
+                    _add_totals_before(stats, cur, n, s1, s2, k1, k3, k5, kfl, kcov)
                 cur = b
                 n = s1 = s2 = k1 = k3 = k5 = kfl = kcov = 0.0
             eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
@@ -138,14 +144,7 @@ def _field_totals_before(e, t, bits, valid_est, bin_px, nbins, stats, hist, bin_
             if valid_est[y, x]:
                 kcov += 1.0
     if cur >= 0:
-        stats[cur, 0] += n
-        stats[cur, 1] += s1
-        stats[cur, 2] += s2
-        stats[cur, 4] += k1
-        stats[cur, 5] += k3
-        stats[cur, 6] += k5
-        stats[cur, 7] += kfl
-        stats[cur, 8] += kcov
+        _add_totals_before(stats, cur, n, s1, s2, k1, k3, k5, kfl, kcov)
     return m
 
 

@@ -11,6 +11,7 @@ picture pair). What a cell is and where its files go is :mod:`harness.tasks`'.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,8 +140,6 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     are the rows it gives alone. A cell that raises stops alone (its outcome carries the
     exception), the others go on. Returns one :class:`CellOutcome` per payload, in order.
     """
-    import time
-
     from algorithms.pipeline import SequenceEstimate
     from algorithms.shared_work import SharedWork
     from harness.metrics import prepare_pair_truth, score_pair
@@ -209,8 +208,6 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
 
 def _finish(run: _CellRun, seq: Any) -> list[dict]:
     """The sequence rows and files of a cell whose pipeline ran to the end; its rows, filtered."""
-    import time
-
     from harness.metrics import score_sequence
 
     t0 = time.perf_counter()
