@@ -74,14 +74,15 @@ def cell_groups(cells: list[Cell], n_groups: int) -> list[list[Cell]]:
     """
     n_groups = max(1, min(n_groups, len(cells)))
     order = {id(c): k for k, c in enumerate(cells)}
+    cost = {id(c): cell_cost(c) for c in cells}
     groups: list[list[Cell]] = [[] for _ in range(n_groups)]
     load = [0.0] * n_groups
-    for c in sorted(cells, key=lambda c: -cell_cost(c)):  # stable: ties keep the suite's order
+    for c in sorted(cells, key=lambda c: -cost[id(c)]):  # stable: ties keep the suite's order
         k = min(range(n_groups), key=lambda g: (load[g], g))
         groups[k].append(c)
-        load[k] += cell_cost(c)
-    groups = [sorted(g, key=lambda c: order[id(c)]) for g in groups if g]
-    return sorted(groups, key=lambda g: -sum(cell_cost(c) for c in g))
+        load[k] += cost[id(c)]
+    ranked = sorted(range(n_groups), key=lambda g: -load[g])  # stable: equal loads keep their order
+    return [sorted(groups[g], key=lambda c: order[id(c)]) for g in ranked if groups[g]]
 
 
 # --------------------------------------------------------------------------- scheduling
