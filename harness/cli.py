@@ -9,7 +9,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
     aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
-    aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE]
+    aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
     aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
     aerobench baseline RUN_DIR --out FILE
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
@@ -185,11 +185,13 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def _write_report(run_dir: Path, baseline: str | None = None, gate: str | None = None,
-                  rules: str | None = None) -> Path | dict:
-    """The run's report (``reports.write_report``): HTML and Markdown beside the results."""
+                  rules: str | None = None, *, workers: int | None = None, progress: bool = True) -> Path | dict:
+    """The run's report (``reports.write_report``): HTML and Markdown beside the results, its figures
+    drawn by ``workers`` processes (default one per core)."""
     from reports import write_report
 
-    return write_report(run_dir, baseline=baseline, gate_verdict=gate, rules=rules)
+    return write_report(run_dir, baseline=baseline, gate_verdict=gate, rules=rules, workers=workers,
+                        progress=progress)
 
 
 def _paths(report: Any) -> str:
@@ -209,7 +211,7 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{result.scenes_reused} reused, {len(result.table)} rows, {result.elapsed_s:.1f} s -> {result.run_dir}")
     if not args.no_report:
         try:
-            report = _write_report(result.run_dir)
+            report = _write_report(result.run_dir, workers=args.workers, progress=not args.quiet)
         except Exception as exc:  # the results are written; a report failure must not hide them
             print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         else:
@@ -227,10 +229,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected at least 1, got {args.workers}")
     for option, value in (("--baseline", args.baseline), ("--gate", args.gate), ("--rules", args.rules)):
         if value is not None and not Path(value).is_file():
             raise UsageError(f"{option}: {value}: no such file")
-    report = _write_report(run_dir, args.baseline, args.gate, args.rules)
+    report = _write_report(run_dir, args.baseline, args.gate, args.rules, workers=args.workers,
+                           progress=not args.quiet)
     print(f"report: {_paths(report)}")
     return EXIT_OK
 
@@ -282,6 +287,8 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected at least 1, got {args.workers}")
     path = gate.baseline_from_run(run_dir, args.out)
     print(f"baseline: {path}")
     return EXIT_OK
@@ -294,6 +301,8 @@ def cmd_gate(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected at least 1, got {args.workers}")
     if not Path(args.baseline).is_file():
         raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
     if args.rules is None and not gate.DEFAULT_RULES.is_file():  # an install without the package data
@@ -360,6 +369,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a verdict written by `aerobench gate --json`, shown at the top of the report")
     s.add_argument("--rules", default=None, help="gate rules YAML for the baseline comparison "
                                                  "(default: gate_rules.yaml of aerobench)")
+    s.add_argument("--workers", type=int, default=None,
+                   help="processes drawing the pictures and figures (default: one per core)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_report)
 
     s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder")

@@ -26,7 +26,7 @@ from reports.load import (RunData, open_scene_sequence, picture_frames, read_cel
 from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.tables import Column, MetricTable, format_value
 
-__all__ = ["render_html", "stylesheet"]
+__all__ = ["SCENE_SECTIONS", "cell_index", "render_html", "scene_block", "scene_blocks", "stylesheet"]
 
 _MAX_PICTURE_FRAMES = 2
 _PICTURE_MIN_WIDTH_PX = 320  # tiny suites render 160 x 120: enlarge pictures to at least this width
@@ -225,12 +225,6 @@ def _difficulty_html(data: RunData, curves: dict[str, pd.DataFrame], cols: list[
     return "".join(out)
 
 
-def _cell_index(data: RunData) -> pd.DataFrame:
-    """One row per ok cell: cell_id, scene, scene_hash, seed, pipeline, sweep."""
-    cols = ["cell_id", "scene", "scene_hash", "seed", "pipeline", "sweep_param", "sweep_value"]
-    return data.ok[cols].drop_duplicates("cell_id").reset_index(drop=True)
-
-
 def _variant_for(data: RunData, cells: pd.DataFrame, base: str, want):
     """The first variant (scene label, seed) of scene ``base`` whose cells satisfy ``want(cell_dir)``."""
     sub = cells[cells["scene"].map(scene_base) == base]
@@ -323,65 +317,64 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
     return "".join(out)
 
 
-def _pictures_html(data: RunData, cells: pd.DataFrame) -> str:
+def _scene_pictures(data: RunData, cells: pd.DataFrame, base: str, colors: dict[str, str]) -> str:
+    """Scene ``base``'s pictures: frame, true and estimated flow, error maps of its first variant."""
     out = []
-    for base in dict.fromkeys(cells["scene"].map(scene_base)):
-        g, seq = _variant_for(data, cells, base, lambda d: bool(picture_frames(d)))
-        if g.empty:
-            out.append(f"<h3>{_e(base)}</h3>" + _missing("No cell saved estimated flow for pictures."))
-            continue
-        label = str(g["scene"].iloc[0])
-        order = {p: i for i, p in enumerate(data.pipelines)}
-        g = g.sort_values("pipeline", key=lambda s: s.map(order))
-        cell_dirs = {r.pipeline: data.run_dir / "cells" / r.cell_id for r in g.itertuples(index=False)}
-        frames = sorted(set().union(*(picture_frames(d) for d in cell_dirs.values())))
-        for f in frames[:_MAX_PICTURE_FRAMES]:
-            img, truth, valid, camera = None, None, None, None
-            if seq is not None:
-                img, pair = seq.frame(f), seq.pair_truth(f)
-                truth, valid, camera = pair.flow, pair.valid, pair.flow_camera
-            totals = {p: read_cell_flow(d, f) for p, d in cell_dirs.items()}
-            totals = {p: v for p, v in totals.items() if v is not None}
-            locals_ = {p: read_cell_flow(d, f, local=True) for p, d in cell_dirs.items() if p in totals}
-            if truth is not None and valid is not None and valid.shape != truth.shape[:2]:
-                valid = None
-            width = img.shape[1] if img is not None else next(iter(totals.values())).shape[1]
-            scale = pictures.display_scale(width, min_width_px=_PICTURE_MIN_WIDTH_PX)
-            where = f"{label}, seed {g['seed'].iloc[0]}, pair {f} \u2192 {f + 1}"
-            out.append(f"<h3>{_e(where)}</h3>")
-            if seq is None:
-                out.append(_missing("Sequence folder not found in the cache dir: no frame or ground truth."))
-            frame_tile = (_tile(img, scale=scale, alt="frame", caption=f"frame {f}") if img is not None
-                          else _empty_tile("frame not found"))
-            out.append("<h4>Total motion (camera and vehicles)</h4>"
-                       '<p class="note">What the pipeline estimates before the global motion is taken out. The '
-                       "camera's motion dominates it, so the field is nearly one colour; moving vehicles show "
-                       "as small deviations.</p>")
-            out.append(_flow_rows(truth, totals, valid, scale=scale, first_error_tile=frame_tile, what="total",
-                                  floor_px=1e-6))
-            true_local = truth - camera if truth is not None and camera is not None else None
-            out.append("<h4>Local motion (global motion taken out)</h4>"
-                       '<p class="note">Estimated: total flow minus the pipeline\'s global-motion field '
-                       "(local_flow files of the cells). True: ground-truth flow minus the camera-induced flow "
-                       "(flow/ minus flow_camera/), zero on the static world. A uniform tint on the background "
-                       "is the global model's error; colour saturates at the largest true local motion, at "
-                       f"least {_LOCAL_FLOOR_PX:g} px.</p>")
-            if not any(v is not None for v in locals_.values()):
-                out.append(_missing(f"The cells saved no local flow (local_flow_{f:06d}.flo; run folders written "
-                                    "before it existed have none): only the true local motion is shown."))
-                locals_ = {}
-            if true_local is None and seq is not None:
-                out.append(_missing("The sequence has no flow_camera/ file for this pair: no true local motion."))
-            if true_local is not None or locals_:
-                valid_tile = (_tile(pictures.mask_image(valid), scale=scale, alt="valid mask",
-                                    caption="ground truth known (white)") if valid is not None
-                              else _empty_tile("no valid mask"))
-                out.append(_flow_rows(true_local, locals_, valid, scale=scale, first_error_tile=valid_tile,
-                                      what="local", floor_px=_LOCAL_FLOOR_PX))
-        out.append('<p class="note">Flow in the Middlebury colour coding, one maximum magnitude per row (the '
-                   "largest true magnitude); estimates beyond it saturate. Small frames are enlarged by "
-                   "pixel repetition, never interpolated.</p>")
-    return "".join(out) or _missing("No pictures.")
+    g, seq = _variant_for(data, cells, base, lambda d: bool(picture_frames(d)))
+    if g.empty:
+        return f"<h3>{_e(base)}</h3>" + _missing("No cell saved estimated flow for pictures.")
+    label = str(g["scene"].iloc[0])
+    order = {p: i for i, p in enumerate(data.pipelines)}
+    g = g.sort_values("pipeline", key=lambda s: s.map(order))
+    cell_dirs = {r.pipeline: data.run_dir / "cells" / r.cell_id for r in g.itertuples(index=False)}
+    frames = sorted(set().union(*(picture_frames(d) for d in cell_dirs.values())))
+    for f in frames[:_MAX_PICTURE_FRAMES]:
+        img, truth, valid, camera = None, None, None, None
+        if seq is not None:
+            img, pair = seq.frame(f), seq.pair_truth(f)
+            truth, valid, camera = pair.flow, pair.valid, pair.flow_camera
+        totals = {p: read_cell_flow(d, f) for p, d in cell_dirs.items()}
+        totals = {p: v for p, v in totals.items() if v is not None}
+        locals_ = {p: read_cell_flow(d, f, local=True) for p, d in cell_dirs.items() if p in totals}
+        if truth is not None and valid is not None and valid.shape != truth.shape[:2]:
+            valid = None
+        width = img.shape[1] if img is not None else next(iter(totals.values())).shape[1]
+        scale = pictures.display_scale(width, min_width_px=_PICTURE_MIN_WIDTH_PX)
+        where = f"{label}, seed {g['seed'].iloc[0]}, pair {f} \u2192 {f + 1}"
+        out.append(f"<h3>{_e(where)}</h3>")
+        if seq is None:
+            out.append(_missing("Sequence folder not found in the cache dir: no frame or ground truth."))
+        frame_tile = (_tile(img, scale=scale, alt="frame", caption=f"frame {f}") if img is not None
+                      else _empty_tile("frame not found"))
+        out.append("<h4>Total motion (camera and vehicles)</h4>"
+                   '<p class="note">What the pipeline estimates before the global motion is taken out. The '
+                   "camera's motion dominates it, so the field is nearly one colour; moving vehicles show "
+                   "as small deviations.</p>")
+        out.append(_flow_rows(truth, totals, valid, scale=scale, first_error_tile=frame_tile, what="total",
+                              floor_px=1e-6))
+        true_local = truth - camera if truth is not None and camera is not None else None
+        out.append("<h4>Local motion (global motion taken out)</h4>"
+                   '<p class="note">Estimated: total flow minus the pipeline\'s global-motion field '
+                   "(local_flow files of the cells). True: ground-truth flow minus the camera-induced flow "
+                   "(flow/ minus flow_camera/), zero on the static world. A uniform tint on the background "
+                   "is the global model's error; colour saturates at the largest true local motion, at "
+                   f"least {_LOCAL_FLOOR_PX:g} px.</p>")
+        if not any(v is not None for v in locals_.values()):
+            out.append(_missing(f"The cells saved no local flow (local_flow_{f:06d}.flo; run folders written "
+                                "before it existed have none): only the true local motion is shown."))
+            locals_ = {}
+        if true_local is None and seq is not None:
+            out.append(_missing("The sequence has no flow_camera/ file for this pair: no true local motion."))
+        if true_local is not None or locals_:
+            valid_tile = (_tile(pictures.mask_image(valid), scale=scale, alt="valid mask",
+                                caption="ground truth known (white)") if valid is not None
+                          else _empty_tile("no valid mask"))
+            out.append(_flow_rows(true_local, locals_, valid, scale=scale, first_error_tile=valid_tile,
+                                  what="local", floor_px=_LOCAL_FLOOR_PX))
+    out.append('<p class="note">Flow in the Middlebury colour coding, one maximum magnitude per row (the '
+               "largest true magnitude); estimates beyond it saturate. Small frames are enlarged by "
+               "pixel repetition, never interpolated.</p>")
+    return "".join(out)
 
 
 def _per_pipeline(data: RunData, cells: pd.DataFrame, read) -> dict:
@@ -396,47 +389,45 @@ def _per_pipeline(data: RunData, cells: pd.DataFrame, read) -> dict:
     return out
 
 
-def _stabilisation_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
+def _scene_stabilisation(data: RunData, cells: pd.DataFrame, base: str, colors: dict[str, str]) -> str:
+    """Scene ``base``'s stabilisation figures (thesis figs. 3.1, 3.2) and estimated vs true jitter."""
     out = []
-    for base in dict.fromkeys(cells["scene"].map(scene_base)):
-        g, seq = _variant_for(data, cells, base, lambda d: (d / "stabilisation.csv").is_file())
-        if g.empty:
-            out.append(f"<h3>{_e(base)}</h3>" + _missing("No stabilisation data (no stabilisation.csv)."))
-            continue
-        label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
-        stabs = _per_pipeline(data, g, read_stabilisation)
-        if not stabs:
-            out.append(f"<h3>{_e(base)}</h3>" + _missing("stabilisation.csv lacks the cumulative / line columns."))
-            continue
-        # the thesis figure shows the pipeline with the thesis' straight flight line, if one ran
-        thesis = next((p for p in stabs if (data.folder.pipelines.get(p, {}).get("jitter") or {}).get("model")
-                       == "line"), next(iter(stabs)))
-        svg, after = plots.stabilisation_figure(stabs[thesis], title=f"{label}, seed {seed}: {thesis}")
-        cap = ("Top (thesis fig. 3.1): estimated cumulative shift, the sum of the pair-wise global shifts "
-               "(blue), its least-squares flight line (orange) and the correction that moves each frame onto "
-               "the line (green). ")
-        cap += ("Bottom (fig. 3.2): after stabilisation, i.e. the true cumulative shift plus the applied "
-                "correction (blue; a straight line when the jitter is removed exactly), its refitted line "
-                "(orange) and the jitter left (green)." if after else
-                "No true cumulative shift known: the after-stabilisation row is left out.")
-        out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3><figure class=\"plot\">{svg}"
-                   f"<figcaption>{_e(cap)}</figcaption></figure>")
-        # pipelines that share a global-motion stage estimate the same jitter: draw it once
-        groups: dict[str, pd.DataFrame] = {}
-        for pipe, st in stabs.items():
-            same = next((k for k, v in groups.items()
-                         if np.allclose(v[["jit_x", "jit_y"]].to_numpy(float), st[["jit_x", "jit_y"]].to_numpy(float),
-                                        equal_nan=True) and len(v) == len(st)), None)
-            if same is None:
-                groups[pipe] = st
-            else:
-                groups[f"{same} = {pipe}"] = groups.pop(same)
-        group_colors = {k: colors[k.split(" = ")[0]] for k in groups}
-        jsvg = plots.jitter_figure(groups, colors=group_colors, title=f"{label}: estimated vs true jitter")
-        out.append(f"<figure class=\"plot\">{jsvg}<figcaption>Estimated jitter (cumulative shift minus "
-                   "fitted line) per pipeline against the true jitter, detrended by its own least-squares line "
-                   "so both are measured from a straight flight line.</figcaption></figure>")
-    return "".join(out) or _missing("No stabilisation data.")
+    g, seq = _variant_for(data, cells, base, lambda d: (d / "stabilisation.csv").is_file())
+    if g.empty:
+        return f"<h3>{_e(base)}</h3>" + _missing("No stabilisation data (no stabilisation.csv).")
+    label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
+    stabs = _per_pipeline(data, g, read_stabilisation)
+    if not stabs:
+        return f"<h3>{_e(base)}</h3>" + _missing("stabilisation.csv lacks the cumulative / line columns.")
+    # the thesis figure shows the pipeline with the thesis' straight flight line, if one ran
+    thesis = next((p for p in stabs if (data.folder.pipelines.get(p, {}).get("jitter") or {}).get("model")
+                   == "line"), next(iter(stabs)))
+    svg, after = plots.stabilisation_figure(stabs[thesis], title=f"{label}, seed {seed}: {thesis}")
+    cap = ("Top (thesis fig. 3.1): estimated cumulative shift, the sum of the pair-wise global shifts "
+           "(blue), its least-squares flight line (orange) and the correction that moves each frame onto "
+           "the line (green). ")
+    cap += ("Bottom (fig. 3.2): after stabilisation, i.e. the true cumulative shift plus the applied "
+            "correction (blue; a straight line when the jitter is removed exactly), its refitted line "
+            "(orange) and the jitter left (green)." if after else
+            "No true cumulative shift known: the after-stabilisation row is left out.")
+    out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3><figure class=\"plot\">{svg}"
+               f"<figcaption>{_e(cap)}</figcaption></figure>")
+    # pipelines that share a global-motion stage estimate the same jitter: draw it once
+    groups: dict[str, pd.DataFrame] = {}
+    for pipe, st in stabs.items():
+        same = next((k for k, v in groups.items()
+                     if np.allclose(v[["jit_x", "jit_y"]].to_numpy(float), st[["jit_x", "jit_y"]].to_numpy(float),
+                                    equal_nan=True) and len(v) == len(st)), None)
+        if same is None:
+            groups[pipe] = st
+        else:
+            groups[f"{same} = {pipe}"] = groups.pop(same)
+    group_colors = {k: colors[k.split(" = ")[0]] for k in groups}
+    jsvg = plots.jitter_figure(groups, colors=group_colors, title=f"{label}: estimated vs true jitter")
+    out.append(f"<figure class=\"plot\">{jsvg}<figcaption>Estimated jitter (cumulative shift minus "
+               "fitted line) per pipeline against the true jitter, detrended by its own least-squares line "
+               "so both are measured from a straight flight line.</figcaption></figure>")
+    return "".join(out)
 
 
 def _table41_html(tr: pd.DataFrame, *, pipe: str, vehicle: int) -> str:
@@ -489,53 +480,52 @@ def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None, 
     return pipe, vehicle, g[g["track_id"] == g["track_id"].iloc[0]]
 
 
-def _tracking_html(data: RunData, cells: pd.DataFrame, colors: dict[str, str]) -> str:
+def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[str, str]) -> str:
+    """Scene ``base``'s trajectories over its first frame, position errors and thesis Table 4.1."""
     out = []
-    for base in dict.fromkeys(cells["scene"].map(scene_base)):
-        g, seq = _variant_for(data, cells, base, lambda d: read_tracks(d) is not None)
-        if g.empty:
-            out.append(f"<h3>{_e(base)}</h3>" + _missing("No tracks in this scene's cells."))
-            continue
-        label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
-        tracks = _per_pipeline(data, g, read_tracks)
-        first = int(min(t["frame"].min() for t in tracks.values()))
-        frame = seq.frame(first) if seq is not None else None
-        truth = read_true_tracks(seq)
-        out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
-        svg = plots.tracking_figure(frame, tracks, truth=truth, title=f"trajectories over frame {first}")
-        multi = any((t["source"] != "point").any() for t in tracks.values())
-        out.append(f'<figure class="plot">{svg}<figcaption>Ground truth: every vehicle\'s true centre (black on '
-                   "white, v&lt;id&gt; at its first frame). Point tracker (blue; thesis 4.1): one track per seed "
-                   "vehicle, started at its true centre in the first frame. "
-                   + ("Multi-target tracker (orange-red, m&lt;id&gt; at the last frame): tracks born from "
-                      "detections, not tied to a vehicle. " if multi else "")
-                   + "Dashed, hollow: raw measurement (flow-followed point or detection centroid); solid, "
-                   "filled: Kalman estimate. Positions are in each frame's own image coordinates (the camera "
-                   f"moves), drawn over frame {first} for orientation."
-                   + ("" if frame is not None else " Sequence frame not found: drawn without the image.")
-                   + ("" if truth is not None else " Sequence tracks.csv not found: truth only for seed vehicles.")
-                   + "</figcaption></figure>")
-        have_truth = all(t[["x_true", "y_true"]].notna().all(axis=1).any() for t in tracks.values())
-        if have_truth:
-            errs = {}
-            for pipe, t in tracks.items():
-                t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
-                e = pd.DataFrame({"frame": t["frame"],
-                                  "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
-                                  "err_kalman": position_error_px(t["x_filt"], t["y_filt"],
-                                                                  t["x_true"], t["y_true"])})
-                errs[pipe] = e.groupby("frame", as_index=False).mean()
-            esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
-            out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '
-                       "its seed vehicle's true centre per frame [px], mean over the seed vehicles. The "
-                       "multi-target tracker is scored in the track metrics (region 'multi').</figcaption></figure>")
-            chosen = _table41_track(tracks, truth, data.folder.pipelines)
-            if chosen is not None:
-                pipe, vehicle, t = chosen
-                out.append(_table41_html(t, pipe=pipe, vehicle=vehicle))
-        else:
-            out.append(_missing("tracks.csv has no ground-truth columns: no position errors."))
-    return "".join(out) or _missing("No tracks.")
+    g, seq = _variant_for(data, cells, base, lambda d: read_tracks(d) is not None)
+    if g.empty:
+        return f"<h3>{_e(base)}</h3>" + _missing("No tracks in this scene's cells.")
+    label, seed = str(g["scene"].iloc[0]), g["seed"].iloc[0]
+    tracks = _per_pipeline(data, g, read_tracks)
+    first = int(min(t["frame"].min() for t in tracks.values()))
+    frame = seq.frame(first) if seq is not None else None
+    truth = read_true_tracks(seq)
+    out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
+    svg = plots.tracking_figure(frame, tracks, truth=truth, title=f"trajectories over frame {first}")
+    multi = any((t["source"] != "point").any() for t in tracks.values())
+    out.append(f'<figure class="plot">{svg}<figcaption>Ground truth: every vehicle\'s true centre (black on '
+               "white, v&lt;id&gt; at its first frame). Point tracker (blue; thesis 4.1): one track per seed "
+               "vehicle, started at its true centre in the first frame. "
+               + ("Multi-target tracker (orange-red, m&lt;id&gt; at the last frame): tracks born from "
+                  "detections, not tied to a vehicle. " if multi else "")
+               + "Dashed, hollow: raw measurement (flow-followed point or detection centroid); solid, "
+               "filled: Kalman estimate. Positions are in each frame's own image coordinates (the camera "
+               f"moves), drawn over frame {first} for orientation."
+               + ("" if frame is not None else " Sequence frame not found: drawn without the image.")
+               + ("" if truth is not None else " Sequence tracks.csv not found: truth only for seed vehicles.")
+               + "</figcaption></figure>")
+    have_truth = all(t[["x_true", "y_true"]].notna().all(axis=1).any() for t in tracks.values())
+    if have_truth:
+        errs = {}
+        for pipe, t in tracks.items():
+            t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
+            e = pd.DataFrame({"frame": t["frame"],
+                              "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
+                              "err_kalman": position_error_px(t["x_filt"], t["y_filt"],
+                                                              t["x_true"], t["y_true"])})
+            errs[pipe] = e.groupby("frame", as_index=False).mean()
+        esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
+        out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '
+                   "its seed vehicle's true centre per frame [px], mean over the seed vehicles. The "
+                   "multi-target tracker is scored in the track metrics (region 'multi').</figcaption></figure>")
+        chosen = _table41_track(tracks, truth, data.folder.pipelines)
+        if chosen is not None:
+            pipe, vehicle, t = chosen
+            out.append(_table41_html(t, pipe=pipe, vehicle=vehicle))
+    else:
+        out.append(_missing("tracks.csv has no ground-truth columns: no position errors."))
+    return "".join(out)
 
 
 def _failed_html(data: RunData) -> str:
@@ -572,11 +562,52 @@ def _regions_html(model: ReportModel) -> str:
                              "from boundaries). Motion total and local: see LK vs HS.</p>")
 
 
-def render_html(model: ReportModel) -> str:
-    """The report page of ``model``."""
+# the sections drawn scene by scene, the report's pictures and figures: nearly all of its time.
+# Each (section, scene) block depends only on the run folder, so blocks can be drawn apart, in
+# any order, by other processes (reports.report), and joined here in the scenes' order.
+_SCENE_SECTIONS = {"tracking": _scene_tracking, "pictures": _scene_pictures,
+                   "stabilisation": _scene_stabilisation}  # the costliest first
+_NO_SCENE_BLOCK = {"pictures": "No pictures.", "stabilisation": "No stabilisation data.", "tracking": "No tracks."}
+SCENE_SECTIONS = tuple(_SCENE_SECTIONS)
+
+
+def cell_index(data: RunData) -> pd.DataFrame:
+    """One row per ok cell: cell_id, scene, scene_hash, seed, pipeline, sweep."""
+    cols = ["cell_id", "scene", "scene_hash", "seed", "pipeline", "sweep_param", "sweep_value"]
+    return data.ok[cols].drop_duplicates("cell_id").reset_index(drop=True)
+
+
+def scene_blocks(cells: pd.DataFrame) -> list[tuple[str, str]]:
+    """Every (section, scene base) block of :data:`SCENE_SECTIONS` that ``cells`` calls for, costliest
+    section first."""
+    bases = list(dict.fromkeys(cells["scene"].map(scene_base)))
+    return [(section, base) for section in SCENE_SECTIONS for base in bases]
+
+
+def scene_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> str:
+    """The HTML of ``section`` (one of :data:`SCENE_SECTIONS`) for scene ``base``.
+
+    Reads only the run folder and the sequences (``data.folder``, ``data.run_dir``,
+    ``data.pipelines``), never the results table: ``data`` may come without its rows.
+    """
+    if section not in _SCENE_SECTIONS:
+        raise ValueError(f"section: expected one of {', '.join(SCENE_SECTIONS)}, got {section!r}")
+    return _SCENE_SECTIONS[section](data, cells, base, plots.pipeline_colors(data.pipelines))
+
+
+def render_html(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> str:
+    """The report page of ``model``.
+
+    ``blocks``: the :func:`scene_block` of every (section, scene) of :func:`scene_blocks`, drawn
+    beforehand (by other processes); None draws them here, one after the other.
+    """
     data = model.data
     colors = plots.pipeline_colors(data.pipelines)
-    cells = _cell_index(data)
+    cells = cell_index(data)
+    if blocks is None:
+        blocks = {key: scene_block(data, cells, *key) for key in scene_blocks(cells)}
+    by_section = {section: "".join(blocks[(section, base)] for sec, base in scene_blocks(cells) if sec == section)
+                  or _missing(_NO_SCENE_BLOCK[section]) for section in SCENE_SECTIONS}
     sec: dict[str, str] = {}
     sec["verdict"] = _verdict_html(model.gate, model.baseline, model.baseline_note)
     sec["lk-vs-hs"] = _lkhs_html(model)
@@ -598,9 +629,8 @@ def render_html(model: ReportModel) -> str:
                           + '<p class="note">Every metric in the results table, tracking and stabilisation '
                           "metrics included (aerobench list explains each).</p>")
     sec["difficulty"] = _difficulty_html(data, model.curves, model.columns, colors)
-    sec["pictures"] = _pictures_html(data, cells) if len(cells) else _missing("No completed cells.")
-    sec["stabilisation"] = _stabilisation_html(data, cells, colors) if len(cells) else _missing("No completed cells.")
-    sec["tracking"] = _tracking_html(data, cells, colors) if len(cells) else _missing("No completed cells.")
+    for section in SCENE_SECTIONS:
+        sec[section] = by_section[section] if len(cells) else _missing("No completed cells.")
     sec["failed"] = _failed_html(data)
     nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
     body = "".join(f'<section id="{k}"><h2>{_e(v)}</h2>{sec[k]}</section>' for k, v in _SECTIONS)

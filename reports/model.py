@@ -117,7 +117,7 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
 
 def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | None = None,
                 gate_verdict: str | os.PathLike | Mapping | None = None,
-                rules: str | os.PathLike | None = None) -> ReportModel:
+                rules: str | os.PathLike | None = None, data: RunData | None = None) -> ReportModel:
     """Read ``run_dir`` and compute every number of its report.
 
     Parameters
@@ -130,8 +130,11 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
         A verdict of ``aerobench gate --json``.
     rules : path, optional
         Gate rules for the baseline comparison; default the gate's ``gate_rules.yaml``.
+    data : RunData, optional
+        ``load_run(run_dir)``, when the caller has read it already.
     """
-    data = load_run(run_dir)
+    if data is None:
+        data = load_run(run_dir)
     cols = headline_columns(data)
     diffs, note = (baseline_diffs(data, baseline, rules=rules) if baseline is not None else (None, ""))
     bases = scene_bases(data.table["scene"])

@@ -205,3 +205,9 @@ def test_report_takes_a_gate_verdict_and_checks_its_files(tmp_path, capsys):
     (tmp_path / "results.parquet").write_bytes(b"")
     assert main(["report", str(tmp_path), "--gate", str(tmp_path / "v.json")]) == 2
     assert capsys.readouterr().err == f"aerobench: error: --gate: {tmp_path / 'v.json'}: no such file\n"
+
+
+def test_report_refuses_fewer_than_one_worker(tmp_path, capsys):
+    (tmp_path / "results.parquet").write_bytes(b"")
+    assert main(["report", str(tmp_path), "--workers", "0"]) == 2
+    assert capsys.readouterr().err == "aerobench: error: --workers: expected at least 1, got 0\n"

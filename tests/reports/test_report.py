@@ -121,6 +121,25 @@ def test_two_writes_are_byte_identical(run_dir, report, tmp_path):
     assert again["md"].read_bytes() == report["md"].read_bytes()
 
 
+def test_figures_drawn_by_worker_processes_give_the_same_bytes(run_dir, report, html_text, tmp_path):
+    # two scenes x three scene sections: the blocks are drawn by two spawned processes, in their own order
+    drawn = write_report(run_dir, out_dir=tmp_path, workers=2)
+    assert drawn["html"].read_bytes() == report["html"].read_bytes()
+    assert drawn["md"].read_bytes() == report["md"].read_bytes()
+    for sid in ("pictures", "stabilisation", "tracking"):  # both scenes in each, in the run's order
+        body = section(html_text, sid)
+        assert body.index("<h3>urban") < body.index("<h3>rural")
+
+
+def test_scene_block_rejects_an_unknown_section(run_dir):
+    from reports.html import cell_index, scene_block
+    from reports.load import load_run
+
+    data = load_run(run_dir)
+    with pytest.raises(ValueError, match="section: expected one of tracking, pictures, stabilisation, got 'maps'"):
+        scene_block(data, cell_index(data), "maps", "urban")
+
+
 def _epe(ok: pd.DataFrame, pipeline: str, scene: str | None = None) -> float:
     rows = ok[(ok["metric"] == "epe_mean") & (ok["region"] == "all") & (ok["motion"] == "total")
               & (ok["pipeline"] == pipeline)]
