@@ -44,8 +44,10 @@ table and the command lines it ran. Run from the project root:
   over its scenes and pipelines (``--json`` keeps them).
 - ``replay``: the many-core model of a finished run: its cells' measured ``elapsed_s``
   grouped and ordered as the runner does for 1, 2, 4, ... workers, on idle cores, plus the
-  serial tail after the cells (``--serial`` measures collection and the report on a copy
-  of the run). Says where scaling stops: the longest task, and the serial tail.
+  tail after the cells (``--serial`` measures, on a copy of the run, collection and the
+  report's parts: its figure blocks, replayed on the same N workers in the order the report
+  submits them, beside the numbers the report computes meanwhile). Says where scaling
+  stops: the longest task, and what stays serial.
 - ``scene``: the cells of one scene (``--presets``, seed 1, the standard's pipelines) run
   by ``aerobench run`` of this tree and of ``--reference`` (another source tree, e.g. a
   git worktree of an older commit), alternately, ``--repeats`` times each, warm cache, no
@@ -466,19 +468,47 @@ def cmd_cores(args: argparse.Namespace) -> None:
 # --------------------------------------------------------------------------- replay on N cores
 
 
-def replay_schedule(tasks: list[tuple[float, float]], workers: int) -> float:
+def replay_schedule(tasks: list[tuple[float, float]], workers: int, *, ordered: bool = True) -> float:
     """Wall time of ``tasks`` (cost the scheduler orders by, seconds it took) on ``workers`` idle workers.
 
     The runner's policy with every task ready (a warm cache): the costliest task first to
-    the first free worker. Returns when the last task ends.
+    the first free worker (``ordered=False``: in the given order, as a pool's queue hands
+    them out). Returns when the last task ends.
     """
     import heapq
 
     free = [0.0] * workers
-    for _, seconds in sorted(tasks, key=lambda t: -t[0]):
+    for _, seconds in (sorted(tasks, key=lambda t: -t[0]) if ordered else tasks):
         start = heapq.heappop(free)
         heapq.heappush(free, start + seconds)
     return max(free)
+
+
+def _report_parts(run_dir: Path, serial: dict) -> tuple[dict, list[float]]:
+    """CPU seconds of the report's parts on ``run_dir``, one after the other in this process: reading the
+    table (``load``), the numbers (``model``), each figure block in the order the report submits them, and
+    joining the page and the Markdown (``page``)."""
+    from reports.html import cell_index, render_html, scene_block, scene_blocks
+    from reports.load import load_run
+    from reports.markdown import render_markdown
+    from reports.model import build_model
+
+    t0 = time.process_time()
+    data = load_run(run_dir)
+    serial["load"] = time.process_time() - t0
+    t0 = time.process_time()
+    model = build_model(run_dir, data=data)
+    serial["model"] = time.process_time() - t0
+    cells = cell_index(data)
+    blocks, drawn = [], {}
+    for key in scene_blocks(cells):
+        t0 = time.process_time()
+        drawn[key] = scene_block(data, cells, *key)
+        blocks.append(time.process_time() - t0)
+    t0 = time.process_time()
+    render_html(model, drawn), render_markdown(model)
+    serial["page"] = time.process_time() - t0
+    return serial, blocks
 
 
 def cmd_replay(args: argparse.Namespace) -> None:
@@ -499,7 +529,8 @@ def cmd_replay(args: argparse.Namespace) -> None:
     by_scene: dict[str, list] = {}
     for c in cells:
         by_scene.setdefault(c.variant.scene_hash, []).append(c)
-    serial = {}
+    serial: dict[str, float] = {}
+    blocks: list[float] = []
     if args.serial:
         work = Path(tempfile.mkdtemp(prefix="aerobench-replay-"))
         try:
@@ -511,14 +542,18 @@ def cmd_replay(args: argparse.Namespace) -> None:
             t0 = time.process_time()
             collect_cells(copy, read=read)
             serial["collect"] = time.process_time() - t0
-            from reports import write_report
-
-            t0 = time.process_time()
-            write_report(copy)
-            serial["report"] = time.process_time() - t0
+            serial, blocks = _report_parts(copy, serial)
         finally:
             shutil.rmtree(work, ignore_errors=True)
-    tail = sum(serial.values())
+
+    def tail(w: int) -> float:
+        """The serial tail on ``w`` workers: collection, reading the table, the report's numbers beside its
+        figure blocks (one worker: after them), writing the page."""
+        if not serial:
+            return 0.0
+        figures = replay_schedule([(0.0, b) for b in blocks], w, ordered=False) if w > 1 else sum(blocks)
+        side = max(serial["model"], figures) if w > 1 else serial["model"] + figures
+        return serial["collect"] + serial["load"] + side + serial["page"]
     total_cpu = sum(elapsed.values())
     rows, base = [], None
     for w in [int(x) for x in args.workers.split(",")]:
@@ -527,13 +562,15 @@ def cmd_replay(args: argparse.Namespace) -> None:
             for group in cell_groups(scene_cells, groups_per_scene(len(by_scene), len(scene_cells), w)):
                 tasks.append((sum(cell_cost(c) for c in group), sum(elapsed[c.cell_id] for c in group)))
         cells_s = replay_schedule(tasks, w) + args.startup
-        wall = cells_s + tail
+        wall = cells_s + tail(w)
         base = base or wall * w  # one worker's time, scaled
-        rows.append((w, len(tasks), f"{cells_s:.0f}", f"{tail:.0f}", f"{wall:.0f}", f"{60 * len(cells) / wall:.0f}",
+        rows.append((w, len(tasks), f"{cells_s:.0f}", f"{tail(w):.0f}", f"{wall:.0f}", f"{60 * len(cells) / wall:.0f}",
                      f"{100 * total_cpu / (w * cells_s):.0f}", f"{base / w / wall * 100 if w > 1 else 100:.0f}"))
     print(f"replay of {run_dir} ({len(cells)} cells, {len(by_scene)} scenes; cells' own time {total_cpu:.0f} s; "
-          f"warm cache; + {args.startup:g} s pool start-up)\nserial tail after the cells, CPU s measured here: "
-          + (", ".join(f"{k} {v:.1f}" for k, v in serial.items()) or "not measured (--serial)") + "\n")
+          f"warm cache; + {args.startup:g} s pool start-up)\ntail after the cells, CPU s measured here: "
+          + (", ".join(f"{k} {v:.1f}" for k, v in serial.items())
+             + f", figure blocks {sum(blocks):.1f} ({len(blocks)}, the longest {max(blocks, default=0):.1f})"
+             if serial else "not measured (--serial)") + "\n")
     print(_table(rows, ("workers", "tasks", "cells_s", "serial_s", "wall_s", "cells_per_min", "busy_%",
                         "efficiency_%")))
     print("\n(a model: each worker a core of its own, cells as long as they took in that run; efficiency is "
