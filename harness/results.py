@@ -44,6 +44,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -291,8 +292,12 @@ def collect_cells(run_dir: str | os.PathLike, *, read: CellRowsReader | None = N
     df = pd.concat(parts, ignore_index=True) if parts else rows_to_frame([])
     if not df["cell_id"].is_monotonic_increasing:  # a folder not named by its rows' cell_id
         df = df.sort_values(["cell_id", *ROW_ORDER], na_position="first", kind="stable").reset_index(drop=True)
-    write_table(df, run_dir / RESULTS_FILE)
-    summary = summarize(df)
+    # the summary is computed while the table is encoded and written: parquet's encoder and zlib (the
+    # summary's histograms) release the GIL, and this is a serial step at the end of every run
+    with ThreadPoolExecutor(1, thread_name_prefix="summary") as pool:
+        summary = pool.submit(summarize, df)
+        write_table(df, run_dir / RESULTS_FILE)
+        summary = summary.result()
     atomic_write_bytes(run_dir / SUMMARY_FILE, summary.drop(columns=["hist"]).to_csv(index=False).encode())
     return df
 
