@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from llvmlite import ir as llvmir
+from numba.extending import intrinsic
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
 from algorithms.pyramid import coarse_to_fine
@@ -53,7 +55,47 @@ def hs_derivatives(E0: np.ndarray, E1: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return Ex, Ey, Et
 
 
-@numba.njit(cache=True, fastmath=True)
+# The iteration below is compiled without fastmath and spells out every rounding (the order of
+# the sums, the fused multiply-adds), so its results do not depend on how LLVM happens to compile
+# and inline it. They are the results of the earlier fastmath kernel as it ran inside hs_iterate
+# (its edge columns differed in the last bit when it ran on its own): benchmarks/hs_speed.py
+# checks them against that kernel, tests/algorithms/test_horn_schunck.py against a plain
+# per-sweep reference of the same steps.
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (float32 fused multiply-add, ``llvm.fma``)."""
+    sig = numba.float32(numba.float32, numba.float32, numba.float32)
+
+    def codegen(context, builder, signature, args):
+        f32 = llvmir.FloatType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [f32], llvmir.FunctionType(f32, [f32, f32, f32]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+_C4 = np.float32(1.0 / 6.0)  # eq. 2.17: weight of each 4-neighbour
+_C8 = np.float32(1.0 / 12.0)  # and of each diagonal neighbour
+
+
+# fastmath=False is explicit on every kernel here: numba passes a caller's fastmath on to
+# callees that do not set it.
+@numba.njit(cache=True, fastmath=False)
+def _hs_update(s4u, s8u, s4v, s8v, ex, ey, et, inv_den):
+    """New ``(u, v)`` at one point from its neighbour sums (float32 scalars), eqs. 2.17, 2.21, 2.22.
+
+    ``s4u`` is the sum of the 4-neighbours of u, ``s8u`` of the diagonal ones
+    (likewise v); ``inv_den = 1 / (alpha^2 + Ex^2 + Ey^2)``.
+    """
+    u_bar = _fma(s8u, _C8, s4u * _C4)  # eq. 2.17
+    v_bar = _fma(s8v, _C8, s4v * _C4)
+    rho = _fma(ey, v_bar, _fma(ex, u_bar, et)) * inv_den  # (Ex u_bar + Ey v_bar + Et) / (alpha^2 + Ex^2 + Ey^2)
+    return _fma(-ex, rho, u_bar), _fma(-ey, rho, v_bar)  # eqs. 2.21, 2.22
+
+
+@numba.njit(cache=True, fastmath=False)
 def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
     """One Jacobi sweep of eqs. 2.17, 2.21, 2.22 from ``u, v`` into ``out_u, out_v``.
 
@@ -61,34 +103,47 @@ def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
     counting that was a third of the sweep.
     """
     h, w = u.shape
-    c4 = np.float32(1.0 / 6.0)
-    c8 = np.float32(1.0 / 12.0)
     for i in range(h):
-        im = i - 1 if i > 0 else 0  # the missing neighbour row replicates the edge
-        ip = i + 1 if i < h - 1 else h - 1
+        im = max(i - 1, 0)  # the missing neighbour row replicates the edge
+        ip = min(i + 1, h - 1)
         # interior columns: plain neighbours, so that the loop vectorises
         for j in range(1, w - 1):
-            u_bar = c4 * (u[im, j] + u[i, j + 1] + u[ip, j] + u[i, j - 1]) \
-                + c8 * (u[im, j - 1] + u[im, j + 1] + u[ip, j + 1] + u[ip, j - 1])  # eq. 2.17
-            v_bar = c4 * (v[im, j] + v[i, j + 1] + v[ip, j] + v[i, j - 1]) \
-                + c8 * (v[im, j - 1] + v[im, j + 1] + v[ip, j + 1] + v[ip, j - 1])
-            r = (Ex[i, j] * u_bar + Ey[i, j] * v_bar + Et[i, j]) * inv_den[i, j]
-            out_u[i, j] = u_bar - Ex[i, j] * r  # eq. 2.21
-            out_v[i, j] = v_bar - Ey[i, j] * r  # eq. 2.22
-        # first and last column: the missing neighbour replicates the edge
-        for j in (0, w - 1):
+            out_u[i, j], out_v[i, j] = _hs_update(
+                ((u[i, j + 1] + u[im, j]) + u[ip, j]) + u[i, j - 1],
+                ((u[im, j + 1] + u[im, j - 1]) + u[ip, j + 1]) + u[ip, j - 1],
+                ((v[i, j + 1] + v[im, j]) + v[ip, j]) + v[i, j - 1],
+                ((v[im, j + 1] + v[im, j - 1]) + v[ip, j + 1]) + v[ip, j - 1],
+                Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
+        # first and last column: the missing neighbour replicates the edge, so u[im, j] + u[ip, j]
+        # is in both sums (the earlier kernel added it first, once)
+        for j in (0, w - 1):  # (at w = 1 both are column 0, with the same result)
             jm = max(j - 1, 0)
             jp = min(j + 1, w - 1)
-            u_bar = c4 * (u[im, j] + u[i, jp] + u[ip, j] + u[i, jm]) \
-                + c8 * (u[im, jm] + u[im, jp] + u[ip, jp] + u[ip, jm])
-            v_bar = c4 * (v[im, j] + v[i, jp] + v[ip, j] + v[i, jm]) \
-                + c8 * (v[im, jm] + v[im, jp] + v[ip, jp] + v[ip, jm])
-            r = (Ex[i, j] * u_bar + Ey[i, j] * v_bar + Et[i, j]) * inv_den[i, j]
-            out_u[i, j] = u_bar - Ex[i, j] * r
-            out_v[i, j] = v_bar - Ey[i, j] * r
+            o = jp if j == 0 else jm  # the neighbour column that is not j itself
+            zu = u[ip, j] + u[im, j]
+            zv = v[ip, j] + v[im, j]
+            out_u[i, j], out_v[i, j] = _hs_update(
+                (zu + u[i, jp]) + u[i, jm], (zu + u[im, o]) + u[ip, o],
+                (zv + v[i, jp]) + v[i, jm], (zv + v[im, o]) + v[ip, o],
+                Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True, fastmath=False, error_model="numpy")
+def _hs_inv_den(Ex, Ey, alpha2) -> np.ndarray:
+    """``1 / (alpha^2 + Ex^2 + Ey^2)``, the denominator of eqs. 2.21-2.22, ``(h, w)`` float32.
+
+    ``error_model="numpy"``: no zero-division check (``alpha2 > 0``), so the loop vectorises.
+    """
+    h, w = Ex.shape
+    inv_den = np.empty((h, w), dtype=np.float32)
+    one = np.float32(1.0)
+    for i in range(h):
+        for j in range(w):
+            inv_den[i, j] = one / _fma(Ey[i, j], Ey[i, j], _fma(Ex[i, j], Ex[i, j], alpha2))
+    return inv_den
+
+
+@numba.njit(cache=True, fastmath=False)
 def hs_iterate(Ex: np.ndarray, Ey: np.ndarray, Et: np.ndarray, u: np.ndarray, v: np.ndarray,
                alpha: float, iterations: int, tol: float) -> int:
     """Run the Horn-Schunck iteration in place on ``u``, ``v`` (all ``(h, w)`` float32).
@@ -102,11 +157,7 @@ def hs_iterate(Ex: np.ndarray, Ey: np.ndarray, Et: np.ndarray, u: np.ndarray, v:
     below ``tol`` px (``tol <= 0``: never). Returns the sweeps done.
     """
     h, w = Ex.shape
-    alpha2 = np.float32(alpha * alpha)
-    inv_den = np.empty((h, w), dtype=np.float32)
-    for i in range(h):
-        for j in range(w):
-            inv_den[i, j] = np.float32(1.0) / (alpha2 + Ex[i, j] * Ex[i, j] + Ey[i, j] * Ey[i, j])
+    inv_den = _hs_inv_den(Ex, Ey, np.float32(alpha * alpha))
     src_u, src_v = u, v
     dst_u = np.empty_like(u)
     dst_v = np.empty_like(v)
