@@ -96,24 +96,54 @@ def _hs_update(s4u, s8u, s4v, s8v, ex, ey, et, inv_den):
 
 
 @numba.njit(cache=True, fastmath=False)
-def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
-    """One Jacobi sweep of eqs. 2.17, 2.21, 2.22 from ``u, v`` into ``out_u, out_v``.
+def _hs_interior(un, uc, us, vn, vc, vs, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
+    """Eqs. 2.17, 2.21, 2.22 along a run of points, from flat ``(n + 2,)`` views of u and v that
+    start one point before it in the row above (``un``), its own row (``uc``) and the row below (``us``).
 
-    Indexes the 2-D arrays directly: taking row views per row costs reference
-    counting that was a third of the sweep.
+    Point t has its neighbours at ``[t]``, ``[t + 1]``, ``[t + 2]`` of those
+    views (left, centre, right), so every index is t plus a constant: no
+    negative-index handling, and the loop vectorises.
+    """
+    for t in range(Ex.shape[0]):
+        out_u[t], out_v[t] = _hs_update(
+            ((uc[t + 2] + un[t + 1]) + us[t + 1]) + uc[t],
+            ((un[t + 2] + un[t]) + us[t + 2]) + us[t],
+            ((vc[t + 2] + vn[t + 1]) + vs[t + 1]) + vc[t],
+            ((vn[t + 2] + vn[t]) + vs[t + 2]) + vs[t],
+            Ex[t], Ey[t], Et[t], inv_den[t])
+
+
+@numba.njit(cache=True, fastmath=False)
+def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
+    """One Jacobi sweep of eqs. 2.17, 2.21, 2.22 from ``u, v`` into ``out_u, out_v`` (C-contiguous).
+
+    The interior rows run as one flat loop (:func:`_hs_interior`), which also
+    writes the first and last column with wrapped neighbours; the first and
+    last row, and then the first and last column of every row, follow with the
+    edge replicated.
     """
     h, w = u.shape
+    if h > 2 and w > 2:
+        # the points k = w + 1 .. (h - 1) w - 2 of the flat arrays: rows 1 .. h - 2 (and columns
+        # w - 1 and 0 between them, overwritten below)
+        n = h * w
+        k0, k1 = w + 1, (h - 1) * w - 1
+        uf, vf = u.reshape(n), v.reshape(n)
+        _hs_interior(uf[k0 - w - 1:k1 - w + 1], uf[k0 - 1:k1 + 1], uf[k0 + w - 1:k1 + w + 1],
+                     vf[k0 - w - 1:k1 - w + 1], vf[k0 - 1:k1 + 1], vf[k0 + w - 1:k1 + w + 1],
+                     Ex.reshape(n)[k0:k1], Ey.reshape(n)[k0:k1], Et.reshape(n)[k0:k1], inv_den.reshape(n)[k0:k1],
+                     out_u.reshape(n)[k0:k1], out_v.reshape(n)[k0:k1])
     for i in range(h):
         im = max(i - 1, 0)  # the missing neighbour row replicates the edge
         ip = min(i + 1, h - 1)
-        # interior columns: plain neighbours, so that the loop vectorises
-        for j in range(1, w - 1):
-            out_u[i, j], out_v[i, j] = _hs_update(
-                ((u[i, j + 1] + u[im, j]) + u[ip, j]) + u[i, j - 1],
-                ((u[im, j + 1] + u[im, j - 1]) + u[ip, j + 1]) + u[ip, j - 1],
-                ((v[i, j + 1] + v[im, j]) + v[ip, j]) + v[i, j - 1],
-                ((v[im, j + 1] + v[im, j - 1]) + v[ip, j + 1]) + v[ip, j - 1],
-                Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
+        if i == 0 or i == h - 1 or w <= 2:
+            for j in range(1, w - 1):
+                out_u[i, j], out_v[i, j] = _hs_update(
+                    ((u[i, j + 1] + u[im, j]) + u[ip, j]) + u[i, j - 1],
+                    ((u[im, j + 1] + u[im, j - 1]) + u[ip, j + 1]) + u[ip, j - 1],
+                    ((v[i, j + 1] + v[im, j]) + v[ip, j]) + v[i, j - 1],
+                    ((v[im, j + 1] + v[im, j - 1]) + v[ip, j + 1]) + v[ip, j - 1],
+                    Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
         # first and last column: the missing neighbour replicates the edge, so u[im, j] + u[ip, j]
         # is in both sums (the earlier kernel added it first, once)
         for j in (0, w - 1):  # (at w = 1 both are column 0, with the same result)
