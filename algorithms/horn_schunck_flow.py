@@ -231,36 +231,57 @@ def _hs_linearise(Ex, Ey, Et, flow, inside, use_inside, u, v) -> None:
 
     ``u, v = pixels_to_cube(flow)``; ``Et <- Et - Ex u - Ey v``; where a cube
     corner lies outside frame t+1 (``use_inside`` and ``inside`` False) the
-    data term is dropped: Ex = Ey = Et = 0.
+    data term is dropped: Ex = Ey = Et = 0. Without branches on the values
+    (a select, and ``&`` of the four corners), so that the loop vectorises.
     """
     h, w = Ex.shape
     zero = np.float32(0.0)
+    q = np.float32(0.25)
+    f = flow.reshape(h + 1, 2 * (w + 1))  # (u, v) of pixel j at 2 j, 2 j + 1: a constant stride
     for i in range(h):
         for j in range(w):
-            u0 = np.float32(0.25) * (flow[i, j, 0] + flow[i, j + 1, 0] + flow[i + 1, j, 0] + flow[i + 1, j + 1, 0])
-            v0 = np.float32(0.25) * (flow[i, j, 1] + flow[i, j + 1, 1] + flow[i + 1, j, 1] + flow[i + 1, j + 1, 1])
+            u0 = q * (f[i, 2 * j] + f[i, 2 * j + 2] + f[i + 1, 2 * j] + f[i + 1, 2 * j + 2])
+            v0 = q * (f[i, 2 * j + 1] + f[i, 2 * j + 3] + f[i + 1, 2 * j + 1] + f[i + 1, 2 * j + 3])
             u[i, j] = u0
             v[i, j] = v0
-            if use_inside and not (inside[i, j] and inside[i, j + 1] and inside[i + 1, j] and inside[i + 1, j + 1]):
-                Ex[i, j] = zero
-                Ey[i, j] = zero
-                Et[i, j] = zero
+            et = Et[i, j] - Ex[i, j] * u0 - Ey[i, j] * v0
+            if use_inside:  # (loop-invariant: the inner loop is compiled once for each case)
+                keep = inside[i, j] & inside[i, j + 1] & inside[i + 1, j] & inside[i + 1, j + 1]
+                Ex[i, j] = Ex[i, j] if keep else zero
+                Ey[i, j] = Ey[i, j] if keep else zero
+                Et[i, j] = et if keep else zero
             else:
-                Et[i, j] = Et[i, j] - Ex[i, j] * u0 - Ey[i, j] * v0
+                Et[i, j] = et
 
 
 @numba.njit(cache=True)
 def _cube_flow_to_pixels(u, v, flow, valid) -> None:
     """:func:`cube_to_pixels` of ``u`` and ``v`` into ``flow`` ``(h + 1, w + 1, 2)``, and ``valid``:
-    where ``x + flow`` lies inside the frame (:func:`algorithms.pyramid.target_inside`)."""
+    where ``x + flow`` lies inside the frame (:func:`algorithms.pyramid.target_inside`).
+
+    The inner columns (both neighbours present) run without clamping or
+    branches, so that the loop vectorises; the first and last column follow.
+    """
     h, w = u.shape
     H, W = h + 1, w + 1
     q = np.float32(0.25)
     zero = np.float32(0.0)
+    x_max = np.float32(W - 1)
+    y_max = np.float32(H - 1)
+    f = flow.reshape(H, 2 * W)  # (u, v) of pixel j at 2 j, 2 j + 1: a constant stride
     for i in range(H):
         i0 = max(i - 1, 0)
         i1 = min(i, h - 1)
-        for j in range(W):
+        y_i = np.float32(i)
+        for j in range(1, W - 1):
+            a = q * (u[i0, j - 1] + u[i0, j] + u[i1, j - 1] + u[i1, j])
+            b = q * (v[i0, j - 1] + v[i0, j] + v[i1, j - 1] + v[i1, j])
+            f[i, 2 * j] = a
+            f[i, 2 * j + 1] = b
+            x = np.float32(j) + a
+            y = y_i + b
+            valid[i, j] = (x >= zero) & (x <= x_max) & (y >= zero) & (y <= y_max)
+        for j in (0, W - 1):
             j0 = max(j - 1, 0)
             j1 = min(j, w - 1)
             a = q * (u[i0, j0] + u[i0, j1] + u[i1, j0] + u[i1, j1])
@@ -268,8 +289,8 @@ def _cube_flow_to_pixels(u, v, flow, valid) -> None:
             flow[i, j, 0] = a
             flow[i, j, 1] = b
             x = np.float32(j) + a
-            y = np.float32(i) + b
-            valid[i, j] = x >= zero and x <= np.float32(W - 1) and y >= zero and y <= np.float32(H - 1)
+            y = y_i + b
+            valid[i, j] = x >= zero and x <= x_max and y >= zero and y <= y_max
 
 
 def _hs_on_cube(f0: np.ndarray, f1: np.ndarray, flow: np.ndarray | None, *, alpha: float, iterations: int,

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
-from algorithms.horn_schunck_flow import cube_to_pixels, horn_schunck, hs_derivatives, hs_iterate, pixels_to_cube
+from algorithms.horn_schunck_flow import (_cube_flow_to_pixels, _hs_linearise, cube_to_pixels, horn_schunck,
+                                         hs_derivatives, hs_iterate, pixels_to_cube)
+from algorithms.pyramid import target_inside
 from algorithms.registry import get_flow_method
 
 M = 16
@@ -227,3 +229,39 @@ def test_bad_input_rejected():
         horn_schunck(np.full((20, 20), np.nan), f)
     with pytest.raises(ValueError, match="alpha"):
         horn_schunck(f, f, alpha=0.0)
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (2, 5), (5, 2), (6, 9), (31, 17)])
+def test_cube_flow_to_pixels_equals_the_numpy_resampling(shape):
+    """The fused numba step (vectorised inner columns, clamped outer ones) against cube_to_pixels and
+    target_inside: the same float32 sums in the same order, so the same bits."""
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    u, v = (rng.normal(0, 3, (shape[0] - 1, shape[1] - 1)).astype(np.float32) for _ in range(2))
+    flow = np.empty(shape + (2,), np.float32)
+    valid = np.empty(shape, bool)
+    _cube_flow_to_pixels(u, v, flow, valid)
+    assert np.array_equal(flow[..., 0], cube_to_pixels(u)) and np.array_equal(flow[..., 1], cube_to_pixels(v))
+    assert np.array_equal(valid, target_inside(flow))
+    if min(shape) > 2:
+        assert valid.any() and not valid.all()  # both outcomes of the mask were exercised
+
+
+@pytest.mark.parametrize("use_inside", [False, True])
+@pytest.mark.parametrize("shape", [(2, 2), (2, 5), (5, 2), (6, 9), (31, 17)])
+def test_linearise_equals_the_numpy_steps(shape, use_inside):
+    """Start and data term of a warp step against pixels_to_cube and Et - Ex u0 - Ey v0 in numpy
+    float32 (same order, same bits), the data term dropped where a cube corner was sampled outside."""
+    rng = np.random.default_rng(shape[0] * 10 + shape[1])
+    flow = rng.normal(0, 2, shape + (2,)).astype(np.float32)
+    inside = rng.uniform(0, 1, shape) > 0.2
+    Ex, Ey, Et = (rng.normal(0, 5, (shape[0] - 1, shape[1] - 1)).astype(np.float32) for _ in range(3))
+    ex, ey, et = Ex.copy(), Ey.copy(), Et.copy()
+    u, v = np.empty_like(Ex), np.empty_like(Ex)
+    _hs_linearise(ex, ey, et, flow, inside, use_inside, u, v)
+    u0, v0 = pixels_to_cube(flow[..., 0]), pixels_to_cube(flow[..., 1])
+    assert np.array_equal(u, u0) and np.array_equal(v, v0)
+    keep = pixels_to_cube(inside.astype(np.float32)) == 1 if use_inside else np.ones(Ex.shape, bool)
+    assert np.array_equal(et, np.where(keep, Et - Ex * u0 - Ey * v0, 0))
+    assert np.array_equal(ex, np.where(keep, Ex, 0)) and np.array_equal(ey, np.where(keep, Ey, 0))
+    if use_inside and min(shape) > 2:
+        assert 0 < keep.sum() < keep.size  # both outcomes exercised
