@@ -1,17 +1,24 @@
 """Horn-Schunck iteration (``hs_iterate``) against the version of a reference tree: the same bits, and the CPU-time ratio.
 
-    python benchmarks/hs_speed.py --ref /work/wt-base [--shape 480,640] [--iterations 100] [--repeats 7]
-        [--blocks 2,4,8,16]
+    python benchmarks/hs_speed.py --ref /work/wt-base [--shape 479,639] [--iterations 100] [--repeats 7]
 
 The reference ``algorithms/horn_schunck_flow.py`` is loaded from ``--ref`` under another module name
 (its registration decorator dropped). Identity: both iterate the same random Ex, Ey, Et (and the
 derivatives of a smooth random texture shifted by a sub-pixel amount) from the same start, at many
 shapes (1xN, Nx1, 2x2, odd sizes, 640x480) and sweep counts 1..17 and 100, with and without a
 tolerance, and the fields and sweep counts are compared with ``np.array_equal``. Speed: ``hs_iterate``
-at ``--shape`` with ``--iterations`` sweeps, ours and the reference alternately ``--repeats`` times
-(CPU time of this process, one thread), medians and the median of the per-call ratios reference / ours
-(above 1: ours is faster), also per sweep. ``--blocks`` also times ``_hs_sweeps_in_place`` with other
-numbers of sweeps per pass (``HS_BLOCK``), for choosing it.
+at ``--shape`` (the cube grid of a 640x480 frame) with ``--iterations`` sweeps, ours and the reference
+alternately ``--repeats`` times (CPU time of this process, one thread), medians and the median of the
+per-call ratios reference / ours (above 1: ours is faster); also ``_hs_sweep`` alone.
+
+Measured (issue 13; reference 95a9436, machine loaded by other work, load average 2.7-3.5 on 2 cores):
+1086 of 1086 cases equal; hs_iterate 640x480 x 100 sweeps 30.4 -> 25.9 ms, ratio 1.18 (1.16 in an
+earlier run); one sweep 1.16-1.19. What did not help, measured with the same bits: temporal blocking
+(2-16 sweeps per pass over row chunks of 8-128 rows, in the two ping-pong arrays): 0.92-1.01, and a
+sweep on arrays that fit in L2 is no faster per point than at 640x480 (about 1 ns per point either way,
+load-port bound: 22 loads for 21 float operations per point), so the sweep is not memory bound; two
+rows per loop iteration (12 instead of 16 loads of u per pair of points) does not vectorise (LLVM:
+"too many memory checks needed"), and forced with noalias it spilled and was slower.
 """
 
 from __future__ import annotations
