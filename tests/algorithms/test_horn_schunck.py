@@ -6,12 +6,19 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
-from algorithms.horn_schunck_flow import (_cube_flow_to_pixels, _hs_linearise, cube_to_pixels, horn_schunck,
-                                         hs_derivatives, hs_iterate, pixels_to_cube)
+from algorithms.horn_schunck_flow import (
+    _cube_flow_to_pixels,
+    _hs_linearise,
+    cube_to_pixels,
+    horn_schunck,
+    hs_derivatives,
+    hs_iterate,
+    pixels_to_cube,
+)
 from algorithms.pyramid import target_inside
 from algorithms.registry import get_flow_method
+from tests.algorithms.synthetic import affine_field, rotation_about, translation
 
 M = 16
 
