@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from llvmlite import ir as llvmir
+from numba.extending import intrinsic
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
 from algorithms.pyramid import coarse_to_fine
@@ -53,42 +55,125 @@ def hs_derivatives(E0: np.ndarray, E1: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return Ex, Ey, Et
 
 
-@numba.njit(cache=True, fastmath=True)
-def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
-    """One Jacobi sweep of eqs. 2.17, 2.21, 2.22 from ``u, v`` into ``out_u, out_v``.
+# The iteration below is compiled without fastmath and spells out every rounding (the order of
+# the sums, the fused multiply-adds), so its results do not depend on how LLVM happens to compile
+# and inline it. They are the results of the earlier fastmath kernel as it ran inside hs_iterate
+# (its edge columns differed in the last bit when it ran on its own): benchmarks/hs_speed.py
+# checks them against that kernel, tests/algorithms/test_horn_schunck.py against a plain
+# per-sweep reference of the same steps.
 
-    Indexes the 2-D arrays directly: taking row views per row costs reference
-    counting that was a third of the sweep.
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (float32 fused multiply-add, ``llvm.fma``)."""
+    sig = numba.float32(numba.float32, numba.float32, numba.float32)
+
+    def codegen(context, builder, signature, args):
+        f32 = llvmir.FloatType()
+        fn = builder.module.declare_intrinsic("llvm.fma", [f32], llvmir.FunctionType(f32, [f32, f32, f32]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+_C4 = np.float32(1.0 / 6.0)  # eq. 2.17: weight of each 4-neighbour
+_C8 = np.float32(1.0 / 12.0)  # and of each diagonal neighbour
+
+
+# fastmath=False is explicit on every kernel here: numba passes a caller's fastmath on to
+# callees that do not set it.
+@numba.njit(cache=True, fastmath=False)
+def _hs_update(s4u, s8u, s4v, s8v, ex, ey, et, inv_den):
+    """New ``(u, v)`` at one point from its neighbour sums (float32 scalars), eqs. 2.17, 2.21, 2.22.
+
+    ``s4u`` is the sum of the 4-neighbours of u, ``s8u`` of the diagonal ones
+    (likewise v); ``inv_den = 1 / (alpha^2 + Ex^2 + Ey^2)``.
+    """
+    u_bar = _fma(s8u, _C8, s4u * _C4)  # eq. 2.17
+    v_bar = _fma(s8v, _C8, s4v * _C4)
+    rho = _fma(ey, v_bar, _fma(ex, u_bar, et)) * inv_den  # (Ex u_bar + Ey v_bar + Et) / (alpha^2 + Ex^2 + Ey^2)
+    return _fma(-ex, rho, u_bar), _fma(-ey, rho, v_bar)  # eqs. 2.21, 2.22
+
+
+@numba.njit(cache=True, fastmath=False)
+def _hs_interior(un, uc, us, vn, vc, vs, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
+    """Eqs. 2.17, 2.21, 2.22 along a run of points, from flat ``(n + 2,)`` views of u and v that
+    start one point before it in the row above (``un``), its own row (``uc``) and the row below (``us``).
+
+    Point t has its neighbours at ``[t]``, ``[t + 1]``, ``[t + 2]`` of those
+    views (left, centre, right), so every index is t plus a constant: no
+    negative-index handling, and the loop vectorises.
+    """
+    for t in range(Ex.shape[0]):
+        out_u[t], out_v[t] = _hs_update(
+            ((uc[t + 2] + un[t + 1]) + us[t + 1]) + uc[t],
+            ((un[t + 2] + un[t]) + us[t + 2]) + us[t],
+            ((vc[t + 2] + vn[t + 1]) + vs[t + 1]) + vc[t],
+            ((vn[t + 2] + vn[t]) + vs[t + 2]) + vs[t],
+            Ex[t], Ey[t], Et[t], inv_den[t])
+
+
+@numba.njit(cache=True, fastmath=False)
+def _hs_sweep(u, v, Ex, Ey, Et, inv_den, out_u, out_v) -> None:
+    """One Jacobi sweep of eqs. 2.17, 2.21, 2.22 from ``u, v`` into ``out_u, out_v`` (C-contiguous).
+
+    The interior rows run as one flat loop (:func:`_hs_interior`), which also
+    writes the first and last column with wrapped neighbours; the first and
+    last row, and then the first and last column of every row, follow with the
+    edge replicated.
     """
     h, w = u.shape
-    c4 = np.float32(1.0 / 6.0)
-    c8 = np.float32(1.0 / 12.0)
+    if h > 2 and w > 2:
+        # the points k = w + 1 .. (h - 1) w - 2 of the flat arrays: rows 1 .. h - 2 (and columns
+        # w - 1 and 0 between them, overwritten below)
+        n = h * w
+        k0, k1 = w + 1, (h - 1) * w - 1
+        uf, vf = u.reshape(n), v.reshape(n)
+        _hs_interior(uf[k0 - w - 1:k1 - w + 1], uf[k0 - 1:k1 + 1], uf[k0 + w - 1:k1 + w + 1],
+                     vf[k0 - w - 1:k1 - w + 1], vf[k0 - 1:k1 + 1], vf[k0 + w - 1:k1 + w + 1],
+                     Ex.reshape(n)[k0:k1], Ey.reshape(n)[k0:k1], Et.reshape(n)[k0:k1], inv_den.reshape(n)[k0:k1],
+                     out_u.reshape(n)[k0:k1], out_v.reshape(n)[k0:k1])
     for i in range(h):
-        im = i - 1 if i > 0 else 0  # the missing neighbour row replicates the edge
-        ip = i + 1 if i < h - 1 else h - 1
-        # interior columns: plain neighbours, so that the loop vectorises
-        for j in range(1, w - 1):
-            u_bar = c4 * (u[im, j] + u[i, j + 1] + u[ip, j] + u[i, j - 1]) \
-                + c8 * (u[im, j - 1] + u[im, j + 1] + u[ip, j + 1] + u[ip, j - 1])  # eq. 2.17
-            v_bar = c4 * (v[im, j] + v[i, j + 1] + v[ip, j] + v[i, j - 1]) \
-                + c8 * (v[im, j - 1] + v[im, j + 1] + v[ip, j + 1] + v[ip, j - 1])
-            r = (Ex[i, j] * u_bar + Ey[i, j] * v_bar + Et[i, j]) * inv_den[i, j]
-            out_u[i, j] = u_bar - Ex[i, j] * r  # eq. 2.21
-            out_v[i, j] = v_bar - Ey[i, j] * r  # eq. 2.22
-        # first and last column: the missing neighbour replicates the edge
-        for j in (0, w - 1):
+        im = max(i - 1, 0)  # the missing neighbour row replicates the edge
+        ip = min(i + 1, h - 1)
+        if i == 0 or i == h - 1 or w <= 2:
+            for j in range(1, w - 1):
+                out_u[i, j], out_v[i, j] = _hs_update(
+                    ((u[i, j + 1] + u[im, j]) + u[ip, j]) + u[i, j - 1],
+                    ((u[im, j + 1] + u[im, j - 1]) + u[ip, j + 1]) + u[ip, j - 1],
+                    ((v[i, j + 1] + v[im, j]) + v[ip, j]) + v[i, j - 1],
+                    ((v[im, j + 1] + v[im, j - 1]) + v[ip, j + 1]) + v[ip, j - 1],
+                    Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
+        # first and last column: the missing neighbour replicates the edge, so u[im, j] + u[ip, j]
+        # is in both sums (the earlier kernel added it first, once)
+        for j in (0, w - 1):  # (at w = 1 both are column 0, with the same result)
             jm = max(j - 1, 0)
             jp = min(j + 1, w - 1)
-            u_bar = c4 * (u[im, j] + u[i, jp] + u[ip, j] + u[i, jm]) \
-                + c8 * (u[im, jm] + u[im, jp] + u[ip, jp] + u[ip, jm])
-            v_bar = c4 * (v[im, j] + v[i, jp] + v[ip, j] + v[i, jm]) \
-                + c8 * (v[im, jm] + v[im, jp] + v[ip, jp] + v[ip, jm])
-            r = (Ex[i, j] * u_bar + Ey[i, j] * v_bar + Et[i, j]) * inv_den[i, j]
-            out_u[i, j] = u_bar - Ex[i, j] * r
-            out_v[i, j] = v_bar - Ey[i, j] * r
+            o = jp if j == 0 else jm  # the neighbour column that is not j itself
+            zu = u[ip, j] + u[im, j]
+            zv = v[ip, j] + v[im, j]
+            out_u[i, j], out_v[i, j] = _hs_update(
+                (zu + u[i, jp]) + u[i, jm], (zu + u[im, o]) + u[ip, o],
+                (zv + v[i, jp]) + v[i, jm], (zv + v[im, o]) + v[ip, o],
+                Ex[i, j], Ey[i, j], Et[i, j], inv_den[i, j])
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True, fastmath=False, error_model="numpy")
+def _hs_inv_den(Ex, Ey, alpha2) -> np.ndarray:
+    """``1 / (alpha^2 + Ex^2 + Ey^2)``, the denominator of eqs. 2.21-2.22, ``(h, w)`` float32.
+
+    ``error_model="numpy"``: no zero-division check (``alpha2 > 0``), so the loop vectorises.
+    """
+    h, w = Ex.shape
+    inv_den = np.empty((h, w), dtype=np.float32)
+    one = np.float32(1.0)
+    for i in range(h):
+        for j in range(w):
+            inv_den[i, j] = one / _fma(Ey[i, j], Ey[i, j], _fma(Ex[i, j], Ex[i, j], alpha2))
+    return inv_den
+
+
+@numba.njit(cache=True, fastmath=False)
 def hs_iterate(Ex: np.ndarray, Ey: np.ndarray, Et: np.ndarray, u: np.ndarray, v: np.ndarray,
                alpha: float, iterations: int, tol: float) -> int:
     """Run the Horn-Schunck iteration in place on ``u``, ``v`` (all ``(h, w)`` float32).
@@ -102,11 +187,7 @@ def hs_iterate(Ex: np.ndarray, Ey: np.ndarray, Et: np.ndarray, u: np.ndarray, v:
     below ``tol`` px (``tol <= 0``: never). Returns the sweeps done.
     """
     h, w = Ex.shape
-    alpha2 = np.float32(alpha * alpha)
-    inv_den = np.empty((h, w), dtype=np.float32)
-    for i in range(h):
-        for j in range(w):
-            inv_den[i, j] = np.float32(1.0) / (alpha2 + Ex[i, j] * Ex[i, j] + Ey[i, j] * Ey[i, j])
+    inv_den = _hs_inv_den(Ex, Ey, np.float32(alpha * alpha))
     src_u, src_v = u, v
     dst_u = np.empty_like(u)
     dst_v = np.empty_like(v)
@@ -150,36 +231,57 @@ def _hs_linearise(Ex, Ey, Et, flow, inside, use_inside, u, v) -> None:
 
     ``u, v = pixels_to_cube(flow)``; ``Et <- Et - Ex u - Ey v``; where a cube
     corner lies outside frame t+1 (``use_inside`` and ``inside`` False) the
-    data term is dropped: Ex = Ey = Et = 0.
+    data term is dropped: Ex = Ey = Et = 0. Without branches on the values
+    (a select, and ``&`` of the four corners), so that the loop vectorises.
     """
     h, w = Ex.shape
     zero = np.float32(0.0)
+    q = np.float32(0.25)
+    f = flow.reshape(h + 1, 2 * (w + 1))  # (u, v) of pixel j at 2 j, 2 j + 1: a constant stride
     for i in range(h):
         for j in range(w):
-            u0 = np.float32(0.25) * (flow[i, j, 0] + flow[i, j + 1, 0] + flow[i + 1, j, 0] + flow[i + 1, j + 1, 0])
-            v0 = np.float32(0.25) * (flow[i, j, 1] + flow[i, j + 1, 1] + flow[i + 1, j, 1] + flow[i + 1, j + 1, 1])
+            u0 = q * (f[i, 2 * j] + f[i, 2 * j + 2] + f[i + 1, 2 * j] + f[i + 1, 2 * j + 2])
+            v0 = q * (f[i, 2 * j + 1] + f[i, 2 * j + 3] + f[i + 1, 2 * j + 1] + f[i + 1, 2 * j + 3])
             u[i, j] = u0
             v[i, j] = v0
-            if use_inside and not (inside[i, j] and inside[i, j + 1] and inside[i + 1, j] and inside[i + 1, j + 1]):
-                Ex[i, j] = zero
-                Ey[i, j] = zero
-                Et[i, j] = zero
+            et = Et[i, j] - Ex[i, j] * u0 - Ey[i, j] * v0
+            if use_inside:  # (loop-invariant: the inner loop is compiled once for each case)
+                keep = inside[i, j] & inside[i, j + 1] & inside[i + 1, j] & inside[i + 1, j + 1]
+                Ex[i, j] = Ex[i, j] if keep else zero
+                Ey[i, j] = Ey[i, j] if keep else zero
+                Et[i, j] = et if keep else zero
             else:
-                Et[i, j] = Et[i, j] - Ex[i, j] * u0 - Ey[i, j] * v0
+                Et[i, j] = et
 
 
 @numba.njit(cache=True)
 def _cube_flow_to_pixels(u, v, flow, valid) -> None:
     """:func:`cube_to_pixels` of ``u`` and ``v`` into ``flow`` ``(h + 1, w + 1, 2)``, and ``valid``:
-    where ``x + flow`` lies inside the frame (:func:`algorithms.pyramid.target_inside`)."""
+    where ``x + flow`` lies inside the frame (:func:`algorithms.pyramid.target_inside`).
+
+    The inner columns (both neighbours present) run without clamping or
+    branches, so that the loop vectorises; the first and last column follow.
+    """
     h, w = u.shape
     H, W = h + 1, w + 1
     q = np.float32(0.25)
     zero = np.float32(0.0)
+    x_max = np.float32(W - 1)
+    y_max = np.float32(H - 1)
+    f = flow.reshape(H, 2 * W)  # (u, v) of pixel j at 2 j, 2 j + 1: a constant stride
     for i in range(H):
         i0 = max(i - 1, 0)
         i1 = min(i, h - 1)
-        for j in range(W):
+        y_i = np.float32(i)
+        for j in range(1, W - 1):
+            a = q * (u[i0, j - 1] + u[i0, j] + u[i1, j - 1] + u[i1, j])
+            b = q * (v[i0, j - 1] + v[i0, j] + v[i1, j - 1] + v[i1, j])
+            f[i, 2 * j] = a
+            f[i, 2 * j + 1] = b
+            x = np.float32(j) + a
+            y = y_i + b
+            valid[i, j] = (x >= zero) & (x <= x_max) & (y >= zero) & (y <= y_max)
+        for j in (0, W - 1):
             j0 = max(j - 1, 0)
             j1 = min(j, w - 1)
             a = q * (u[i0, j0] + u[i0, j1] + u[i1, j0] + u[i1, j1])
@@ -187,8 +289,8 @@ def _cube_flow_to_pixels(u, v, flow, valid) -> None:
             flow[i, j, 0] = a
             flow[i, j, 1] = b
             x = np.float32(j) + a
-            y = np.float32(i) + b
-            valid[i, j] = x >= zero and x <= np.float32(W - 1) and y >= zero and y <= np.float32(H - 1)
+            y = y_i + b
+            valid[i, j] = x >= zero and x <= x_max and y >= zero and y <= y_max
 
 
 def _hs_on_cube(f0: np.ndarray, f1: np.ndarray, flow: np.ndarray | None, *, alpha: float, iterations: int,
