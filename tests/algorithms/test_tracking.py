@@ -18,6 +18,27 @@ def test_detection_finds_known_blobs_with_centroids_and_areas():
         detect_moving_objects(m.astype(np.uint8))
 
 
+@pytest.mark.parametrize("threads", [1, 4])
+def test_detection_numbers_regions_as_opencvs_default_labelling_does(threads):
+    # detect_moving_objects asks for BBDT by name; the regions, their order (equal areas keep the label
+    # order) and their centroids must be those of connectedComponentsWithStats' default (Spaghetti)
+    import cv2
+
+    rng = np.random.default_rng(5)
+    old = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        for density in (0.05, 0.3, 0.55):
+            for shape in ((480, 640), (37, 53), (1, 9), (8, 1)):
+                m = rng.random(shape) < density
+                n, _, stats, cents = cv2.connectedComponentsWithStats(m.view(np.uint8), connectivity=8)
+                ref = sorted([(float(cents[i, 0]), float(cents[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
+                              for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= 2], key=lambda d: -d[2])
+                assert detect_moving_objects(m, min_area_px=2) == ref
+    finally:
+        cv2.setNumThreads(old)
+
+
 def test_point_tracker_follows_global_plus_local_and_filters_flow():
     h, w = 50, 80
     tracker = PointTracker(10.0, 40.0, track_id=7, seed_vehicle_id=3, kalman=THESIS_KALMAN)
