@@ -19,6 +19,7 @@ Conventions (see ``docs/architecture.md``):
 from __future__ import annotations
 
 import cv2
+import numba
 import numpy as np
 
 __all__ = [
@@ -140,15 +141,59 @@ def warp_backward(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.n
     """
     f = check_flow(flow, shape=np.asarray(image).shape[:2])
     h, w = f.shape[:2]
-    map_x = np.arange(w, dtype=np.float32)[None, :] + f[..., 0]  # a row and a column broadcast, no meshgrid
-    map_y = np.arange(h, dtype=np.float32)[:, None] + f[..., 1]
+    map_x, map_y = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
+    inside = np.empty((h, w), bool)
+    target_points(f, map_x, map_y, inside)
     src = np.asarray(image).astype(np.float32, copy=False)
     warped = cv2.remap(src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    inside = map_x >= 0
-    inside &= map_x <= w - 1
-    inside &= map_y >= 0
-    inside &= map_y <= h - 1
     return warped, inside
+
+
+def target_points(flow: np.ndarray, map_x: np.ndarray | None, map_y: np.ndarray | None,
+                  inside: np.ndarray) -> None:
+    """Where each pixel's flow points, ``(x + u, y + v)``, and whether that lies inside the frame, in one pass.
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float32
+        Checked (see :func:`check_flow`).
+    map_x, map_y : ndarray, (H, W) float32, or None
+        Filled with ``x + u`` and ``y + v`` in float32 (the sums of
+        ``np.arange(W, dtype=float32)[None, :] + flow[..., 0]`` and its y twin); None: not wanted.
+    inside : ndarray, (H, W) bool
+        Filled with ``0 <= x + u <= W - 1 and 0 <= y + v <= H - 1`` (False for NaN).
+    """
+    f = np.ascontiguousarray(flow, dtype=np.float32)
+    if map_x is None or map_y is None:
+        _target_inside(f, inside)
+    else:
+        _target_points(f, map_x, map_y, inside)
+
+
+@numba.njit(cache=True)
+def _target_points(f, map_x, map_y, inside) -> None:
+    h, w = inside.shape
+    zero, xmax, ymax = np.float32(0.0), np.float32(w - 1), np.float32(h - 1)
+    for i in range(h):
+        yi = np.float32(i)
+        for j in range(w):
+            x = np.float32(j) + f[i, j, 0]
+            y = yi + f[i, j, 1]
+            map_x[i, j] = x
+            map_y[i, j] = y
+            inside[i, j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
+
+
+@numba.njit(cache=True)
+def _target_inside(f, inside) -> None:
+    h, w = inside.shape
+    zero, xmax, ymax = np.float32(0.0), np.float32(w - 1), np.float32(h - 1)
+    for i in range(h):
+        yi = np.float32(i)
+        for j in range(w):
+            x = np.float32(j) + f[i, j, 0]
+            y = yi + f[i, j, 1]
+            inside[i, j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
 
 
 def _middlebury_wheel() -> np.ndarray:
