@@ -170,30 +170,38 @@ def target_points(flow: np.ndarray, map_x: np.ndarray | None, map_y: np.ndarray 
         _target_points(f, map_x, map_y, inside)
 
 
+# Row by row over flat rows (u, v, u, v, ...) with x from a float32 arange: the compiler vectorises
+# these loops (4-5x faster than indexing f[i, j, c] with x converted from j in the loop).
 @numba.njit(cache=True)
 def _target_points(f, map_x, map_y, inside) -> None:
     h, w = inside.shape
     zero, xmax, ymax = np.float32(0.0), np.float32(w - 1), np.float32(h - 1)
+    xs = np.arange(w).astype(np.float32)
+    rows = f.reshape(h, 2 * w)
     for i in range(h):
         yi = np.float32(i)
+        r, mx, my, o = rows[i], map_x[i], map_y[i], inside[i]
         for j in range(w):
-            x = np.float32(j) + f[i, j, 0]
-            y = yi + f[i, j, 1]
-            map_x[i, j] = x
-            map_y[i, j] = y
-            inside[i, j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
+            x = xs[j] + r[2 * j]
+            y = yi + r[2 * j + 1]
+            mx[j] = x
+            my[j] = y
+            o[j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
 
 
 @numba.njit(cache=True)
 def _target_inside(f, inside) -> None:
     h, w = inside.shape
     zero, xmax, ymax = np.float32(0.0), np.float32(w - 1), np.float32(h - 1)
+    xs = np.arange(w).astype(np.float32)
+    rows = f.reshape(h, 2 * w)
     for i in range(h):
         yi = np.float32(i)
+        r, o = rows[i], inside[i]
         for j in range(w):
-            x = np.float32(j) + f[i, j, 0]
-            y = yi + f[i, j, 1]
-            inside[i, j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
+            x = xs[j] + r[2 * j]
+            y = yi + r[2 * j + 1]
+            o[j] = (x >= zero) & (x <= xmax) & (y >= zero) & (y <= ymax)
 
 
 def _middlebury_wheel() -> np.ndarray:

@@ -112,20 +112,28 @@ def motion_mask(flow: np.ndarray, valid: np.ndarray, min_magnitude_px: float) ->
 
 @numba.njit(cache=True)
 def _motion_mask(f, valid, t, lo, hi, out) -> None:
-    """Flat ``f`` (2 n,) float32, ``valid`` and ``out`` (n,) bool; see :func:`motion_mask`."""
-    for k in range(valid.size):
-        if not valid[k]:
-            out[k] = False
-            continue
-        u = f[2 * k]
-        v = f[2 * k + 1]
-        q = np.float64(u) * np.float64(u) + np.float64(v) * np.float64(v)
-        if q < lo:
-            out[k] = False
-        elif q > hi:
-            out[k] = True
-        else:  # near the threshold, NaN or infinite: the hypotf numpy calls
-            out[k] = np.float64(math.hypot(u, v)) >= t
+    """Flat ``f`` (2 n,) float32, ``valid`` and ``out`` (n,) bool; see :func:`motion_mask`.
+
+    A first pass without branches (it vectorises) settles every pixel outside the band; a second
+    one, only when some valid pixel lies in the band (or is NaN), asks ``hypotf`` there.
+    """
+    n = valid.size
+    in_band = 0
+    for k in range(n):
+        u = np.float64(f[2 * k])
+        v = np.float64(f[2 * k + 1])
+        q = u * u + v * v
+        vk = valid[k]
+        out[k] = vk & (q > hi)
+        in_band += np.int64(vk & (not (q < lo)) & (not (q > hi)))
+    if in_band:
+        for k in range(n):
+            if valid[k]:
+                u = np.float64(f[2 * k])
+                v = np.float64(f[2 * k + 1])
+                q = u * u + v * v
+                if not (q < lo) and not (q > hi):  # near the threshold, NaN or infinite: numpy's hypotf
+                    out[k] = np.float64(math.hypot(f[2 * k], f[2 * k + 1])) >= t
 
 
 @register_stage("detection")
