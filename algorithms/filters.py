@@ -175,13 +175,26 @@ def temporal_filter(prev: np.ndarray | None, cur: np.ndarray, next: np.ndarray |
     -------
     ndarray, (H, W, 2) float32
     """
-    c = check_flow(cur, name="cur")
-    p = None if prev is None else check_flow(prev, name="prev", shape=c.shape[:2])
-    n = None if next is None else check_flow(next, name="next", shape=c.shape[:2])
+    def check_all() -> tuple:  # check_flow of each field in turn, its errors in this order
+        c = check_flow(cur, name="cur")
+        return (c, None if prev is None else check_flow(prev, name="prev", shape=c.shape[:2]),
+                None if next is None else check_flow(next, name="next", shape=c.shape[:2]))
+
+    # layouts first; finiteness from the output: a NaN or infinite input gives a non-finite mean (a convex
+    # mean of finite float32 values, taken in float64, cannot overflow), one test instead of three
+    try:
+        c = check_flow(cur, name="cur", allow_nan=True)
+        p = None if prev is None else check_flow(prev, name="prev", shape=c.shape[:2], allow_nan=True)
+        n = None if next is None else check_flow(next, name="next", shape=c.shape[:2], allow_nan=True)
+    except (TypeError, ValueError):
+        check_all()  # raises the first error of the three checks in turn
+        raise
     weight = 0.5 + (0.25 if p is not None else 0.0) + (0.25 if n is not None else 0.0)
     out = np.empty(c.shape, dtype=np.float32)
     flat = [np.ascontiguousarray(a).reshape(-1) for a in (c, c if p is None else p, c if n is None else n)]
     _temporal_mean(flat[0], flat[1], p is not None, flat[2], n is not None, weight, out.reshape(-1))
+    if not np.isfinite(out).all():
+        check_all()
     return out
 
 

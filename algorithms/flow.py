@@ -140,15 +140,35 @@ def warp_backward(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.n
     """
     f = check_flow(flow, shape=np.asarray(image).shape[:2])
     h, w = f.shape[:2]
-    map_x = np.arange(w, dtype=np.float32)[None, :] + f[..., 0]  # a row and a column broadcast, no meshgrid
-    map_y = np.arange(h, dtype=np.float32)[:, None] + f[..., 1]
+    map_x, map_y = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
+    inside = np.empty((h, w), bool)
+    target_points(f, map_x, map_y, inside)
     src = np.asarray(image).astype(np.float32, copy=False)
     warped = cv2.remap(src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    inside = map_x >= 0
-    inside &= map_x <= w - 1
-    inside &= map_y >= 0
-    inside &= map_y <= h - 1
     return warped, inside
+
+
+def target_points(flow: np.ndarray, map_x: np.ndarray | None, map_y: np.ndarray | None,
+                  inside: np.ndarray) -> None:
+    """Where each pixel's flow points, ``(x + u, y + v)``, and whether that lies inside the frame, in one pass.
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float32
+        Checked (see :func:`check_flow`).
+    map_x, map_y : ndarray, (H, W) float32, or None
+        Filled with ``x + u`` and ``y + v`` in float32 (the sums of
+        ``np.arange(W, dtype=float32)[None, :] + flow[..., 0]`` and its y twin); None: not wanted.
+    inside : ndarray, (H, W) bool
+        Filled with ``0 <= x + u <= W - 1 and 0 <= y + v <= H - 1`` (False for NaN).
+    """
+    from algorithms._point_kernels import target_inside_kernel, target_points_kernel  # numba, on first use
+
+    f = np.ascontiguousarray(flow, dtype=np.float32)
+    if map_x is None or map_y is None:
+        target_inside_kernel(f, inside)
+    else:
+        target_points_kernel(f, map_x, map_y, inside)
 
 
 def _middlebury_wheel() -> np.ndarray:

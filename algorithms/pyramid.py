@@ -18,7 +18,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from algorithms.flow import FLOW_DTYPE, warp_backward
+from algorithms.flow import FLOW_DTYPE, target_points, warp_backward
 
 __all__ = ["gaussian_pyramid", "resize_flow", "target_inside", "coarse_to_fine", "median_flow"]
 
@@ -76,12 +76,12 @@ def resize_flow(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def target_inside(flow: np.ndarray) -> np.ndarray:
     """``(H, W)`` bool: where ``x + flow`` lands inside frame t+1 (a match can exist there)."""
     h, w = flow.shape[:2]
-    xs = np.arange(w, dtype=np.float32)[None, :] + flow[..., 0]
-    ys = np.arange(h, dtype=np.float32)[:, None] + flow[..., 1]
-    inside = xs >= 0
-    inside &= xs <= w - 1
-    inside &= ys >= 0
-    inside &= ys <= h - 1
+    if flow.dtype != np.float32:  # float64 sums
+        xs = np.arange(w, dtype=np.float32)[None, :] + flow[..., 0]
+        ys = np.arange(h, dtype=np.float32)[:, None] + flow[..., 1]
+        return (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
+    inside = np.empty((h, w), dtype=bool)
+    target_points(flow, None, None, inside)  # the same float32 sums and tests, one pass
     return inside
 
 

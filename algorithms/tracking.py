@@ -54,6 +54,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import cv2
+import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.optimize import linear_sum_assignment
@@ -62,12 +63,77 @@ from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine", "CorrelationMatch",
+__all__ = ["motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine", "CorrelationMatch",
            "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
 TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
                  "source", "seed_vehicle_id")
+
+
+def motion_mask(flow: np.ndarray, valid: np.ndarray, min_magnitude_px: float) -> np.ndarray:
+    """The moving pixels: ``valid & (np.hypot(u, v) >= min_magnitude_px)``, bit for bit, in one pass.
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+        Filtered local flow (u, v), px.
+    valid : ndarray, (H, W) bool
+    min_magnitude_px : float
+        Compared as numpy compares it with the magnitude (a Python number in the flow's
+        dtype, NumPy 2's rule for Python scalars).
+
+    Returns
+    -------
+    ndarray, (H, W) bool
+
+    Notes
+    -----
+    For a float32 field the magnitude is settled from ``q = u^2 + v^2`` in float64 (exact
+    squares) wherever ``q`` lies outside ``t^2 (1 +- 2^-20)``; inside that band, where
+    rounding could decide, the C library's ``hypotf`` that ``np.hypot`` calls decides (its
+    error, under an ulp of float32, is far inside the band). The numpy form took 1.6 ms
+    at 640x480 (float32 ``hypot`` over strided channels), this 0.3 ms.
+    """
+    f, v = np.asarray(flow), np.asarray(valid)
+    if not (f.dtype == np.float32 and f.ndim == 3 and f.shape[2] == 2 and v.dtype == bool
+            and v.shape == f.shape[:2]):
+        return v & (np.hypot(f[..., 0], f[..., 1]) >= min_magnitude_px)
+    # the threshold the comparison of a float32 magnitude with min_magnitude_px uses
+    t = float(np.result_type(f.dtype, min_magnitude_px).type(min_magnitude_px))
+    lo = hi = -1.0  # t <= 0: every finite magnitude passes
+    if t > 0:
+        lo, hi = t * t * (1.0 - 2.0**-20), t * t * (1.0 + 2.0**-20)
+    out = np.empty(v.shape, dtype=bool)
+    _motion_mask(np.ascontiguousarray(f).reshape(-1), np.ascontiguousarray(v).reshape(-1), t, lo, hi,
+                 out.reshape(-1))
+    return out
+
+
+@numba.njit(cache=True)
+def _motion_mask(f, valid, t, lo, hi, out) -> None:
+    """Flat ``f`` (2 n,) float32, ``valid`` and ``out`` (n,) bool; see :func:`motion_mask`.
+
+    A first pass without branches (it vectorises) settles every pixel outside the band; a second
+    one, only when some valid pixel lies in the band (or is NaN), asks ``hypotf`` there.
+    """
+    n = valid.size
+    in_band = 0
+    for k in range(n):
+        u = np.float64(f[2 * k])
+        v = np.float64(f[2 * k + 1])
+        q = u * u + v * v
+        vk = valid[k]
+        out[k] = vk & (q > hi)
+        in_band += np.int64(vk & (not (q < lo)) & (not (q > hi)))
+    if in_band:
+        for k in range(n):
+            if valid[k]:
+                u = np.float64(f[2 * k])
+                v = np.float64(f[2 * k + 1])
+                q = u * u + v * v
+                if not (q < lo) and not (q > hi):  # near the threshold, NaN or infinite: numpy's hypotf
+                    out[k] = np.float64(math.hypot(f[2 * k], f[2 * k + 1])) >= t
 
 
 @register_stage("detection")
@@ -95,8 +161,15 @@ def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
     if connectivity not in (4, 8):
         raise ValueError(f"connectivity: expected 4 or 8, got {connectivity}")
     # a bool array's bytes are 0 / 1: the uint8 view is the image astype would copy
-    n, _, stats, centroids = cv2.connectedComponentsWithStats(np.ascontiguousarray(m).view(np.uint8),
-                                                              connectivity=connectivity)
+    image = np.ascontiguousarray(m).view(np.uint8)
+    if connectivity == 8:
+        # BBDT (Grana 2010) scans the same 2x2 blocks in the same order as the default (Spaghetti), so it
+        # numbers the regions alike and gives the same labels, stats and centroids; with stats it ran
+        # 3x faster here (0.8 vs 2.5 ms at 640x480; tests/algorithms/test_tracking.py compares the two)
+        n, _, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(image, 8, cv2.CV_32S,
+                                                                               cv2.CCL_BBDT)
+    else:
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(image, connectivity=connectivity)
     out = [(float(centroids[i, 0]), float(centroids[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
            for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area_px]
     return sorted(out, key=lambda d: -d[2])

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["avg_filter", "deflate_huffman", "deflate_bound", "flow_rowdelta_planes", "flow_xor"]
+__all__ = ["avg_filter", "deflate_huffman", "deflate_bound", "flow_rowdelta_planes", "flow_xor", "flow_rowdelta_bits"]
 
 # literals 0..255 and end-of-block 256; HLIT = 257
 _N_LIT = 257
@@ -318,3 +318,23 @@ def flow_xor(bits, bits_c):  # pragma: no cover - numba
             j += 1
     return index, xor
 
+
+
+@numba.njit(cache=True, nogil=True)
+def flow_rowdelta_bits(planes, bits_c):  # pragma: no cover - numba
+    """The inverse of :func:`flow_rowdelta_planes`: the camera flow's bits from the byte planes.
+
+    planes : (4, 2, H, W) uint8. Out: bits_c (H, W, 2) uint32, the running sum along each row of
+    ``planes[3] << 24 | planes[2] << 16 | planes[1] << 8 | planes[0]`` modulo 2**32: what
+    the uint32 ``np.cumsum`` along x of those words gives (component last),
+    in one pass instead of four arrays and a transpose.
+    """
+    nc, h, w = planes.shape[1], planes.shape[2], planes.shape[3]
+    for y in range(h):
+        for c in range(nc):
+            acc = np.uint32(0)
+            for x in range(w):
+                d = ((np.uint32(planes[3, c, y, x]) << np.uint32(24)) | (np.uint32(planes[2, c, y, x]) << np.uint32(16))
+                     | (np.uint32(planes[1, c, y, x]) << np.uint32(8)) | np.uint32(planes[0, c, y, x]))
+                acc = np.uint32(acc + d)  # wraps modulo 2**32, as the uint32 cumsum
+                bits_c[y, x, c] = acc

@@ -318,18 +318,6 @@ def _byte_planes(bits: np.ndarray) -> np.ndarray:
                                 .transpose(3, 2, 0, 1))
 
 
-def _from_byte_planes(planes: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`_byte_planes`: ``(4, 2, H, W)`` uint8 -> ``(2, H, W)`` uint32 (component first).
-
-    Shifts and ors: about 3x faster than gathering the bytes back by a transpose.
-    """
-    out = planes[3].astype(np.uint32)
-    for k in (2, 1, 0):
-        out <<= 8
-        out |= planes[k]
-    return out
-
-
 _ZSTD = threading.local()
 
 
@@ -472,8 +460,11 @@ def decode_flow_npz(data: bytes, *, name: str = "<bytes>") -> tuple[np.ndarray, 
             or (index.size and (index.min() < 0 or index.max() >= n))):
         raise FormatError(f"{name}: flow_xor_index {index.shape} {index.dtype} and flow_xor_bits {xor.shape} "
                           f"{xor.dtype}: expected K int64 indices below {n} and K uint32 values")
-    bits_c = np.cumsum(_from_byte_planes(delta), axis=2, dtype=np.uint32)  # (2, H, W); wraps modulo 2**32
-    bits_c = np.ascontiguousarray(bits_c.transpose(1, 2, 0))
+    from scenes import _codec_kernels as K  # numba: only where flow files are read
+
+    # the running sum of each row's deltas, modulo 2**32, (H, W, 2) in one pass
+    bits_c = np.empty((delta.shape[2], delta.shape[3], 2), np.uint32)
+    K.flow_rowdelta_bits(np.ascontiguousarray(delta), bits_c)
     bits = bits_c.copy()
     bits.ravel()[index] ^= xor
     return bits.view(np.float32), bits_c.view(np.float32)

@@ -43,6 +43,15 @@ def test_temporal_filter_eq_4_12_and_ends():
     np.testing.assert_allclose(temporal_filter(None, b, None), b)
     with pytest.raises(ValueError, match=r"next: expected size \(2, 2\)"):
         temporal_filter(a, b, _field(np.zeros((3, 3)), np.zeros((3, 3))))
+    # a non-finite field is named, the first of cur, prev, next in turn, whichever the other faults
+    bad = a.copy()
+    bad[1, 0, 1] = np.inf
+    nan = a.copy()
+    nan[0, 1, 0] = np.nan
+    for fields, name in (((a, b, bad), "next"), ((nan, b, bad), "prev"), ((a, nan, None), "cur"),
+                         ((None, bad, c), "cur"), ((nan, b, a[:1]), "prev")):
+        with pytest.raises(ValueError, match=rf"{name}: 1 value\(s\) are NaN or infinite"):
+            temporal_filter(*fields)
 
 
 def test_threshold_keeps_only_allowed_direction_and_magnitude():

@@ -251,12 +251,20 @@ def test_pipelines_sharing_work_give_the_estimates_each_gives_alone():
     assert shared.hits["compensated"] >= 1
 
 
-def test_shared_work_hands_out_copies_and_refuses_other_frames():
+def test_shared_work_hands_out_read_only_views_and_refuses_other_frames():
     frames = Frames(3)
     shared = SharedWork(frames)
     g = shared.gray(1)
-    g[:] = -1
-    assert shared.gray(1).min() >= 0  # a caller writing into its frame changes nobody else's
+    with pytest.raises(ValueError, match="read-only"):
+        g[:] = -1  # a caller cannot write into what another pipeline sees
+    with pytest.raises(ValueError):
+        g.flags.writeable = True
+    assert shared.gray(1).min() >= 0
+    warped = shared.compensated(0, "shift", np.eye(3), lambda: (g + 1, np.zeros(g.shape + (2,), np.float32),
+                                                                np.ones(g.shape, bool)))
+    assert all(not a.flags.writeable for a in warped)
+    with pytest.raises(ValueError, match="read-only"):
+        warped[1][...] = 1.0
     with pytest.raises(ValueError, match="the SharedWork made for these frames"):
         next(Pipeline.from_dict(BASE).run(Frames(3), shared=shared))
     with pytest.raises(ValueError, match="max_bytes: expected >= 0"):

@@ -48,6 +48,35 @@ def test_target_inside_marks_where_x_plus_flow_stays_in_the_frame():
     assert inside[:, :4].all() and not inside[:, 4].any()
 
 
+def test_target_inside_and_warp_backward_are_the_float32_sums_and_tests_of_the_numpy_form():
+    # the one-pass kernels against the expressions they replace, on points on the frame's edges and NaN
+    import cv2
+
+    from algorithms.flow import warp_backward
+
+    rng = np.random.default_rng(2)
+    h, w = 31, 47
+    flow = rng.uniform(-3, 3, (h, w, 2)).astype(np.float32)
+    flow[0, :, 1] = 0.0                       # on the top edge
+    flow[:, -1, 0] = 0.0                      # on the right edge
+    flow[5, :, 0] = -np.arange(w, dtype=np.float32)  # x + u = 0 exactly
+    flow[6, 3] = (np.float32(-3.0000002), 0.0)       # a rounding's width outside
+    flow[7, 7] = (np.nan, 0.0)
+    xs = np.arange(w, dtype=np.float32)[None, :] + flow[..., 0]
+    ys = np.arange(h, dtype=np.float32)[:, None] + flow[..., 1]
+    expected = (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1)
+    assert np.array_equal(target_inside(flow), expected)
+    f64 = flow.astype(np.float64)
+    assert np.array_equal(target_inside(f64), expected)
+    image = rng.uniform(0, 255, (h, w)).astype(np.float32)
+    finite = np.nan_to_num(flow)
+    xs, ys = np.arange(w, dtype=np.float32)[None, :] + finite[..., 0], np.arange(h, dtype=np.float32)[:, None] + finite[..., 1]
+    strided = np.ascontiguousarray(finite.transpose(1, 0, 2)).transpose(1, 0, 2)  # not C-contiguous
+    warped, inside = warp_backward(image, strided)
+    assert np.array_equal(warped, cv2.remap(image, xs, ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+    assert np.array_equal(inside, (xs >= 0) & (xs <= w - 1) & (ys >= 0) & (ys <= h - 1))
+
+
 def test_median_flow_removes_an_isolated_outlier_and_refuses_other_sizes():
     flow = np.ones((9, 9, 2), np.float32)
     flow[4, 4] = (50.0, -50.0)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from algorithms.kalman import THESIS_KALMAN, scalar_kalman
-from algorithms.tracking import MultiTargetTracker, PointTracker, detect_moving_objects
+from algorithms.tracking import MultiTargetTracker, PointTracker, detect_moving_objects, motion_mask
 
 
 def test_detection_finds_known_blobs_with_centroids_and_areas():
@@ -16,6 +16,48 @@ def test_detection_finds_known_blobs_with_centroids_and_areas():
     assert det == [(14.5, 7.0, 50), (41.5, 31.5, 16)]
     with pytest.raises(ValueError, match=r"mask: expected \(H, W\) bool"):
         detect_moving_objects(m.astype(np.uint8))
+
+
+@pytest.mark.parametrize("threshold", [0.5, 0.7, 1, 0.0, -1.0, np.float64(0.7), 1e-30, 1e30])
+def test_motion_mask_is_numpys_hypot_comparison_bit_for_bit(threshold):
+    rng = np.random.default_rng(3)
+    h, w = 120, 160
+    t = float(np.float32(abs(threshold))) or 1.0
+    # vectors on and around the circle |w| = t (the rounding band), random ones, zeros, NaN and infinity
+    angle = rng.uniform(0, 2 * np.pi, (h, w))
+    radius = t * (1 + rng.choice([0.0, 1e-7, -1e-7, 6e-8, -6e-8, 1e-3, -0.5, 2.0], (h, w)))
+    flow = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=-1).astype(np.float32)
+    flow[:10] = rng.standard_normal((10, w, 2)).astype(np.float32)
+    flow[10, :5] = 0.0
+    flow[11, 0], flow[11, 1], flow[11, 2] = (np.nan, 1.0), (np.inf, 0.0), (-np.inf, np.nan)
+    valid = rng.random((h, w)) < 0.9
+    expected = valid & (np.hypot(flow[..., 0], flow[..., 1]) >= threshold)
+    got = motion_mask(flow, valid, threshold)
+    assert got.dtype == bool and np.array_equal(got, expected)
+    # other layouts take the numpy form
+    f64 = flow.astype(np.float64)
+    assert np.array_equal(motion_mask(f64, valid, threshold), valid & (np.hypot(f64[..., 0], f64[..., 1]) >= threshold))
+
+
+@pytest.mark.parametrize("threads", [1, 4])
+def test_detection_numbers_regions_as_opencvs_default_labelling_does(threads):
+    # detect_moving_objects asks for BBDT by name; the regions, their order (equal areas keep the label
+    # order) and their centroids must be those of connectedComponentsWithStats' default (Spaghetti)
+    import cv2
+
+    rng = np.random.default_rng(5)
+    old = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        for density in (0.05, 0.3, 0.55):
+            for shape in ((480, 640), (37, 53), (1, 9), (8, 1)):
+                m = rng.random(shape) < density
+                n, _, stats, cents = cv2.connectedComponentsWithStats(m.view(np.uint8), connectivity=8)
+                ref = sorted([(float(cents[i, 0]), float(cents[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
+                              for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= 2], key=lambda d: -d[2])
+                assert detect_moving_objects(m, min_area_px=2) == ref
+    finally:
+        cv2.setNumThreads(old)
 
 
 def test_point_tracker_follows_global_plus_local_and_filters_flow():
