@@ -767,14 +767,17 @@ def shift_rows(shifts_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
     Pairs whose truth is empty (the last frame) or whose estimate is NaN are skipped.
     """
     s = np.asarray(shifts_px, np.float64).reshape(-1, 2)
-    cam = camera.sort_values("frame").reset_index(drop=True)
+    cam = camera.sort_values("frame")
+    # whole columns once: a pandas row lookup per pair cost more than the rest of the sequence scoring
+    true = cam[["global_dx_px", "global_dy_px"]].to_numpy(np.float64)
+    frames = cam["frame"].to_numpy()
     rows = []
     for i in range(min(len(s), len(cam))):
-        t = cam.loc[i, ["global_dx_px", "global_dy_px"]].to_numpy(np.float64)
+        t = true[i]
         if not (np.isfinite(t).all() and np.isfinite(s[i]).all()):
             continue
         err = float(np.hypot(*(s[i] - t)))
-        rows.append(_row("shift_error", err, err, 1, motion="global", frame=int(cam.loc[i, "frame"])))
+        rows.append(_row("shift_error", err, err, 1, motion="global", frame=int(frames[i])))
     return rows
 
 

@@ -222,6 +222,14 @@ def test_shift_error_per_pair_skips_the_last_frame():
     assert [r["frame"] for r in rows] == [0, 1, 2]
 
 
+def test_shift_error_pairs_the_shifts_with_the_camera_rows_in_frame_order():
+    cam = _camera(4, jitter=np.zeros((4, 2)))
+    cam["global_dx_px"] = [1.0, 2.0, 3.0, np.nan]
+    shuffled = cam.iloc[[2, 0, 3, 1]]  # camera.csv in any order: pair i is frame i's row
+    rows = M.shift_rows(np.array([[1.0, 0.0], [2.0, 3.0], [0.0, 4.0]]), shuffled)
+    assert [(r["frame"], r["value"]) for r in rows] == [(0, 0.0), (1, 3.0), (2, 5.0)]
+
+
 def test_jitter_residual_absorbs_the_truths_linear_trend():
     i = np.arange(20.0)
     wobble = np.stack([np.sin(i), np.cos(2 * i)], axis=1)
