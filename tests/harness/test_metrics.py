@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from types import SimpleNamespace
 
 import numpy as np
@@ -198,6 +199,19 @@ def test_histogram_round_trip_and_overflow():
     assert M.hist_quantile(h, 0.5) == pytest.approx(0.015)  # the 3rd of 5, at its bin centre
     assert M.hist_quantile(h, 1.0) == M.HIST_MAX_PX           # overflow reads as the floor
     assert math.isnan(M.hist_quantile(np.zeros_like(h), 0.5))
+
+
+@pytest.mark.parametrize("bins", [[], [0], [M.HIST_NBINS - 1], [0, M.HIST_NBINS - 1], [7, 8, 300]])
+def test_encoded_histogram_stores_its_first_to_last_non_empty_bin(bins):
+    h = np.zeros(M.HIST_NBINS, np.int64)
+    h[bins] = np.arange(1, len(bins) + 1)
+    data = M.encode_hist(h)
+    if not bins:
+        assert data == b""
+        return
+    fmt, width, lo, n = struct.unpack_from("<BBII", data)
+    assert (fmt, width, lo, n) == (1, 4, min(bins), max(bins) - min(bins) + 1)
+    np.testing.assert_array_equal(M.decode_hist(data), h)
 
 
 def test_registry_describes_every_metric():
