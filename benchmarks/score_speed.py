@@ -71,11 +71,25 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "harness"))
 
-import harness.metrics as M  # noqa: E402
-from harness._flow_kernels import _ASIN_C, _EDGE, _TO_DEG, K1, K3, K5, KCOV, KFL, N, S_AE, S_EPE, S_SQ  # noqa: E402
-from harness._flow_kernels import region_hists  # noqa: E402
-from harness.metrics import prepare_pair_truth, score_pair  # noqa: E402
 from test_score_fused import reference_score_pair  # noqa: E402
+
+import harness.metrics as M  # noqa: E402
+from harness._flow_kernels import (  # noqa: E402
+    _ASIN_C,
+    _EDGE,
+    _TO_DEG,
+    K1,
+    K3,
+    K5,
+    KCOV,
+    KFL,
+    S_AE,
+    S_EPE,
+    S_SQ,
+    N,
+    region_hists,
+)
+from harness.metrics import prepare_pair_truth, score_pair  # noqa: E402
 
 N_SHARED = 7
 
@@ -620,6 +634,25 @@ def real_pair(preset: str, sequence: str | None):
     return estimate, truth
 
 
+def pipeline_estimates(sequence: str, pair: int = 0) -> tuple[list, object]:
+    """The estimates of pair ``pair`` of the sequence folder by the ``standard`` suite's pipelines, and its truth."""
+    from algorithms.pipeline import PairEstimate, Pipeline
+    from harness.cell_scoring import point_seeds
+    from harness.suites import expand, load_suite
+    from scenes import open_sequence
+
+    seq = open_sequence(sequence)
+    specs = {c.pipeline: c.pipeline_spec for c in expand(load_suite("standard"))}
+    out = []
+    for spec in specs.values():
+        for est in Pipeline.from_dict(spec).run(seq, seeds=point_seeds(seq.tracks)):
+            if isinstance(est, PairEstimate) and est.index == pair:
+                out.append(SimpleNamespace(flow_total=est.flow_total, flow_global=est.flow_global, valid=est.valid,
+                                           stage_ms={}))
+                break
+    return out, seq.pair_truth(pair)
+
+
 def _same_rows(a: list[dict], b: list[dict]) -> bool:
     """Rows equal field by field, bit for bit (NaN equal to NaN)."""
     def same(x, y):
@@ -633,12 +666,22 @@ def main() -> None:
     ap.add_argument("--preset", default="nominal")
     ap.add_argument("--sequence", default=None, help="a rendered sequence folder: its pair 0, no rendering")
     ap.add_argument("--runs", type=int, default=31)
+    ap.add_argument("--pipelines", action="store_true",
+                    help="score the standard suite's pipelines' estimates of pair --pair of --sequence instead of "
+                         "the truth plus noise (their errors crowd into a few low bins, as in a real run)")
+    ap.add_argument("--pair", type=int, default=0, help="with --pipelines: the pair")
     args = ap.parse_args()
     cv2.setNumThreads(1)
-    estimate, truth = real_pair(args.preset, args.sequence)
+    if args.pipelines:
+        if not args.sequence:
+            ap.error("--pipelines needs --sequence")
+        estimates, truth = pipeline_estimates(args.sequence, args.pair)
+        estimate = estimates[0]
+    else:
+        estimate, truth = real_pair(args.preset, args.sequence)
+        estimates = [SimpleNamespace(**{**vars(estimate), "flow_total": estimate.flow_total + np.float32(0.01 * i)})
+                     for i in range(N_SHARED)]
     h, w = truth.valid.shape
-    estimates = [SimpleNamespace(**{**vars(estimate), "flow_total": estimate.flow_total + np.float32(0.01 * i)})
-                 for i in range(N_SHARED)]
 
     def shared(score):
         def run():
@@ -655,7 +698,7 @@ def main() -> None:
 
     prepared = prepare_pair_truth(truth)
     same = all(_same_rows(new(est, prepared), old(est, prepared)) for est in estimates)
-    n7 = f"{N_SHARED} estimates / {N_SHARED}"
+    n7 = f"{len(estimates)} estimates / {len(estimates)}"
     paths = {
         "reference (per region)": lambda: reference_score_pair(estimate, truth, frame=0),
         "before (2 passes)": lambda: _score_pair_before(estimate, truth, frame=0),
@@ -666,7 +709,7 @@ def main() -> None:
         n7: shared(new),
         f"95a9436 {n7}": shared(old),
     }
-    per_call = {n7: N_SHARED, f"95a9436 {n7}": N_SHARED}
+    per_call = {n7: len(estimates), f"95a9436 {n7}": len(estimates)}
     for fn in paths.values():
         fn()
     cpu: dict[str, list[float]] = {k: [] for k in paths}
@@ -678,7 +721,8 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in cpu.items()}
     low = {k: min(v) for k, v in cpu.items()}
     ref = "before (2 passes)"
-    print(f"score_pair on a {w}x{h} {args.sequence or args.preset!r} pair (4 regions x 2 motions), CPU ms over "
+    what = f"the standard pipelines' estimates of pair {args.pair}" if args.pipelines else "truth + noise"
+    print(f"score_pair on a {w}x{h} {args.sequence or args.preset!r} pair ({what}; 4 regions x 2 motions), CPU ms over "
           f"{args.runs} interleaved runs, one native thread; load average {os.getloadavg()[0]:.1f} on "
           f"{os.cpu_count()} cores")
     print(f"  {'path':34s} {'median':>7s} {'min':>7s} {'med/before':>11s} {'min/before':>11s}")
@@ -689,7 +733,7 @@ def main() -> None:
         o = f"95a9436 {k}"
         rounds = statistics.median(a / b for a, b in zip(cpu[k], cpu[o]))
         print(f"  {k:34s} {med[k] / med[o]:7.3f} {low[k] / low[o]:7.3f} {rounds:7.3f}")
-    print(f"rows of the {N_SHARED} estimates identical to 95a9436's, bit for bit: {same}")
+    print(f"rows of the {len(estimates)} estimates identical to 95a9436's, bit for bit: {same}")
     if not same:
         raise SystemExit("the rows differ from 95a9436's")
 
