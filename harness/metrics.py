@@ -485,9 +485,11 @@ def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float
             for k in dict.fromkeys(k for k in ks if k >= 0):  # each bin once, in order
                 size, first = sizes_l[m][slot_l[m][k]], start_l[m][slot_l[m][k]]
                 parts = [values[first[b]:first[b] + size[b]] for b in range(1, n_codes) if (b >> r) & 1 and size[b]]
-                samples = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                # a pattern's segment serves several regions: partitioned in place only as a copy
+                samples = parts[0].copy() if len(parts) == 1 else np.concatenate(parts)
                 js = [j for j, kj in enumerate(ks) if kj == k]  # the quantiles read from this bin
-                out[m, r, js] = np.partition(samples, rank[m, r, js])[rank[m, r, js]]
+                samples.partition(rank[m, r, js])
+                out[m, r, js] = samples[rank[m, r, js]]
     return out
 
 
