@@ -481,13 +481,13 @@ def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float
     # the selection, per region and bin, with Python's lists (numpy's scalars cost more than the work here)
     sizes_l, start_l, slot_l = sizes.tolist(), start.tolist(), [dict(zip(ks.tolist(), range(len(ks)))) for ks in kept]
     for m, by_region in enumerate(target.tolist()):
-        for r, ks in enumerate(by_region):
-            for k in dict.fromkeys(k for k in ks if k >= 0):  # each bin once, in order
+        for r, bins_r in enumerate(by_region):
+            for k in dict.fromkeys(k for k in bins_r if k >= 0):  # each bin once, in order
                 size, first = sizes_l[m][slot_l[m][k]], start_l[m][slot_l[m][k]]
                 parts = [values[first[b]:first[b] + size[b]] for b in range(1, n_codes) if (b >> r) & 1 and size[b]]
                 # a pattern's segment serves several regions: partitioned in place only as a copy
                 samples = parts[0].copy() if len(parts) == 1 else np.concatenate(parts)
-                js = [j for j, kj in enumerate(ks) if kj == k]  # the quantiles read from this bin
+                js = [j for j, kj in enumerate(bins_r) if kj == k]  # the quantiles read from this bin
                 samples.partition(rank[m, r, js])
                 out[m, r, js] = samples[rank[m, r, js]]
     return out
