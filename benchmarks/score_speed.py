@@ -1,14 +1,17 @@
 """Scoring speed per frame pair: the one-pass ``score_pair`` against the per-region scoring it replaced.
 
     cd /work/wt-scoring && PYTHONPATH=. python benchmarks/score_speed.py [--preset nominal] [--runs 31]
-        [--sequence PATH]
+        [--sequence PATH [--pipelines [--pair 0]]]
 
 The pair is real: frames 0 -> 1 of ``--preset`` rendered with its exact ground truth
 (flow, camera flow, valid mask, instances), or pair 0 of a rendered sequence folder
 (``--sequence``, no rendering); the "estimate" is the true flow plus heavy-tailed noise
 (Student t, 2 degrees of freedom, 0.5 px scale: errors from hundredths of a pixel to past
-the histogram's 100 px edge) and a constant global field. Timed side by side, interleaved,
-after one untimed call each (numba's compiled kernels load from its cache):
+the histogram's 100 px edge) and a constant global field. With ``--pipelines`` the estimates
+are instead the ``standard`` suite's seven pipelines' own estimates of pair ``--pair`` of the
+``--sequence``: their errors crowd into a few bins of hundredths of a pixel, a third of the
+pixels in the median's bin, which is what the quantiles cost in a real run. Timed side by
+side, interleaved, after one untimed call each (numba's compiled kernels load from its cache):
 
 - ``reference``: ``reference_score_pair`` of ``tests/harness/test_score_fused.py``, the
   per-region numpy scoring (the test that the two agree lives there);
@@ -18,7 +21,12 @@ after one untimed call each (numba's compiled kernels load from its cache):
 - ``prepare_pair_truth``: the truth side alone;
 - ``score_pair(prepared=)``: one estimate against a truth prepared beforehand;
 - ``7 estimates / 7``: ``prepare_pair_truth`` once and seven ``score_pair(prepared=)``, per
-  estimate (the runner scores up to seven pipelines of a scene against one truth).
+  estimate (the runner scores up to seven pipelines of a scene against one truth);
+- ``95a9436 ...``: the same two with ``score_pair`` as of commit 95a9436 (kept here as
+  ``score_pair_95a9436``: every pixel of both motions scanned again for the quantiles' bins,
+  each sample written once per region, ``np.flatnonzero`` in ``encode_hist``), with the
+  ratios of today's to it and a bit-for-bit comparison of the rows of every estimate (the
+  run fails if they differ).
 
 Figures are medians and minima over ``--runs`` interleaved rounds of CPU (process) time, with
 one native thread (``cv2.setNumThreads(1)``, numba and BLAS at 1); the machine is shared,
@@ -45,6 +53,25 @@ on a quiet one every figure is lower (the minima are the nearer), score_pair und
 Of the remaining time about two thirds is the pass itself (square roots and divisions
 of both motions in float64, 4 lanes), then the quantile scan, the histogram encoding
 (zlib) and the truth side.
+
+Against 95a9436 (2026-11-24, same VM, load average about 2 from other jobs, 21 runs, the
+nominal render's pair 0; ratios today / 95a9436 of the medians, the minima and the median
+of the per-round ratios; rows identical bit for bit in both):
+
+    =====================================  ==============  =====  =====  =========
+    estimates                              path            med    min    per round
+    =====================================  ==============  =====  =====  =========
+    the standard pipelines' (--pipelines)  prepared=        0.891  0.896  0.891
+    the standard pipelines' (--pipelines)  7 estimates / 7  0.924  0.922  0.916
+    truth + noise                          prepared=        1.024  0.974  0.987
+    truth + noise                          7 estimates / 7  0.955  0.962  0.975
+    =====================================  ==============  =====  =====  =========
+
+(pipelines: 18.05 against 20.25 ms median per estimate.) The gain is in the quantiles: with
+real estimates a median bin holds 40 000 to 100 000 pixels of a region, which 95a9436
+collected once per region they belong to behind a mispredicted branch per pixel; now each
+pixel once per motion, grouped by membership pattern, a region's samples gathered from its
+patterns' segments. With truth + noise the bins are small and the two are within noise.
 """
 
 from __future__ import annotations
@@ -56,6 +83,7 @@ for _var in ("LP_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_N
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 import argparse  # noqa: E402
+import math  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -70,9 +98,25 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "harness"))
 
-import harness.metrics as M  # noqa: E402
-from harness.metrics import prepare_pair_truth, score_pair  # noqa: E402
 from test_score_fused import reference_score_pair  # noqa: E402
+
+import harness.metrics as M  # noqa: E402
+from harness._flow_kernels import (  # noqa: E402
+    _ASIN_C,
+    _EDGE,
+    _TO_DEG,
+    K1,
+    K3,
+    K5,
+    KCOV,
+    KFL,
+    S_AE,
+    S_EPE,
+    S_SQ,
+    N,
+    region_hists,
+)
+from harness.metrics import prepare_pair_truth, score_pair  # noqa: E402
 
 N_SHARED = 7
 
@@ -252,6 +296,347 @@ def _score_pair_before(estimate, truth, *, frame):
     return rows
 
 
+# --------------------------------------------------------------------------- score_pair as of 95a9436
+# (a chain-free pass that wrote every pixel's bin, then a scan of all pixels for the quantiles' bins), for the
+# ratio and the identity check only: the kernels of harness/_flow_kernels.py and the functions of
+# harness/metrics.py at that commit, renamed with _old
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def acos_old(cos):  # pragma: no cover - numba
+    """arccos of c in [-1, 1], branch-free (SIMD in a loop); within 2 ulp of libm's / numpy's.
+
+    acos c = pi/2 - asin c for |c| <= 1/2, 2 asin sqrt((1 - c) / 2) for c > 1/2,
+    pi - 2 asin sqrt((1 + c) / 2) for c < -1/2, asin by its series in x^2 <= 1/4.
+    """
+    a = abs(cos)
+    big = a > 0.5
+    x = math.sqrt(0.5 * (1.0 - a)) if big else cos
+    z = x * x
+    # Estrin's scheme (a tree of depth 5 rather than Horner's chain of 23): the loop over the
+    # pixels runs in SIMD registers and is not held up by the latency of one long chain;
+    # every term is positive, so the order of the sums costs no accuracy
+    c = _ASIN_C
+    z2 = z * z
+    z4 = z2 * z2
+    z8 = z4 * z4
+    a0, a1, a2, a3 = c[0] + c[1] * z, c[2] + c[3] * z, c[4] + c[5] * z, c[6] + c[7] * z
+    a4, a5, a6, a7 = c[8] + c[9] * z, c[10] + c[11] * z, c[12] + c[13] * z, c[14] + c[15] * z
+    a8, a9, a10, a11 = c[16] + c[17] * z, c[18] + c[19] * z, c[20] + c[21] * z, c[22] + c[23] * z
+    b0, b1, b2 = a0 + a1 * z2, a2 + a3 * z2, a4 + a5 * z2
+    b3, b4, b5 = a6 + a7 * z2, a8 + a9 * z2, a10 + a11 * z2
+    d0, d1, d2 = b0 + b1 * z4, b2 + b3 * z4, b4 + b5 * z4
+    p = d0 + (d1 + d2 * z8) * z8
+    s = x + x * z * p  # asin x
+    r_big = 2.0 * s if cos > 0.0 else math.pi - 2.0 * s
+    r_small = 0.5 * math.pi - s
+    return r_big if big else r_small
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _acos_deg_old(c):  # pragma: no cover - numba
+    """In place: the cosines ``c`` (1-D) become their angles in degrees (``np.degrees(np.arccos(c))`` to 2 ulp)."""
+    for i in range(c.size):
+        c[i] = acos_old(c[i]) * _TO_DEG
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _epe_old(eu, ev, tu, tv):  # pragma: no cover - numba
+    """EPE in its sqrt form (float64 in)."""
+    du, dv = eu - tu, ev - tv
+    return math.sqrt(du * du + dv * dv)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _cos_old(eu, ev, tu, tv):  # pragma: no cover - numba
+    """Clipped cosine of the angular error (float64 in), as angular_error_deg computes it."""
+    # Barron 1994: angle between (u_e, v_e, 1) and (u_t, v_t, 1)
+    num = eu * tu + ev * tv + 1.0
+    den = math.sqrt((eu * eu + ev * ev + 1.0) * (tu * tu + tv * tv + 1.0))
+    return min(max(num / den, -1.0), 1.0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _bin_old(epe, per_bin, nbins):  # pragma: no cover - numba
+    """(histogram bin, near an edge?) of an EPE, branch-free: NaN (unscored) and >= 100 px give the last bin.
+
+    ``per_bin`` is 1 / bin_px: the product is within an ulp of the quotient that decides the bin,
+    so the two can only disagree near an edge, where :func:`_bin_exact` divides.
+    """
+    q = epe * per_bin
+    kf = np.floor(q)  # a float: NaN stays NaN (math.floor would give an integer)
+    frac = q - kf
+    kf = kf if kf < nbins - 1.0 else nbins - 1.0
+    return np.int32(kf), (frac < _EDGE) | (frac > 1.0 - _EDGE)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _bin_exact_old(du, dv, bin_px, nbins):  # pragma: no cover - numba
+    """(EPE, bin) of a pixel near a bin edge: EPE by hypot, as endpoint_error, so that the bin is its bin."""
+    epe = math.hypot(du, dv)
+    kf = np.floor(epe / bin_px)  # clamped as a float: a huge EPE would overflow an integer
+    return epe, np.int32(kf if kf < nbins - 1.0 else nbins - 1.0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _fl_old(epe, du, dv, tu, tv):  # pragma: no cover - numba
+    """KITTI Fl of a pixel with EPE > 3 px: also > 5 % of |w_true| (1.0 or 0.0)."""
+    if tu * tu + tv * tv < 3599.0:  # 0.05 |w_true| < 3 px < EPE, without the hypot
+        return 1.0
+    limit = 0.05 * math.hypot(tu, tv)
+    if abs(epe - limit) <= _EDGE * limit:
+        epe = math.hypot(du, dv)
+    return 1.0 if epe > limit else 0.0
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _run_totals_old(stats, b, epe, ang, ve, x0, x1):  # pragma: no cover - numba
+    """Add the totals of the pixels x0 .. x1 - 1 of a row (one pattern ``b``) to ``stats[b]``.
+
+    The sums are reassociated (SIMD): they differ from a sequential sum by rounding only.
+    """
+    s1 = s2 = sa = k1 = k3 = k5 = kc = 0.0
+    for x in range(x0, x1):
+        v = epe[x]
+        s1 += v
+        s2 += v * v
+        sa += ang[x]
+        k1 += 1.0 if v > 1.0 else 0.0
+        k3 += 1.0 if v > 3.0 else 0.0
+        k5 += 1.0 if v > 5.0 else 0.0
+        kc += 1.0 if ve[x] else 0.0
+    stats[b, N] += x1 - x0
+    stats[b, S_EPE] += s1
+    stats[b, S_SQ] += s2
+    stats[b, S_AE] += sa
+    stats[b, K1] += k1
+    stats[b, K3] += k3
+    stats[b, K5] += k5
+    stats[b, KCOV] += kc
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _count_row_old(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, stats, hist, bins):  # pragma: no cover
+    """Count the scored pixels of a row of one motion from its per-pixel errors (epe, ang, k, edge)."""
+    w = bits.size
+    for x in range(w):
+        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, Fl)
+            if motion == 0:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0]) - tu, np.float64(e[x, 1]) - tv
+            else:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0] - g[x, 0]) - tu, np.float64(e[x, 1] - g[x, 1]) - tv
+            if edge[x]:
+                epe[x], k[x] = _bin_exact_old(du, dv, bin_px, nbins)
+            if epe[x] > 3.0:
+                stats[bits[x], KFL] += _fl_old(epe[x], du, dv, tu, tv)
+    for x in range(w):
+        bins[x] = k[x]
+        hist[bits[x], k[x]] += 1  # pattern 0 (not scored) is counted too, and ignored
+    x0 = 0
+    while x0 < w:
+        b = bits[x0]
+        x1 = x0 + 1
+        while x1 < w and bits[x1] == b:
+            x1 += 1
+        if b != 0:
+            _run_totals_old(stats, b, epe, ang, ve, x0, x1)
+        x0 = x1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def pair_totals_old(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist, bins):  # pragma: no cover
+    """One pass over the pixels: totals and EPE histogram of every membership pattern, both motions.
+
+    e, g : (H, W, 2) float32 estimate (total) and its global field; t, tl : (H, W, 2) float32
+    truth, total and local; bits, bits_l : (H, W) uint8, bit r set when the pixel is scored in
+    region r for the total / local motion (0: not scored); valid_est : (H, W) bool.
+    Out: stats (2, 2**R, 9) float64 (columns N .. KCOV) and hist (2, 2**R, nbins) int32, row
+    ``[m, b]`` for the pixels of motion m whose bits equal b (a region sums its patterns; row 0
+    is garbage); bins (2, H, W) uint16, each scored pixel's bin (for :func:`values_in_bins`).
+    Returns the number of pixels whose estimate, total or local, is not finite (the caller
+    raises; the totals are then incomplete).
+    """
+    h, w = bits.shape
+    per_bin = 1.0 / bin_px
+    epe_t, ang_t, k_t, edge_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    epe_l, ang_l, k_l, edge_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    bad = 0
+    for y in range(h):
+        # errors of every pixel of the row (NaN where the truth is unknown), branch-free; the
+        # arithmetic and the arccos in separate loops, each of which the compiler vectorises
+        for x in range(w):
+            e0, e1 = e[y, x, 0], e[y, x, 1]
+            # local estimate in float32, as np.float32(e) - np.float32(g)
+            l0, l1 = e0 - g[y, x, 0], e1 - g[y, x, 1]
+            fin = (e0 - e0) + (e1 - e1) + (l0 - l0) + (l1 - l1)  # NaN unless all four are finite
+            bad += fin != fin
+            eu, ev, tu, tv = np.float64(e0), np.float64(e1), np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
+            epe_t[x] = epe = _epe_old(eu, ev, tu, tv)
+            k_t[x], edge_t[x] = _bin_old(epe, per_bin, nbins)
+            ang_t[x] = _cos_old(eu, ev, tu, tv)
+            eu, ev, tu, tv = np.float64(l0), np.float64(l1), np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
+            epe_l[x] = epe = _epe_old(eu, ev, tu, tv)
+            k_l[x], edge_l[x] = _bin_old(epe, per_bin, nbins)
+            ang_l[x] = _cos_old(eu, ev, tu, tv)
+        _acos_deg_old(ang_t)
+        _acos_deg_old(ang_l)
+        _count_row_old(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t,
+                   stats[0], hist[0], bins[0, y])
+        _count_row_old(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l,
+                   stats[1], hist[1], bins[1, y])
+    return bad
+
+
+@numba.njit(cache=True, error_model="numpy")
+def values_in_bins_old(e, g, t, tl, bits, bits_l, bins, is_target, target, start, out):  # pragma: no cover - numba
+    """The EPEs (hypot, as endpoint_error) of motion m, region r's pixels in bin ``target[m, r, j]``,
+    into ``out[start[m, r, j]:...]``.
+
+    The nearest-rank quantile lies in a known bin (from the histogram); the exact value is
+    found among the few samples of that bin instead of partitioning every pixel's EPE.
+    """
+    fill = start.copy()
+    h, w = bits.shape
+    _, n_regions, n_q = target.shape
+    for m in range(2):
+        bm = bits if m == 0 else bits_l
+        tm = t if m == 0 else tl
+        tgt = is_target[m]
+        for y in range(h):
+            for x in range(w):
+                k = bins[m, y, x]
+                b = bm[y, x]
+                if not tgt[k] or b == 0:
+                    continue
+                if m == 0:
+                    eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
+                else:
+                    eu, ev = np.float64(e[y, x, 0] - g[y, x, 0]), np.float64(e[y, x, 1] - g[y, x, 1])
+                epe = math.hypot(eu - np.float64(tm[y, x, 0]), ev - np.float64(tm[y, x, 1]))
+                for r in range(n_regions):
+                    if (b >> r) & 1:
+                        for j in range(n_q):
+                            if target[m, r, j] == k:
+                                out[fill[m, r, j]] = epe
+                                fill[m, r, j] += 1
+
+
+def _error_rows_from_totals_old(n: int, s_epe: float, s_sq: float, s_ae: float, over: list[int], fl: int,
+                            med: float, p95: float, hist: np.ndarray, *, region: str, motion: str,
+                            frame: int | None) -> list[dict]:
+    """The flow metric rows of one region from its totals (one place builds them, whichever path counted)."""
+    nan = float("nan")
+    kw = {"region": region, "motion": motion, "frame": frame}
+
+    def mean(s: float) -> float:
+        return s / n if n else nan
+
+    packed = M.encode_hist(hist)  # one bytes object shared by both quantile rows
+    rows = [
+        M._row("epe_mean", mean(s_epe), s_epe, n, **kw),
+        M._row("epe_rms", math.sqrt(s_sq / n) if n else nan, s_sq, n, **kw),
+        M._row("epe_median", med, nan, n, hist=packed, **kw),
+        M._row("epe_p95", p95, nan, n, hist=packed, **kw),
+        M._row("ae_mean", mean(s_ae), s_ae, n, **kw),
+    ]
+    for thr, k in zip(M.OUTLIER_PX, over):
+        rows.append(M._row(f"outlier_{thr}px", 100.0 * mean(k), k, n, **kw))
+    # KITTI Fl: EPE > 3 px and EPE > 5 % of |w_true|
+    rows.append(M._row("fl_all", 100.0 * mean(fl), fl, n, **kw))
+    return rows
+
+
+def _quantiles_old(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> np.ndarray:
+    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty)."""
+    target, rank, sizes = M._quantile_targets(hist, qs)
+    out = np.full(target.shape, np.nan)
+    # quantiles of a region in the same bin share one segment (an almost constant error puts
+    # most pixels in one bin: a segment may hold most of the image)
+    first = np.broadcast_to(np.arange(len(qs)), target.shape).copy()  # the first quantile of the same bin
+    for j in range(1, len(qs)):
+        for i in range(j - 1, -1, -1):
+            first[..., j] = np.where(target[..., j] == target[..., i], i, first[..., j])
+    own = (first == np.arange(len(qs))) & (target >= 0)
+    fill_target = np.where(own, target, -2)  # -2 matches no bin: nothing collected
+    fill_sizes = np.where(own, sizes, 0)
+    start = np.zeros_like(fill_sizes)
+    start.ravel()[1:] = np.cumsum(fill_sizes.ravel())[:-1]
+    values = np.empty(int(fill_sizes.sum()), np.float64)
+    is_target = np.zeros((2, hist.shape[-1]), np.bool_)
+    for m in range(2):
+        is_target[m, target[m][target[m] >= 0]] = True
+    values_in_bins_old(e, g, t, tl, bits, bits_l, bins, is_target, fill_target, start, values)
+    for m, r in zip(*np.nonzero(target[..., 0] >= 0)):
+        for j in np.flatnonzero(own[m, r]):
+            shared = np.flatnonzero(first[m, r] == j)  # the quantiles read from this segment
+            seg = values[start[m, r, j]:start[m, r, j] + fill_sizes[m, r, j]]
+            part = np.partition(seg, rank[m, r, shared])
+            out[m, r, shared] = part[rank[m, r, shared]]
+    return out
+
+
+def _score_motions_old(e: np.ndarray, g: np.ndarray, truth: M.PreparedTruth, ve: np.ndarray, *, frame: int | None,
+                   motions: tuple[str, ...] = M.MOTIONS) -> tuple[list[dict], int]:
+    """Flow rows of both motions in every region, and the number of non-finite estimate pixels.
+
+    e, g : (H, W, 2) float32 C-contiguous estimate and global field (local estimate = e - g);
+    ve : (H, W) bool. ``motions`` names motion 0 (total) and, if two, motion 1 (local); with
+    one, the local motion is left unscored. When the count returned is not 0 the rows are
+    meaningless: the caller raises.
+    """
+    names = truth.regions
+    h, w = truth.shape
+    n_codes = 1 << len(names)
+    stats = np.zeros((2, n_codes, 9), np.float64)
+    hist_code = np.zeros((2, n_codes, M.HIST_NBINS), np.int32)
+    bins = np.empty((2, h, w), np.uint16)
+    bits_l = truth.bits_local if len(motions) > 1 else M._read_only(np.zeros_like(truth.bits))
+    bad = pair_totals_old(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, ve, M.HIST_BIN_PX, M.HIST_NBINS,
+                      stats, hist_code, bins)
+    if bad:
+        return [], bad
+    hist = np.zeros((2, len(names), M.HIST_NBINS), np.int64)
+    region_hists(hist_code, stats[:, :, M._N], hist)
+    quant = _quantiles_old(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist, (0.5, 0.95))
+    # region totals: the sum of the patterns it belongs to
+    member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
+    rows: list[dict] = []
+    for m, motion in enumerate(motions):
+        by_code = stats[m]
+        used = np.flatnonzero(by_code[:, M._N])
+        for j, r in enumerate(names):
+            st = np.zeros(9)
+            for c in used:
+                if member[j, c]:
+                    st += by_code[c]
+            n = int(st[M._N])
+            rows += _error_rows_from_totals_old(n, float(st[M._S_EPE]), float(st[M._S_SQ]), float(st[M._S_AE]),
+                                            [int(st[M._K1]), int(st[M._K3]), int(st[M._K5])], int(st[M._KFL]),
+                                            float(quant[m, j, 0]), float(quant[m, j, 1]), hist[m, j],
+                                            region=r, motion=motion, frame=frame)
+            k = int(st[M._KCOV])
+            rows.append(M._row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
+                             frame=frame))
+    return rows, 0
+
+
+def score_pair_95a9436(estimate, *, frame, prepared):
+    """``score_pair(estimate, None, frame=frame, prepared=prepared)`` as of 95a9436."""
+    shape = prepared.shape
+    e = np.ascontiguousarray(M.check_flow(estimate.flow_total, name="flow_est", shape=shape, allow_nan=True))
+    g = np.asarray(estimate.flow_global, np.float32)
+    if g.shape != e.shape:
+        g = np.broadcast_to(g, e.shape)
+    e, g, ve = M._read_only(e), M._read_only(np.ascontiguousarray(g)), M._read_only(M._valid_est(estimate.valid, shape))
+    rows, bad = _score_motions_old(e, g, prepared, ve, frame=frame)
+    if bad:
+        raise ValueError("score_pair_95a9436: non-finite estimate")
+    if getattr(estimate, "stage_ms", None):
+        rows += M.timing_rows(estimate.stage_ms, frame=frame)
+    return rows
+
+
 # --------------------------------------------------------------------------- the pair
 
 def real_pair(preset: str, sequence: str | None):
@@ -276,33 +661,82 @@ def real_pair(preset: str, sequence: str | None):
     return estimate, truth
 
 
+def pipeline_estimates(sequence: str, pair: int = 0) -> tuple[list, object]:
+    """The estimates of pair ``pair`` of the sequence folder by the ``standard`` suite's pipelines, and its truth."""
+    from algorithms.pipeline import PairEstimate, Pipeline
+    from harness.cell_scoring import point_seeds
+    from harness.suites import expand, load_suite
+    from scenes import open_sequence
+
+    seq = open_sequence(sequence)
+    specs = {c.pipeline: c.pipeline_spec for c in expand(load_suite("standard"))}
+    out = []
+    for spec in specs.values():
+        for est in Pipeline.from_dict(spec).run(seq, seeds=point_seeds(seq.tracks)):
+            if isinstance(est, PairEstimate) and est.index == pair:
+                out.append(SimpleNamespace(flow_total=est.flow_total, flow_global=est.flow_global, valid=est.valid,
+                                           stage_ms={}))
+                break
+    return out, seq.pair_truth(pair)
+
+
+def _same_rows(a: list[dict], b: list[dict]) -> bool:
+    """Rows equal field by field, bit for bit (NaN equal to NaN)."""
+    def same(x, y):
+        return x == y or (isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y))
+    return len(a) == len(b) and all(ra.keys() == rb.keys() and all(same(ra[k], rb[k]) for k in ra)
+                                    for ra, rb in zip(a, b))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="nominal")
     ap.add_argument("--sequence", default=None, help="a rendered sequence folder: its pair 0, no rendering")
     ap.add_argument("--runs", type=int, default=31)
+    ap.add_argument("--pipelines", action="store_true",
+                    help="score the standard suite's pipelines' estimates of pair --pair of --sequence instead of "
+                         "the truth plus noise (their errors crowd into a few low bins, as in a real run)")
+    ap.add_argument("--pair", type=int, default=0, help="with --pipelines: the pair")
     args = ap.parse_args()
     cv2.setNumThreads(1)
-    estimate, truth = real_pair(args.preset, args.sequence)
+    if args.pipelines:
+        if not args.sequence:
+            ap.error("--pipelines needs --sequence")
+        estimates, truth = pipeline_estimates(args.sequence, args.pair)
+        estimate = estimates[0]
+    else:
+        estimate, truth = real_pair(args.preset, args.sequence)
+        estimates = [SimpleNamespace(**{**vars(estimate), "flow_total": estimate.flow_total + np.float32(0.01 * i)})
+                     for i in range(N_SHARED)]
     h, w = truth.valid.shape
-    estimates = [SimpleNamespace(**{**vars(estimate), "flow_total": estimate.flow_total + np.float32(0.01 * i)})
-                 for i in range(N_SHARED)]
 
-    def shared():
-        prepared = prepare_pair_truth(truth)
-        for est in estimates:
-            score_pair(est, None, frame=0, prepared=prepared)
+    def shared(score):
+        def run():
+            prepared = prepare_pair_truth(truth)
+            for est in estimates:
+                score(est, prepared)
+        return run
+
+    def new(est, prepared):
+        return score_pair(est, None, frame=0, prepared=prepared)
+
+    def old(est, prepared):
+        return score_pair_95a9436(est, frame=0, prepared=prepared)
 
     prepared = prepare_pair_truth(truth)
+    same = all(_same_rows(new(est, prepared), old(est, prepared)) for est in estimates)
+    n7 = f"{len(estimates)} estimates / {len(estimates)}"
     paths = {
         "reference (per region)": lambda: reference_score_pair(estimate, truth, frame=0),
         "before (2 passes)": lambda: _score_pair_before(estimate, truth, frame=0),
         "score_pair": lambda: score_pair(estimate, truth, frame=0),
         "prepare_pair_truth": lambda: prepare_pair_truth(truth),
-        "score_pair(prepared=)": lambda: score_pair(estimate, None, frame=0, prepared=prepared),
-        f"{N_SHARED} estimates / {N_SHARED}": shared,
+        "score_pair(prepared=)": lambda: new(estimate, prepared),
+        "95a9436 score_pair(prepared=)": lambda: old(estimate, prepared),
+        n7: shared(new),
+        f"95a9436 {n7}": shared(old),
     }
-    per_call = {f"{N_SHARED} estimates / {N_SHARED}": N_SHARED}
+    per_call = {n7: len(estimates), f"95a9436 {n7}": len(estimates)}
     for fn in paths.values():
         fn()
     cpu: dict[str, list[float]] = {k: [] for k in paths}
@@ -314,12 +748,21 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in cpu.items()}
     low = {k: min(v) for k, v in cpu.items()}
     ref = "before (2 passes)"
-    print(f"score_pair on a {w}x{h} {args.sequence or args.preset!r} pair (4 regions x 2 motions), CPU ms over "
+    what = f"the standard pipelines' estimates of pair {args.pair}" if args.pipelines else "truth + noise"
+    print(f"score_pair on a {w}x{h} {args.sequence or args.preset!r} pair ({what}; 4 regions x 2 motions), CPU ms over "
           f"{args.runs} interleaved runs, one native thread; load average {os.getloadavg()[0]:.1f} on "
           f"{os.cpu_count()} cores")
-    print(f"  {'path':26s} {'median':>7s} {'min':>7s} {'med/before':>11s} {'min/before':>11s}")
+    print(f"  {'path':34s} {'median':>7s} {'min':>7s} {'med/before':>11s} {'min/before':>11s}")
     for k in paths:
-        print(f"  {k:26s} {med[k]:7.2f} {low[k]:7.2f} {med[k] / med[ref]:11.3f} {low[k] / low[ref]:11.3f}")
+        print(f"  {k:34s} {med[k]:7.2f} {low[k]:7.2f} {med[k] / med[ref]:11.3f} {low[k] / low[ref]:11.3f}")
+    print("now against 95a9436, side by side (ratio of medians, of minima; median of the per-round ratios):")
+    for k in ("score_pair(prepared=)", n7):
+        o = f"95a9436 {k}"
+        rounds = statistics.median(a / b for a, b in zip(cpu[k], cpu[o]))
+        print(f"  {k:34s} {med[k] / med[o]:7.3f} {low[k] / low[o]:7.3f} {rounds:7.3f}")
+    print(f"rows of the {len(estimates)} estimates identical to 95a9436's, bit for bit: {same}")
+    if not same:
+        raise SystemExit("the rows differ from 95a9436's")
 
 
 if __name__ == "__main__":

@@ -231,37 +231,40 @@ def pair_totals(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist
 
 
 @numba.njit(cache=True, error_model="numpy")
-def values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, target, start, out):  # pragma: no cover - numba
-    """The EPEs (hypot, as endpoint_error) of motion m, region r's pixels in bin ``target[m, r, j]``,
-    into ``out[start[m, r, j]:...]``.
+def values_in_bins(e, g, t, tl, bits, bits_l, bins, slot, start, out):  # pragma: no cover - numba
+    """The EPEs (hypot, as endpoint_error) of the scored pixels in the quantiles' bins, once per pixel and
+    motion, grouped by (bin, membership pattern).
 
-    The nearest-rank quantile lies in a known bin (from the histogram); the exact value is
-    found among the few samples of that bin instead of partitioning every pixel's EPE.
+    A scored pixel of motion m (pattern ``b = bits[y, x]``, or ``bits_l``, not 0) whose bin
+    ``k = bins[m, y, x]`` has ``slot[m, k] = s >= 0`` goes into segment ``c = start[m, s, b]``:
+    ``out[c:...]``, in no particular order (a region's samples of bin k are the segments of the
+    patterns holding it).
     """
     fill = start.copy()
     h, w = bits.shape
-    _, n_regions, n_q = target.shape
+    idx = np.empty(w, np.int64)
     for m in range(2):
         bm = bits if m == 0 else bits_l
         tm = t if m == 0 else tl
-        tgt = is_target[m]
+        sl = slot[m]
+        fm = fill[m]
+        bn = bins[m]
         for y in range(h):
+            # the row's pixels to collect, compacted without a branch (a target bin may hold a third
+            # of the pixels: a branch on it would be mispredicted often)
+            n = 0
             for x in range(w):
-                k = bins[m, y, x]
-                b = bm[y, x]
-                if not tgt[k] or b == 0:
-                    continue
+                idx[n] = x
+                n += (sl[bn[y, x]] >= 0) & (bm[y, x] != 0)
+            for i in range(n):
+                x = idx[i]
                 if m == 0:
                     eu, ev = np.float64(e[y, x, 0]), np.float64(e[y, x, 1])
                 else:
                     eu, ev = np.float64(e[y, x, 0] - g[y, x, 0]), np.float64(e[y, x, 1] - g[y, x, 1])
-                epe = math.hypot(eu - np.float64(tm[y, x, 0]), ev - np.float64(tm[y, x, 1]))
-                for r in range(n_regions):
-                    if (b >> r) & 1:
-                        for j in range(n_q):
-                            if target[m, r, j] == k:
-                                out[fill[m, r, j]] = epe
-                                fill[m, r, j] += 1
+                s, b = sl[bn[y, x]], bm[y, x]
+                out[fm[s, b]] = math.hypot(eu - np.float64(tm[y, x, 0]), ev - np.float64(tm[y, x, 1]))
+                fm[s, b] += 1
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -49,14 +49,6 @@ def point_seeds(tracks: pd.DataFrame) -> list[tuple[int, float, float]]:
     return [(int(r.vehicle_id), float(r.x_px), float(r.y_px)) for r in first.itertuples()]
 
 
-def _as_rows(rows: Any) -> list[dict]:
-    if rows is None:
-        return []
-    if isinstance(rows, pd.DataFrame):
-        return rows.to_dict("records")
-    return [dict(r) for r in rows]
-
-
 def _renderer_of(meta: Mapping) -> str:
     """One line naming what rendered a sequence (renderer and GL strings of meta.json)."""
     parts = [str(meta.get(k)) for k in ("renderer", "gl_renderer", "gl_version") if meta.get(k)]
@@ -181,7 +173,7 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                         truth_of[est.index] = (truth, prepare_pair_truth(truth))
                         del truth
                     truth, prepared = truth_of[est.index]
-                    run.rows += _as_rows(score_pair(est, truth, frame=est.index, prepared=prepared))
+                    run.rows += score_pair(est, truth, frame=est.index, prepared=prepared)  # fresh dicts: no copy
                     del truth, prepared
                     if est.index in run.pictures:
                         artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
@@ -213,7 +205,7 @@ def _finish(run: _CellRun, seq: Any) -> list[dict]:
     t0 = time.perf_counter()
     if run.seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
-    rows = run.rows + _as_rows(score_sequence(run.seq_est, seq.camera, seq.tracks))
+    rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks)  # fresh dicts: no copy
     artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
     artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))
     if run.payload["metrics"] is not None:

@@ -311,10 +311,12 @@ def encode_hist(counts: np.ndarray) -> bytes:
     fifth of the ``"bin:count ..."`` text that schema v1 stored, and decodes without parsing.
     """
     counts = np.asarray(counts)
-    nz = np.flatnonzero(counts)
-    if nz.size == 0:
+    # first and last non-empty bin by argmax (np.flatnonzero of 10001 bins costs 5 times more)
+    nz = counts != 0
+    lo = int(nz.argmax()) if nz.size else 0
+    if nz.size == 0 or not nz[lo]:
         return b""
-    lo, hi = int(nz[0]), int(nz[-1]) + 1
+    hi = nz.size - int(nz[::-1].argmax())
     part = counts[lo:hi]
     width = 4 if int(part.max()) < 2 ** 32 else 8
     payload = part.astype("<u4" if width == 4 else "<u8").tobytes()
@@ -452,34 +454,42 @@ def _quantile_targets(hist: np.ndarray, qs: tuple[float, ...]):
     return target, np.where(target >= 0, rank - below, 0), sizes
 
 
-def _quantiles(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> np.ndarray:
-    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty)."""
+def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float, ...]) -> np.ndarray:
+    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty).
+
+    ``hist_code`` (2, 2**R, nbins) is the histogram of each membership pattern, ``hist``
+    (2, R, nbins) of each region (the sum of its patterns').
+    """
     from harness._flow_kernels import values_in_bins
 
-    target, rank, sizes = _quantile_targets(hist, qs)
+    target, rank, _ = _quantile_targets(hist, qs)
     out = np.full(target.shape, np.nan)
-    # quantiles of a region in the same bin share one segment (an almost constant error puts
-    # most pixels in one bin: a segment may hold most of the image)
-    first = np.broadcast_to(np.arange(len(qs)), target.shape).copy()  # the first quantile of the same bin
-    for j in range(1, len(qs)):
-        for i in range(j - 1, -1, -1):
-            first[..., j] = np.where(target[..., j] == target[..., i], i, first[..., j])
-    own = (first == np.arange(len(qs))) & (target >= 0)
-    fill_target = np.where(own, target, -2)  # -2 matches no bin: nothing collected
-    fill_sizes = np.where(own, sizes, 0)
-    start = np.zeros_like(fill_sizes)
-    start.ravel()[1:] = np.cumsum(fill_sizes.ravel())[:-1]
-    values = np.empty(int(fill_sizes.sum()), np.float64)
-    is_target = np.zeros((2, hist.shape[-1]), np.bool_)
-    for m in range(2):
-        is_target[m, target[m][target[m] >= 0]] = True
-    values_in_bins(e, g, t, tl, bits, bits_l, bins, is_target, fill_target, start, values)
-    for m, r in zip(*np.nonzero(target[..., 0] >= 0)):
-        for j in np.flatnonzero(own[m, r]):
-            shared = np.flatnonzero(first[m, r] == j)  # the quantiles read from this segment
-            seg = values[start[m, r, j]:start[m, r, j] + fill_sizes[m, r, j]]
-            part = np.partition(seg, rank[m, r, shared])
-            out[m, r, shared] = part[rank[m, r, shared]]
+    n_m, n_codes, nbins = hist_code.shape
+    # the samples of each target bin are collected once per pixel, by membership pattern (a
+    # pixel is in several regions; an almost constant error puts most pixels in one bin)
+    slot = np.full((n_m, nbins), -1, np.int16)  # a target bin's index among its motion's
+    kept = [np.unique(target[m][target[m] >= 0]) for m in range(n_m)]
+    sizes = np.zeros((n_m, max(1, max(len(k) for k in kept)), n_codes), np.int64)
+    for m, ks in enumerate(kept):
+        slot[m, ks] = np.arange(len(ks))
+        sizes[m, :len(ks), 1:] = hist_code[m, 1:, ks]  # pattern 0: not scored, not collected
+    start = np.zeros(sizes.size, np.int64)
+    start[1:] = np.cumsum(sizes.ravel())[:-1]
+    start = start.reshape(sizes.shape)
+    values = np.empty(int(sizes.sum()), np.float64)
+    values_in_bins(e, g, t, tl, bits, bits_l, bins, slot, start, values)
+    # the selection, per region and bin, with Python's lists (numpy's scalars cost more than the work here)
+    sizes_l, start_l, slot_l = sizes.tolist(), start.tolist(), [dict(zip(ks.tolist(), range(len(ks)))) for ks in kept]
+    for m, by_region in enumerate(target.tolist()):
+        for r, bins_r in enumerate(by_region):
+            for k in dict.fromkeys(k for k in bins_r if k >= 0):  # each bin once, in order
+                size, first = sizes_l[m][slot_l[m][k]], start_l[m][slot_l[m][k]]
+                parts = [values[first[b]:first[b] + size[b]] for b in range(1, n_codes) if (b >> r) & 1 and size[b]]
+                # a pattern's segment serves several regions: partitioned in place only as a copy
+                samples = parts[0].copy() if len(parts) == 1 else np.concatenate(parts)
+                js = [j for j, kj in enumerate(bins_r) if kj == k]  # the quantiles read from this bin
+                samples.partition(rank[m, r, js])
+                out[m, r, js] = samples[rank[m, r, js]]
     return out
 
 
@@ -597,7 +607,7 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
         return [], bad
     hist = np.zeros((2, len(names), HIST_NBINS), np.int64)
     region_hists(hist_code, stats[:, :, _N], hist)
-    quant = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist, (0.5, 0.95))
+    quant = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist_code, hist, (0.5, 0.95))
     # region totals: the sum of the patterns it belongs to
     member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
     rows: list[dict] = []
@@ -767,14 +777,17 @@ def shift_rows(shifts_px: np.ndarray, camera: pd.DataFrame) -> list[dict]:
     Pairs whose truth is empty (the last frame) or whose estimate is NaN are skipped.
     """
     s = np.asarray(shifts_px, np.float64).reshape(-1, 2)
-    cam = camera.sort_values("frame").reset_index(drop=True)
+    cam = camera.sort_values("frame")
+    # whole columns once: a pandas row lookup per pair cost more than the rest of the sequence scoring
+    true = cam[["global_dx_px", "global_dy_px"]].to_numpy(np.float64)
+    frames = cam["frame"].to_numpy()
     rows = []
     for i in range(min(len(s), len(cam))):
-        t = cam.loc[i, ["global_dx_px", "global_dy_px"]].to_numpy(np.float64)
+        t = true[i]
         if not (np.isfinite(t).all() and np.isfinite(s[i]).all()):
             continue
         err = float(np.hypot(*(s[i] - t)))
-        rows.append(_row("shift_error", err, err, 1, motion="global", frame=int(cam.loc[i, "frame"])))
+        rows.append(_row("shift_error", err, err, 1, motion="global", frame=int(frames[i])))
     return rows
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 from types import SimpleNamespace
 
 import numpy as np
@@ -200,6 +201,19 @@ def test_histogram_round_trip_and_overflow():
     assert math.isnan(M.hist_quantile(np.zeros_like(h), 0.5))
 
 
+@pytest.mark.parametrize("bins", [[], [0], [M.HIST_NBINS - 1], [0, M.HIST_NBINS - 1], [7, 8, 300]])
+def test_encoded_histogram_stores_its_first_to_last_non_empty_bin(bins):
+    h = np.zeros(M.HIST_NBINS, np.int64)
+    h[bins] = np.arange(1, len(bins) + 1)
+    data = M.encode_hist(h)
+    if not bins:
+        assert data == b""
+        return
+    fmt, width, lo, n = struct.unpack_from("<BBII", data)
+    assert (fmt, width, lo, n) == (1, 4, min(bins), max(bins) - min(bins) + 1)
+    np.testing.assert_array_equal(M.decode_hist(data), h)
+
+
 def test_registry_describes_every_metric():
     table = M.describe_metrics()
     assert {"epe_mean", "fl_all", "jitter_residual_rms", "id_switches", "time_flow_ms"} <= set(table["metric"])
@@ -220,6 +234,14 @@ def test_shift_error_per_pair_skips_the_last_frame():
     rows = M.shift_rows(np.array([[1.0, 0.0], [4.0, 4.0], [1.0, 0.0]]), cam)
     assert [r["value"] for r in rows] == [0.0, 5.0, 0.0]
     assert [r["frame"] for r in rows] == [0, 1, 2]
+
+
+def test_shift_error_pairs_the_shifts_with_the_camera_rows_in_frame_order():
+    cam = _camera(4, jitter=np.zeros((4, 2)))
+    cam["global_dx_px"] = [1.0, 2.0, 3.0, np.nan]
+    shuffled = cam.iloc[[2, 0, 3, 1]]  # camera.csv in any order: pair i is frame i's row
+    rows = M.shift_rows(np.array([[1.0, 0.0], [2.0, 3.0], [0.0, 4.0]]), shuffled)
+    assert [(r["frame"], r["value"]) for r in rows] == [(0, 0.0), (1, 3.0), (2, 5.0)]
 
 
 def test_jitter_residual_absorbs_the_truths_linear_trend():

@@ -159,6 +159,23 @@ def test_fused_scoring_equals_the_reference_on_synthetic_fields(scale):
     assert_same_scores(estimate, truth, 3)
 
 
+def test_fused_scoring_equals_the_reference_when_one_bin_holds_most_pixels():
+    """An almost constant error, as real estimates have on the background: one bin holds the median and
+    the p95 of every region and motion, over several membership patterns each."""
+    rng = np.random.default_rng(16)
+    estimate, truth = _synthetic_pair(rng)
+    noise = np.float32(0.0123) + rng.uniform(0.0, 0.004, truth.flow.shape[:2]).astype(np.float32)
+    estimate.flow_total = truth.flow + np.stack([noise, np.zeros_like(noise)], -1)
+    estimate.flow_global = truth.flow_camera.copy()
+    rows = assert_same_scores(estimate, truth, 2)
+    for r in rows:
+        if r["metric"] == "epe_median":
+            hist = M.decode_hist(r["hist"])
+            assert hist[1] > 0.9 * hist.sum(), (r["region"], r["motion"])
+            assert 0.01 <= r["value"] and next(q["value"] for q in rows if q["metric"] == "epe_p95" and q["region"]
+                                               == r["region"] and q["motion"] == r["motion"]) < 0.02
+
+
 def test_fused_scoring_equals_the_reference_on_fast_motion():
     """Flows of 60 to 200 px: the Fl limit (5 % of |w_true|) is above 3 px and decides."""
     rng = np.random.default_rng(9)
