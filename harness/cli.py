@@ -287,8 +287,6 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers: expected at least 1, got {args.workers}")
     path = gate.baseline_from_run(run_dir, args.out)
     print(f"baseline: {path}")
     return EXIT_OK
@@ -301,8 +299,6 @@ def cmd_gate(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers: expected at least 1, got {args.workers}")
     if not Path(args.baseline).is_file():
         raise UsageError(f"--baseline: {args.baseline}: no such file (a missing baseline is not a pass)")
     if args.rules is None and not gate.DEFAULT_RULES.is_file():  # an install without the package data
