@@ -101,7 +101,8 @@ class SharedWork:
 
     def compensated(self, t: int, model: str, matrix: np.ndarray,
                     compute: Callable[[], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
-        """Frame ``t + 1`` compensated by ``matrix`` (``compute()`` once per pair, model and matrix); read-only views."""
+        """Frame ``t + 1`` compensated by ``matrix`` (``compute()`` once per pair, model and matrix); read-only
+        views."""
         key = (int(t), model, np.ascontiguousarray(matrix, np.float64).tobytes())
         hit = self._compensated.get(key)
         if hit is not None:

@@ -63,8 +63,8 @@ from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine", "CorrelationMatch",
-           "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
+__all__ = ["motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine",
+           "CorrelationMatch", "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
 TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
