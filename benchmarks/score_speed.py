@@ -100,22 +100,9 @@ sys.path.insert(0, str(ROOT / "tests" / "harness"))
 
 from test_score_fused import reference_score_pair  # noqa: E402
 
+import harness._flow_kernels as FK  # noqa: E402
 import harness.metrics as M  # noqa: E402
-from harness._flow_kernels import (  # noqa: E402
-    _ASIN_C,
-    _EDGE,
-    _TO_DEG,
-    K1,
-    K3,
-    K5,
-    KCOV,
-    KFL,
-    S_AE,
-    S_EPE,
-    S_SQ,
-    N,
-    region_hists,
-)
+from harness._flow_kernels import region_hists  # noqa: E402
 from harness.metrics import prepare_pair_truth, score_pair  # noqa: E402
 
 N_SHARED = 7
@@ -297,195 +284,11 @@ def _score_pair_before(estimate, truth, *, frame):
 
 
 # --------------------------------------------------------------------------- score_pair as of 95a9436
-# (a chain-free pass that wrote every pixel's bin, then a scan of all pixels for the quantiles' bins), for the
-# ratio and the identity check only: the kernels of harness/_flow_kernels.py and the functions of
-# harness/metrics.py at that commit, renamed with _old
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def acos_old(cos):  # pragma: no cover - numba
-    """arccos of c in [-1, 1], branch-free (SIMD in a loop); within 2 ulp of libm's / numpy's.
-
-    acos c = pi/2 - asin c for |c| <= 1/2, 2 asin sqrt((1 - c) / 2) for c > 1/2,
-    pi - 2 asin sqrt((1 + c) / 2) for c < -1/2, asin by its series in x^2 <= 1/4.
-    """
-    a = abs(cos)
-    big = a > 0.5
-    x = math.sqrt(0.5 * (1.0 - a)) if big else cos
-    z = x * x
-    # Estrin's scheme (a tree of depth 5 rather than Horner's chain of 23): the loop over the
-    # pixels runs in SIMD registers and is not held up by the latency of one long chain;
-    # every term is positive, so the order of the sums costs no accuracy
-    c = _ASIN_C
-    z2 = z * z
-    z4 = z2 * z2
-    z8 = z4 * z4
-    a0, a1, a2, a3 = c[0] + c[1] * z, c[2] + c[3] * z, c[4] + c[5] * z, c[6] + c[7] * z
-    a4, a5, a6, a7 = c[8] + c[9] * z, c[10] + c[11] * z, c[12] + c[13] * z, c[14] + c[15] * z
-    a8, a9, a10, a11 = c[16] + c[17] * z, c[18] + c[19] * z, c[20] + c[21] * z, c[22] + c[23] * z
-    b0, b1, b2 = a0 + a1 * z2, a2 + a3 * z2, a4 + a5 * z2
-    b3, b4, b5 = a6 + a7 * z2, a8 + a9 * z2, a10 + a11 * z2
-    d0, d1, d2 = b0 + b1 * z4, b2 + b3 * z4, b4 + b5 * z4
-    p = d0 + (d1 + d2 * z8) * z8
-    s = x + x * z * p  # asin x
-    r_big = 2.0 * s if cos > 0.0 else math.pi - 2.0 * s
-    r_small = 0.5 * math.pi - s
-    return r_big if big else r_small
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _acos_deg_old(c):  # pragma: no cover - numba
-    """In place: the cosines ``c`` (1-D) become their angles in degrees (``np.degrees(np.arccos(c))`` to 2 ulp)."""
-    for i in range(c.size):
-        c[i] = acos_old(c[i]) * _TO_DEG
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _epe_old(eu, ev, tu, tv):  # pragma: no cover - numba
-    """EPE in its sqrt form (float64 in)."""
-    du, dv = eu - tu, ev - tv
-    return math.sqrt(du * du + dv * dv)
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _cos_old(eu, ev, tu, tv):  # pragma: no cover - numba
-    """Clipped cosine of the angular error (float64 in), as angular_error_deg computes it."""
-    # Barron 1994: angle between (u_e, v_e, 1) and (u_t, v_t, 1)
-    num = eu * tu + ev * tv + 1.0
-    den = math.sqrt((eu * eu + ev * ev + 1.0) * (tu * tu + tv * tv + 1.0))
-    return min(max(num / den, -1.0), 1.0)
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _bin_old(epe, per_bin, nbins):  # pragma: no cover - numba
-    """(histogram bin, near an edge?) of an EPE, branch-free: NaN (unscored) and >= 100 px give the last bin.
-
-    ``per_bin`` is 1 / bin_px: the product is within an ulp of the quotient that decides the bin,
-    so the two can only disagree near an edge, where :func:`_bin_exact` divides.
-    """
-    q = epe * per_bin
-    kf = np.floor(q)  # a float: NaN stays NaN (math.floor would give an integer)
-    frac = q - kf
-    kf = kf if kf < nbins - 1.0 else nbins - 1.0
-    return np.int32(kf), (frac < _EDGE) | (frac > 1.0 - _EDGE)
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _bin_exact_old(du, dv, bin_px, nbins):  # pragma: no cover - numba
-    """(EPE, bin) of a pixel near a bin edge: EPE by hypot, as endpoint_error, so that the bin is its bin."""
-    epe = math.hypot(du, dv)
-    kf = np.floor(epe / bin_px)  # clamped as a float: a huge EPE would overflow an integer
-    return epe, np.int32(kf if kf < nbins - 1.0 else nbins - 1.0)
-
-
-@numba.njit(cache=True, inline="always", error_model="numpy")
-def _fl_old(epe, du, dv, tu, tv):  # pragma: no cover - numba
-    """KITTI Fl of a pixel with EPE > 3 px: also > 5 % of |w_true| (1.0 or 0.0)."""
-    if tu * tu + tv * tv < 3599.0:  # 0.05 |w_true| < 3 px < EPE, without the hypot
-        return 1.0
-    limit = 0.05 * math.hypot(tu, tv)
-    if abs(epe - limit) <= _EDGE * limit:
-        epe = math.hypot(du, dv)
-    return 1.0 if epe > limit else 0.0
-
-
-@numba.njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def _run_totals_old(stats, b, epe, ang, ve, x0, x1):  # pragma: no cover - numba
-    """Add the totals of the pixels x0 .. x1 - 1 of a row (one pattern ``b``) to ``stats[b]``.
-
-    The sums are reassociated (SIMD): they differ from a sequential sum by rounding only.
-    """
-    s1 = s2 = sa = k1 = k3 = k5 = kc = 0.0
-    for x in range(x0, x1):
-        v = epe[x]
-        s1 += v
-        s2 += v * v
-        sa += ang[x]
-        k1 += 1.0 if v > 1.0 else 0.0
-        k3 += 1.0 if v > 3.0 else 0.0
-        k5 += 1.0 if v > 5.0 else 0.0
-        kc += 1.0 if ve[x] else 0.0
-    stats[b, N] += x1 - x0
-    stats[b, S_EPE] += s1
-    stats[b, S_SQ] += s2
-    stats[b, S_AE] += sa
-    stats[b, K1] += k1
-    stats[b, K3] += k3
-    stats[b, K5] += k5
-    stats[b, KCOV] += kc
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _count_row_old(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, stats, hist, bins):  # pragma: no cover
-    """Count the scored pixels of a row of one motion from its per-pixel errors (epe, ang, k, edge)."""
-    w = bits.size
-    for x in range(w):
-        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, Fl)
-            if motion == 0:
-                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
-                du, dv = np.float64(e[x, 0]) - tu, np.float64(e[x, 1]) - tv
-            else:
-                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
-                du, dv = np.float64(e[x, 0] - g[x, 0]) - tu, np.float64(e[x, 1] - g[x, 1]) - tv
-            if edge[x]:
-                epe[x], k[x] = _bin_exact_old(du, dv, bin_px, nbins)
-            if epe[x] > 3.0:
-                stats[bits[x], KFL] += _fl_old(epe[x], du, dv, tu, tv)
-    for x in range(w):
-        bins[x] = k[x]
-        hist[bits[x], k[x]] += 1  # pattern 0 (not scored) is counted too, and ignored
-    x0 = 0
-    while x0 < w:
-        b = bits[x0]
-        x1 = x0 + 1
-        while x1 < w and bits[x1] == b:
-            x1 += 1
-        if b != 0:
-            _run_totals_old(stats, b, epe, ang, ve, x0, x1)
-        x0 = x1
-
-
-@numba.njit(cache=True, error_model="numpy")
-def pair_totals_old(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist, bins):  # pragma: no cover
-    """One pass over the pixels: totals and EPE histogram of every membership pattern, both motions.
-
-    e, g : (H, W, 2) float32 estimate (total) and its global field; t, tl : (H, W, 2) float32
-    truth, total and local; bits, bits_l : (H, W) uint8, bit r set when the pixel is scored in
-    region r for the total / local motion (0: not scored); valid_est : (H, W) bool.
-    Out: stats (2, 2**R, 9) float64 (columns N .. KCOV) and hist (2, 2**R, nbins) int32, row
-    ``[m, b]`` for the pixels of motion m whose bits equal b (a region sums its patterns; row 0
-    is garbage); bins (2, H, W) uint16, each scored pixel's bin (for :func:`values_in_bins`).
-    Returns the number of pixels whose estimate, total or local, is not finite (the caller
-    raises; the totals are then incomplete).
-    """
-    h, w = bits.shape
-    per_bin = 1.0 / bin_px
-    epe_t, ang_t, k_t, edge_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
-    epe_l, ang_l, k_l, edge_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
-    bad = 0
-    for y in range(h):
-        # errors of every pixel of the row (NaN where the truth is unknown), branch-free; the
-        # arithmetic and the arccos in separate loops, each of which the compiler vectorises
-        for x in range(w):
-            e0, e1 = e[y, x, 0], e[y, x, 1]
-            # local estimate in float32, as np.float32(e) - np.float32(g)
-            l0, l1 = e0 - g[y, x, 0], e1 - g[y, x, 1]
-            fin = (e0 - e0) + (e1 - e1) + (l0 - l0) + (l1 - l1)  # NaN unless all four are finite
-            bad += fin != fin
-            eu, ev, tu, tv = np.float64(e0), np.float64(e1), np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
-            epe_t[x] = epe = _epe_old(eu, ev, tu, tv)
-            k_t[x], edge_t[x] = _bin_old(epe, per_bin, nbins)
-            ang_t[x] = _cos_old(eu, ev, tu, tv)
-            eu, ev, tu, tv = np.float64(l0), np.float64(l1), np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
-            epe_l[x] = epe = _epe_old(eu, ev, tu, tv)
-            k_l[x], edge_l[x] = _bin_old(epe, per_bin, nbins)
-            ang_l[x] = _cos_old(eu, ev, tu, tv)
-        _acos_deg_old(ang_t)
-        _acos_deg_old(ang_l)
-        _count_row_old(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t,
-                   stats[0], hist[0], bins[0, y])
-        _count_row_old(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l,
-                   stats[1], hist[1], bins[1, y])
-    return bad
+# (a scan of all pixels for the quantiles' bins, each sample stored once per region), for the ratio and the
+# identity check only: what has changed since that commit, renamed with _old. pair_totals (and the kernels it
+# calls) and _error_rows_from_totals are as they were then: the package's own serve both paths.
+pair_totals_old = FK.pair_totals
+_error_rows_from_totals_old = M._error_rows_from_totals
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -520,31 +323,6 @@ def values_in_bins_old(e, g, t, tl, bits, bits_l, bins, is_target, target, start
                             if target[m, r, j] == k:
                                 out[fill[m, r, j]] = epe
                                 fill[m, r, j] += 1
-
-
-def _error_rows_from_totals_old(n: int, s_epe: float, s_sq: float, s_ae: float, over: list[int], fl: int,
-                            med: float, p95: float, hist: np.ndarray, *, region: str, motion: str,
-                            frame: int | None) -> list[dict]:
-    """The flow metric rows of one region from its totals (one place builds them, whichever path counted)."""
-    nan = float("nan")
-    kw = {"region": region, "motion": motion, "frame": frame}
-
-    def mean(s: float) -> float:
-        return s / n if n else nan
-
-    packed = M.encode_hist(hist)  # one bytes object shared by both quantile rows
-    rows = [
-        M._row("epe_mean", mean(s_epe), s_epe, n, **kw),
-        M._row("epe_rms", math.sqrt(s_sq / n) if n else nan, s_sq, n, **kw),
-        M._row("epe_median", med, nan, n, hist=packed, **kw),
-        M._row("epe_p95", p95, nan, n, hist=packed, **kw),
-        M._row("ae_mean", mean(s_ae), s_ae, n, **kw),
-    ]
-    for thr, k in zip(M.OUTLIER_PX, over):
-        rows.append(M._row(f"outlier_{thr}px", 100.0 * mean(k), k, n, **kw))
-    # KITTI Fl: EPE > 3 px and EPE > 5 % of |w_true|
-    rows.append(M._row("fl_all", 100.0 * mean(fl), fl, n, **kw))
-    return rows
 
 
 def _quantiles_old(e, g, t, tl, bits, bits_l, bins, hist, qs: tuple[float, ...]) -> np.ndarray:
