@@ -29,10 +29,8 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMB
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import importlib.util  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -40,23 +38,14 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _earlier  # noqa: E402  (benchmarks/, the script's folder)
+
 import algorithms.horn_schunck_flow as hs  # noqa: E402
 
 
 def load_earlier(tree: str):
     """``tree/algorithms/horn_schunck_flow.py`` as a module named ``hs_earlier``."""
-    src = (Path(tree) / "algorithms" / "horn_schunck_flow.py").read_text()
-    src = "\n".join("" if line.startswith("@register_flow") else line for line in src.splitlines())
-    # a file of its own (numba's cache keys on the file), in a folder that outlives the run
-    path = Path(tempfile.gettempdir()) / "hs_earlier" / "hs_earlier.py"
-    path.parent.mkdir(exist_ok=True)
-    if not path.is_file() or path.read_text() != src:
-        path.write_text(src)
-    spec = importlib.util.spec_from_file_location("hs_earlier", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["hs_earlier"] = mod  # numba's cache loads re-import the module by name
-    spec.loader.exec_module(mod)
-    return mod
+    return _earlier.load_earlier(tree, "algorithms/horn_schunck_flow.py", "hs_earlier")
 
 
 def _random_terms(rng, shape):

@@ -28,10 +28,8 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMB
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import importlib.util  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -40,24 +38,15 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _earlier  # noqa: E402  (benchmarks/, the script's folder)
+
 from algorithms.tv_l1_flow import tv_l1  # noqa: E402
 from scenes.sequence import open_sequence  # noqa: E402
 
 
 def load_earlier(tree: str):
     """The ``tv_l1`` of ``tree/algorithms/tv_l1_flow.py``, as a module named ``tv_l1_earlier``."""
-    src = (Path(tree) / "algorithms" / "tv_l1_flow.py").read_text()
-    src = "\n".join("" if line.startswith("@register_flow") else line for line in src.splitlines())
-    # a file of its own (numba's cache keys on the file), in a folder that outlives the run
-    path = Path(tempfile.gettempdir()) / "tv_l1_earlier" / "tv_l1_earlier.py"
-    path.parent.mkdir(exist_ok=True)
-    if not path.is_file() or path.read_text() != src:
-        path.write_text(src)
-    spec = importlib.util.spec_from_file_location("tv_l1_earlier", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["tv_l1_earlier"] = mod  # numba's cache loads re-import the module by name
-    spec.loader.exec_module(mod)
-    return mod.tv_l1
+    return _earlier.load_earlier(tree, "algorithms/tv_l1_flow.py", "tv_l1_earlier").tv_l1
 
 
 def main() -> None:
