@@ -17,14 +17,17 @@ import dataclasses
 import multiprocessing
 import os
 import sys
-from collections.abc import Mapping
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from pathlib import Path
 
 import pandas as pd
 
-from reports.html import cell_index, render_html, scene_block, scene_blocks
-from reports.load import RunData, load_run
+from harness.run_folder import read_run
+from reports.html import SCENE_SECTIONS, cell_index, render_html, scene_block, scene_blocks
+from reports.load import RunData, load_run, scene_base
 from reports.markdown import render_markdown
 from reports.model import build_model
 from scenes.formats import atomic_write_bytes
@@ -32,40 +35,85 @@ from scenes.formats import atomic_write_bytes
 __all__ = ["write_report", "build_report"]
 
 
+def _warm_up() -> None:
+    """In a fresh figure process: import what drawing needs (pandas, matplotlib, the report's modules)
+    while the parent reads the results table."""
+    import reports.html  # noqa: F401
+
+
 def _draw_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> str:
-    """:func:`scene_block` in a worker process (a module-level function, so that spawn can find it)."""
+    """:func:`scene_block` in a figure process (a module-level function, so that spawn can find it)."""
     return scene_block(data, cells, section, base)
 
 
-def _draw_blocks(data: RunData, workers: int | None, progress: bool,
-                 numbers) -> tuple[object, dict[tuple[str, str], str]]:
-    """``numbers()`` here while the scene blocks are drawn by ``workers`` processes: (its result, the blocks)."""
-    from tqdm import tqdm
-
+@contextmanager
+def _figure_pool(run_dir: str | os.PathLike, workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
+    """``workers`` spawned figure processes (None: one per core), started and importing at once; None when
+    one process (this one) is all there is to use. No more than the run has scene blocks."""
     from harness.executors import default_workers, worker_setup, worker_threads
+
+    n = workers or default_workers()
+    try:  # run.json names the cells: 3 blocks a scene at most
+        n = min(n, len(SCENE_SECTIONS) * len({scene_base(c.scene) for c in read_run(run_dir).cells}))
+    except (OSError, ValueError):  # load_run reports it, in one place
+        pass
+    if n <= 1:
+        yield None
+        return
+    pool = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=worker_setup, initargs=(worker_threads(n),))
+    try:
+        for _ in range(n):
+            pool.submit(_warm_up)
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _draw_blocks(data: RunData, pool: ProcessPoolExecutor | None, progress: bool,
+                 numbers: Callable[[], object]) -> tuple[object, dict[tuple[str, str], str]]:
+    """``numbers()`` here while ``pool`` draws the scene blocks: (its result, the blocks).
+
+    Without a pool, the numbers and then each block in this process. A figure process that
+    dies (killed, out of memory) costs nothing but time: the blocks it left are drawn here.
+    """
+    from tqdm import tqdm
 
     cells = cell_index(data)
     keys = scene_blocks(cells)
-    n = min(workers or default_workers(), len(keys))
     bar = tqdm(total=len(keys), desc="report figures", unit="figure", disable=not progress, file=sys.stderr,
                dynamic_ncols=True)
+    futures: dict[tuple[str, str], Future] = {}
+    broken: list[BrokenProcessPool] = []
+
+    def died(exc: BrokenProcessPool) -> None:
+        if not broken:
+            print(f"aerobench: warning: a report figure process died ({exc}); drawing the rest here",
+                  file=sys.stderr)
+        broken.append(exc)
+
     try:
-        if n <= 1:  # no process to spare: the numbers, then each block, in this process
-            result = numbers()
-            blocks = {}
-            for key in keys:
-                blocks[key] = scene_block(data, cells, *key)
-                bar.update()
-            return result, blocks
-        # the workers need the folder, not its rows: leave the table out of what is pickled to them
-        light = dataclasses.replace(data, table=data.table.iloc[:0], ok=data.ok.iloc[:0])
-        with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=worker_setup, initargs=(worker_threads(n),)) as pool:
-            futures = {key: pool.submit(_draw_block, light, cells, *key) for key in keys}
-            for f in futures.values():
-                f.add_done_callback(lambda _: bar.update())
-            result = numbers()
-            return result, {key: f.result() for key, f in futures.items()}
+        if pool is not None and len(keys) > 1:
+            # the processes need the folder, not its rows: the table is left out of what is pickled to them
+            light = dataclasses.replace(data, table=data.table.iloc[:0], ok=data.ok.iloc[:0])
+            try:
+                for key in keys:
+                    futures[key] = pool.submit(_draw_block, light, cells, *key)
+                    futures[key].add_done_callback(lambda _: bar.update())
+            except BrokenProcessPool as exc:  # already broken: the blocks not handed out are drawn here
+                died(exc)
+        result = numbers()
+        blocks = {}
+        for key in keys:
+            if key in futures and not broken:
+                try:
+                    blocks[key] = futures[key].result()
+                    continue
+                except BrokenProcessPool as exc:
+                    died(exc)
+            blocks[key] = scene_block(data, cells, *key)
+            bar.update()
+        return result, blocks
     finally:
         bar.close()
 
@@ -75,9 +123,10 @@ def build_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
                  rules: str | os.PathLike | None = None, workers: int | None = 1,
                  progress: bool = False) -> tuple[str, str]:
     """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`)."""
-    data = load_run(run_dir)
-    model, blocks = _draw_blocks(data, workers, progress, lambda: build_model(
-        run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules, data=data))
+    with _figure_pool(run_dir, workers) as pool:  # the processes start while the table is read
+        data = load_run(run_dir)
+        model, blocks = _draw_blocks(data, pool, progress, lambda: build_model(
+            run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules, data=data))
     return render_html(model, blocks), render_markdown(model)
 
 

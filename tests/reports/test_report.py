@@ -232,3 +232,21 @@ def test_stabilisation_legend_names_the_after_row(html_text):
     stab = section(html_text, "stabilisation")
     assert "after: true cumulative + correction" in stab and "after: its refitted line" in stab
     assert "(red)" not in stab  # the flight line is drawn in vermillion/orange
+
+
+def test_a_figure_process_that_dies_costs_no_figure(run_dir, capsys):
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    from reports.load import load_run
+    from reports.report import _draw_blocks
+
+    data = load_run(run_dir)
+    alone = _draw_blocks(data, None, False, lambda: "numbers")
+    # a pool whose process exits as it starts: every block it was given is lost with it
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=os._exit,
+                             initargs=(3,)) as pool:
+        drawn = _draw_blocks(data, pool, False, lambda: "numbers")
+    assert drawn == alone and len(drawn[1]) == 6  # 2 scenes x 3 sections, each drawn here instead
+    assert "a report figure process died" in capsys.readouterr().err
