@@ -72,7 +72,7 @@ def _provenance_rows(data: RunData) -> list[tuple[str, str]]:
     versions = prov.get("versions") or {}
     if isinstance(versions, Mapping):
         versions = ", ".join(f"{k} {v}" for k, v in sorted(versions.items()))
-    sweeps = sorted(set(data.table["sweep_param"].astype(str)) - {""})
+    sweeps = sorted(set(pd.unique(data.table["sweep_param"].astype(str)).tolist()) - {""})  # not a loop over rows
     n_cells = data.table["cell_id"].nunique()
     commit, dirty = prov.get("git_commit"), prov.get("git_dirty")
     return [

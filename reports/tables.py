@@ -165,10 +165,18 @@ def sweep_curves(data: RunData) -> dict[str, pd.DataFrame]:
     return out
 
 
+# the columns metric_table reads (its pooling and cell counts): a scene's rows are cut to these before
+# they are filtered (a bool filter takes every column of ~10^6 rows, most of them arrow strings)
+_POOLED_COLUMNS = ["pipeline", "cell_id", "metric", "region", "motion", "kind", "value", "sum", "count", "unit",
+                   "higher_is_better", "hist", "status"]
+
+
 def per_scene_rows(data: RunData) -> dict[str, pd.DataFrame]:
-    """Scene (variant labels without their sweep suffix) -> its ok rows."""
+    """Scene (variant labels without their sweep suffix) -> its ok rows (the columns :func:`metric_table`
+    reads)."""
     bases = scene_bases(data.ok["scene"])
-    return {s: data.ok[bases == s] for s in dict.fromkeys(bases)}
+    rows = data.ok[[c for c in _POOLED_COLUMNS if c in data.ok.columns]]
+    return {s: rows[bases == s] for s in dict.fromkeys(bases)}
 
 
 # ------------------------------------------------------------------------------ baseline and gate
