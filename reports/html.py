@@ -604,9 +604,10 @@ def render_html(model: ReportModel, blocks: dict[tuple[str, str], str] | None = 
     data = model.data
     colors = plots.pipeline_colors(data.pipelines)
     cells = cell_index(data)
+    keys = scene_blocks(cells)
     if blocks is None:
-        blocks = {key: scene_block(data, cells, *key) for key in scene_blocks(cells)}
-    by_section = {section: "".join(blocks[(section, base)] for sec, base in scene_blocks(cells) if sec == section)
+        blocks = {key: scene_block(data, cells, *key) for key in keys}
+    by_section = {section: "".join(blocks[key] for key in keys if key[0] == section)
                   or _missing(_NO_SCENE_BLOCK[section]) for section in SCENE_SECTIONS}
     sec: dict[str, str] = {}
     sec["verdict"] = _verdict_html(model.gate, model.baseline, model.baseline_note)
