@@ -285,10 +285,95 @@ def _score_pair_before(estimate, truth, *, frame):
 
 # --------------------------------------------------------------------------- score_pair as of 95a9436
 # (a scan of all pixels for the quantiles' bins, each sample stored once per region), for the ratio and the
-# identity check only: what has changed since that commit, renamed with _old. pair_totals (and the kernels it
-# calls) and _error_rows_from_totals are as they were then: the package's own serve both paths.
-pair_totals_old = FK.pair_totals
+# identity check only: what has changed since that commit, renamed with _old. pair_totals, _count_row and
+# _run_totals are copied as they were then (the package's pair_totals has changed since, and the check must not
+# compare it with itself); the element kernels they inline (_epe, _bin, _cos, _acos_deg, _fl, _bin_exact) and
+# _error_rows_from_totals are as they were then: the package's own serve both paths.
 _error_rows_from_totals_old = M._error_rows_from_totals
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _run_totals_old(stats, b, epe, ang, ve, x0, x1):
+    s1 = s2 = sa = k1 = k3 = k5 = kc = 0.0
+    for x in range(x0, x1):
+        v = epe[x]
+        s1 += v
+        s2 += v * v
+        sa += ang[x]
+        k1 += 1.0 if v > 1.0 else 0.0
+        k3 += 1.0 if v > 3.0 else 0.0
+        k5 += 1.0 if v > 5.0 else 0.0
+        kc += 1.0 if ve[x] else 0.0
+    stats[b, FK.N] += x1 - x0
+    stats[b, FK.S_EPE] += s1
+    stats[b, FK.S_SQ] += s2
+    stats[b, FK.S_AE] += sa
+    stats[b, FK.K1] += k1
+    stats[b, FK.K3] += k3
+    stats[b, FK.K5] += k5
+    stats[b, FK.KCOV] += kc
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _count_row_old(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, stats, hist, bins):
+    w = bits.size
+    for x in range(w):
+        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, Fl)
+            if motion == 0:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0]) - tu, np.float64(e[x, 1]) - tv
+            else:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0] - g[x, 0]) - tu, np.float64(e[x, 1] - g[x, 1]) - tv
+            if edge[x]:
+                epe[x], k[x] = FK._bin_exact(du, dv, bin_px, nbins)
+            if epe[x] > 3.0:
+                stats[bits[x], FK.KFL] += FK._fl(epe[x], du, dv, tu, tv)
+    for x in range(w):
+        bins[x] = k[x]
+        hist[bits[x], k[x]] += 1  # pattern 0 (not scored) is counted too, and ignored
+    x0 = 0
+    while x0 < w:
+        b = bits[x0]
+        x1 = x0 + 1
+        while x1 < w and bits[x1] == b:
+            x1 += 1
+        if b != 0:
+            _run_totals_old(stats, b, epe, ang, ve, x0, x1)
+        x0 = x1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def pair_totals_old(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist, bins):
+    h, w = bits.shape
+    per_bin = 1.0 / bin_px
+    epe_t, ang_t, k_t, edge_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    epe_l, ang_l, k_l, edge_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    bad = 0
+    for y in range(h):
+        # errors of every pixel of the row (NaN where the truth is unknown), branch-free; the
+        # arithmetic and the arccos in separate loops, each of which the compiler vectorises
+        for x in range(w):
+            e0, e1 = e[y, x, 0], e[y, x, 1]
+            # local estimate in float32, as np.float32(e) - np.float32(g)
+            l0, l1 = e0 - g[y, x, 0], e1 - g[y, x, 1]
+            fin = (e0 - e0) + (e1 - e1) + (l0 - l0) + (l1 - l1)  # NaN unless all four are finite
+            bad += fin != fin
+            eu, ev, tu, tv = np.float64(e0), np.float64(e1), np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
+            epe_t[x] = epe = FK._epe(eu, ev, tu, tv)
+            k_t[x], edge_t[x] = FK._bin(epe, per_bin, nbins)
+            ang_t[x] = FK._cos(eu, ev, tu, tv)
+            eu, ev, tu, tv = np.float64(l0), np.float64(l1), np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
+            epe_l[x] = epe = FK._epe(eu, ev, tu, tv)
+            k_l[x], edge_l[x] = FK._bin(epe, per_bin, nbins)
+            ang_l[x] = FK._cos(eu, ev, tu, tv)
+        FK._acos_deg(ang_t)
+        FK._acos_deg(ang_l)
+        _count_row_old(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t,
+                       stats[0], hist[0], bins[0, y])
+        _count_row_old(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l,
+                       stats[1], hist[1], bins[1, y])
+    return bad
 
 
 @numba.njit(cache=True, error_model="numpy")
