@@ -23,10 +23,10 @@ side, interleaved, after one untimed call each (numba's compiled kernels load fr
 - ``7 estimates / 7``: ``prepare_pair_truth`` once and seven ``score_pair(prepared=)``, per
   estimate (the runner scores up to seven pipelines of a scene against one truth);
 - ``95a9436 ...``: the same two with ``score_pair`` as of commit 95a9436 (kept here as
-  ``score_pair_95a9436``: every pixel of both motions scanned again for the quantiles' bins,
-  each sample written once per region, ``np.flatnonzero`` in ``encode_hist``), with the
-  ratios of today's to it and a bit-for-bit comparison of the rows of every estimate (the
-  run fails if they differ).
+  ``score_pair_95a9436``: its ``pair_totals``, whose per-pixel loop ran scalar, every pixel
+  of both motions scanned again for the quantiles' bins, each sample written once per region,
+  ``np.flatnonzero`` in ``encode_hist``), with the ratios of today's to it and a bit-for-bit
+  comparison of the rows of every estimate (the run fails if they differ).
 
 Figures are medians and minima over ``--runs`` interleaved rounds of CPU (process) time, with
 one native thread (``cv2.setNumThreads(1)``, numba and BLAS at 1); the machine is shared,

@@ -196,8 +196,9 @@ def pair_totals(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist
     """One pass over the pixels: totals and EPE histogram of every membership pattern, both motions.
 
     e, g : (H, W, 2) float32 estimate (total) and its global field; t, tl : (H, W, 2) float32
-    truth, total and local; bits, bits_l : (H, W) uint8, bit r set when the pixel is scored in
-    region r for the total / local motion (0: not scored); valid_est : (H, W) bool.
+    truth, total and local (all four C-contiguous); bits, bits_l : (H, W) uint8, bit r set when
+    the pixel is scored in region r for the total / local motion (0: not scored); valid_est :
+    (H, W) bool.
     Out: stats (2, 2**R, 9) float64 (columns N .. KCOV) and hist (2, 2**R, nbins) int32, row
     ``[m, b]`` for the pixels of motion m whose bits equal b (a region sums its patterns; row 0
     is garbage); bins (2, H, W) uint16, each scored pixel's bin (for :func:`values_in_bins`).
