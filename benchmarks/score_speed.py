@@ -22,7 +22,9 @@ side, interleaved, after one untimed call each (numba's compiled kernels load fr
 - ``score_pair(prepared=)``: one estimate against a truth prepared beforehand;
 - ``7 estimates / 7``: ``prepare_pair_truth`` once and seven ``score_pair(prepared=)``, per
   estimate (the runner scores up to seven pipelines of a scene against one truth);
-- ``95a9436 ...``: the same two with ``score_pair`` as of commit 95a9436 (kept here as
+- ``pair_totals (the pass alone)``: the numba pass of ``score_pair`` on one estimate, the
+  package's against 95a9436's (its copy here);
+- ``95a9436 ...``: the same with ``score_pair`` as of commit 95a9436 (kept here as
   ``score_pair_95a9436``: its ``pair_totals``, whose per-pixel loop ran scalar, every pixel
   of both motions scanned again for the quantiles' bins, each sample written once per region,
   ``np.flatnonzero`` in ``encode_hist``), with the ratios of today's to it and a bit-for-bit
@@ -72,6 +74,11 @@ real estimates a median bin holds 40 000 to 100 000 pixels of a region, which 95
 collected once per region they belong to behind a mispredicted branch per pixel; now each
 pixel once per motion, grouped by membership pattern, a region's samples gathered from its
 patterns' segments. With truth + noise the bins are small and the two are within noise.
+
+Later the same day, with ``pair_totals``' per-pixel loop in SIMD (it ran scalar before), the
+ratios to 95a9436 are 0.712 (prepared=), 0.724 (7 estimates) and 0.681 (the pass alone) with
+the pipelines' estimates, 0.817 / 0.825 with truth + noise (21 runs, load 2.4-3.2; figures in
+benchmarks/standard_cost.md).
 """
 
 from __future__ import annotations
@@ -543,6 +550,19 @@ def pipeline_estimates(sequence: str, pair: int = 0) -> tuple[list, object]:
     return out, seq.pair_truth(pair)
 
 
+def _pass(kernel, estimate, prepared) -> int:
+    """``kernel`` (``pair_totals`` or its 95a9436 copy) on one estimate, as ``_score_motions`` calls it."""
+    e = M._read_only(np.ascontiguousarray(estimate.flow_total, np.float32))
+    g = M._read_only(np.ascontiguousarray(np.broadcast_to(np.asarray(estimate.flow_global, np.float32), e.shape)))
+    ve = M._read_only(M._valid_est(estimate.valid, prepared.shape))
+    n_codes = 1 << len(prepared.regions)
+    stats = np.zeros((2, n_codes, 9))
+    hist = np.zeros((2, n_codes, M.HIST_NBINS), np.int32)
+    bins = np.empty((2,) + prepared.shape, np.uint16)
+    return kernel(e, g, prepared.flow, prepared.flow_local, prepared.bits, prepared.bits_local, ve, M.HIST_BIN_PX,
+                  M.HIST_NBINS, stats, hist, bins)
+
+
 def _same_rows(a: list[dict], b: list[dict]) -> bool:
     """Rows equal field by field, bit for bit (NaN equal to NaN)."""
     def same(x, y):
@@ -598,6 +618,8 @@ def main() -> None:
         "95a9436 score_pair(prepared=)": lambda: old(estimate, prepared),
         n7: shared(new),
         f"95a9436 {n7}": shared(old),
+        "pair_totals (the pass alone)": lambda: _pass(FK.pair_totals, estimate, prepared),
+        "95a9436 pair_totals": lambda: _pass(pair_totals_old, estimate, prepared),
     }
     per_call = {n7: len(estimates), f"95a9436 {n7}": len(estimates)}
     for fn in paths.values():
@@ -619,8 +641,8 @@ def main() -> None:
     for k in paths:
         print(f"  {k:34s} {med[k]:7.2f} {low[k]:7.2f} {med[k] / med[ref]:11.3f} {low[k] / low[ref]:11.3f}")
     print("now against 95a9436, side by side (ratio of medians, of minima; median of the per-round ratios):")
-    for k in ("score_pair(prepared=)", n7):
-        o = f"95a9436 {k}"
+    for k in ("score_pair(prepared=)", n7, "pair_totals (the pass alone)"):
+        o = f"95a9436 {k.split(' (')[0]}" if k.startswith("pair_totals") else f"95a9436 {k}"
         rounds = statistics.median(a / b for a, b in zip(cpu[k], cpu[o]))
         print(f"  {k:34s} {med[k] / med[o]:7.3f} {low[k] / low[o]:7.3f} {rounds:7.3f}")
     print(f"rows of the {len(estimates)} estimates identical to 95a9436's, bit for bit: {same}")
