@@ -22,11 +22,13 @@ side, interleaved, after one untimed call each (numba's compiled kernels load fr
 - ``score_pair(prepared=)``: one estimate against a truth prepared beforehand;
 - ``7 estimates / 7``: ``prepare_pair_truth`` once and seven ``score_pair(prepared=)``, per
   estimate (the runner scores up to seven pipelines of a scene against one truth);
-- ``95a9436 ...``: the same two with ``score_pair`` as of commit 95a9436 (kept here as
-  ``score_pair_95a9436``: every pixel of both motions scanned again for the quantiles' bins,
-  each sample written once per region, ``np.flatnonzero`` in ``encode_hist``), with the
-  ratios of today's to it and a bit-for-bit comparison of the rows of every estimate (the
-  run fails if they differ).
+- ``pair_totals (the pass alone)``: the numba pass of ``score_pair`` on one estimate, the
+  package's against 95a9436's (its copy here);
+- ``95a9436 ...``: the same with ``score_pair`` as of commit 95a9436 (kept here as
+  ``score_pair_95a9436``: its ``pair_totals``, whose per-pixel loop ran scalar, every pixel
+  of both motions scanned again for the quantiles' bins, each sample written once per region,
+  ``np.flatnonzero`` in ``encode_hist``), with the ratios of today's to it and a bit-for-bit
+  comparison of the rows of every estimate (the run fails if they differ).
 
 Figures are medians and minima over ``--runs`` interleaved rounds of CPU (process) time, with
 one native thread (``cv2.setNumThreads(1)``, numba and BLAS at 1); the machine is shared,
@@ -72,6 +74,11 @@ real estimates a median bin holds 40 000 to 100 000 pixels of a region, which 95
 collected once per region they belong to behind a mispredicted branch per pixel; now each
 pixel once per motion, grouped by membership pattern, a region's samples gathered from its
 patterns' segments. With truth + noise the bins are small and the two are within noise.
+
+Later the same day, with ``pair_totals``' per-pixel loop in SIMD (it ran scalar before), the
+ratios to 95a9436 are 0.712 (prepared=), 0.724 (7 estimates) and 0.681 (the pass alone) with
+the pipelines' estimates, 0.817 / 0.825 with truth + noise (21 runs, load 2.4-3.2; figures in
+benchmarks/standard_cost.md).
 """
 
 from __future__ import annotations
@@ -285,10 +292,95 @@ def _score_pair_before(estimate, truth, *, frame):
 
 # --------------------------------------------------------------------------- score_pair as of 95a9436
 # (a scan of all pixels for the quantiles' bins, each sample stored once per region), for the ratio and the
-# identity check only: what has changed since that commit, renamed with _old. pair_totals (and the kernels it
-# calls) and _error_rows_from_totals are as they were then: the package's own serve both paths.
-pair_totals_old = FK.pair_totals
+# identity check only: what has changed since that commit, renamed with _old. pair_totals, _count_row and
+# _run_totals are copied as they were then (the package's pair_totals has changed since, and the check must not
+# compare it with itself); the element kernels they inline (_epe, _bin, _cos, _acos_deg, _fl, _bin_exact) and
+# _error_rows_from_totals are as they were then: the package's own serve both paths.
 _error_rows_from_totals_old = M._error_rows_from_totals
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
+def _run_totals_old(stats, b, epe, ang, ve, x0, x1):
+    s1 = s2 = sa = k1 = k3 = k5 = kc = 0.0
+    for x in range(x0, x1):
+        v = epe[x]
+        s1 += v
+        s2 += v * v
+        sa += ang[x]
+        k1 += 1.0 if v > 1.0 else 0.0
+        k3 += 1.0 if v > 3.0 else 0.0
+        k5 += 1.0 if v > 5.0 else 0.0
+        kc += 1.0 if ve[x] else 0.0
+    stats[b, FK.N] += x1 - x0
+    stats[b, FK.S_EPE] += s1
+    stats[b, FK.S_SQ] += s2
+    stats[b, FK.S_AE] += sa
+    stats[b, FK.K1] += k1
+    stats[b, FK.K3] += k3
+    stats[b, FK.K5] += k5
+    stats[b, FK.KCOV] += kc
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _count_row_old(e, g, t, bits, ve, motion, bin_px, nbins, epe, ang, k, edge, stats, hist, bins):
+    w = bits.size
+    for x in range(w):
+        if bits[x] != 0 and (edge[x] or epe[x] > 3.0):  # rare: hypot decides (bin edge, Fl)
+            if motion == 0:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0]) - tu, np.float64(e[x, 1]) - tv
+            else:
+                tu, tv = np.float64(t[x, 0]), np.float64(t[x, 1])
+                du, dv = np.float64(e[x, 0] - g[x, 0]) - tu, np.float64(e[x, 1] - g[x, 1]) - tv
+            if edge[x]:
+                epe[x], k[x] = FK._bin_exact(du, dv, bin_px, nbins)
+            if epe[x] > 3.0:
+                stats[bits[x], FK.KFL] += FK._fl(epe[x], du, dv, tu, tv)
+    for x in range(w):
+        bins[x] = k[x]
+        hist[bits[x], k[x]] += 1  # pattern 0 (not scored) is counted too, and ignored
+    x0 = 0
+    while x0 < w:
+        b = bits[x0]
+        x1 = x0 + 1
+        while x1 < w and bits[x1] == b:
+            x1 += 1
+        if b != 0:
+            _run_totals_old(stats, b, epe, ang, ve, x0, x1)
+        x0 = x1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def pair_totals_old(e, g, t, tl, bits, bits_l, valid_est, bin_px, nbins, stats, hist, bins):
+    h, w = bits.shape
+    per_bin = 1.0 / bin_px
+    epe_t, ang_t, k_t, edge_t = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    epe_l, ang_l, k_l, edge_l = np.empty(w), np.empty(w), np.empty(w, np.int32), np.empty(w, np.bool_)
+    bad = 0
+    for y in range(h):
+        # errors of every pixel of the row (NaN where the truth is unknown), branch-free; the
+        # arithmetic and the arccos in separate loops, each of which the compiler vectorises
+        for x in range(w):
+            e0, e1 = e[y, x, 0], e[y, x, 1]
+            # local estimate in float32, as np.float32(e) - np.float32(g)
+            l0, l1 = e0 - g[y, x, 0], e1 - g[y, x, 1]
+            fin = (e0 - e0) + (e1 - e1) + (l0 - l0) + (l1 - l1)  # NaN unless all four are finite
+            bad += fin != fin
+            eu, ev, tu, tv = np.float64(e0), np.float64(e1), np.float64(t[y, x, 0]), np.float64(t[y, x, 1])
+            epe_t[x] = epe = FK._epe(eu, ev, tu, tv)
+            k_t[x], edge_t[x] = FK._bin(epe, per_bin, nbins)
+            ang_t[x] = FK._cos(eu, ev, tu, tv)
+            eu, ev, tu, tv = np.float64(l0), np.float64(l1), np.float64(tl[y, x, 0]), np.float64(tl[y, x, 1])
+            epe_l[x] = epe = FK._epe(eu, ev, tu, tv)
+            k_l[x], edge_l[x] = FK._bin(epe, per_bin, nbins)
+            ang_l[x] = FK._cos(eu, ev, tu, tv)
+        FK._acos_deg(ang_t)
+        FK._acos_deg(ang_l)
+        _count_row_old(e[y], g[y], t[y], bits[y], valid_est[y], 0, bin_px, nbins, epe_t, ang_t, k_t, edge_t,
+                       stats[0], hist[0], bins[0, y])
+        _count_row_old(e[y], g[y], tl[y], bits_l[y], valid_est[y], 1, bin_px, nbins, epe_l, ang_l, k_l, edge_l,
+                       stats[1], hist[1], bins[1, y])
+    return bad
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -458,6 +550,19 @@ def pipeline_estimates(sequence: str, pair: int = 0) -> tuple[list, object]:
     return out, seq.pair_truth(pair)
 
 
+def _pass(kernel, estimate, prepared) -> int:
+    """``kernel`` (``pair_totals`` or its 95a9436 copy) on one estimate, as ``_score_motions`` calls it."""
+    e = M._read_only(np.ascontiguousarray(estimate.flow_total, np.float32))
+    g = M._read_only(np.ascontiguousarray(np.broadcast_to(np.asarray(estimate.flow_global, np.float32), e.shape)))
+    ve = M._read_only(M._valid_est(estimate.valid, prepared.shape))
+    n_codes = 1 << len(prepared.regions)
+    stats = np.zeros((2, n_codes, 9))
+    hist = np.zeros((2, n_codes, M.HIST_NBINS), np.int32)
+    bins = np.empty((2,) + prepared.shape, np.uint16)
+    return kernel(e, g, prepared.flow, prepared.flow_local, prepared.bits, prepared.bits_local, ve, M.HIST_BIN_PX,
+                  M.HIST_NBINS, stats, hist, bins)
+
+
 def _same_rows(a: list[dict], b: list[dict]) -> bool:
     """Rows equal field by field, bit for bit (NaN equal to NaN)."""
     def same(x, y):
@@ -513,6 +618,8 @@ def main() -> None:
         "95a9436 score_pair(prepared=)": lambda: old(estimate, prepared),
         n7: shared(new),
         f"95a9436 {n7}": shared(old),
+        "pair_totals (the pass alone)": lambda: _pass(FK.pair_totals, estimate, prepared),
+        "95a9436 pair_totals": lambda: _pass(pair_totals_old, estimate, prepared),
     }
     per_call = {n7: len(estimates), f"95a9436 {n7}": len(estimates)}
     for fn in paths.values():
@@ -534,8 +641,8 @@ def main() -> None:
     for k in paths:
         print(f"  {k:34s} {med[k]:7.2f} {low[k]:7.2f} {med[k] / med[ref]:11.3f} {low[k] / low[ref]:11.3f}")
     print("now against 95a9436, side by side (ratio of medians, of minima; median of the per-round ratios):")
-    for k in ("score_pair(prepared=)", n7):
-        o = f"95a9436 {k}"
+    for k in ("score_pair(prepared=)", n7, "pair_totals (the pass alone)"):
+        o = f"95a9436 {k.split(' (')[0]}" if k.startswith("pair_totals") else f"95a9436 {k}"
         rounds = statistics.median(a / b for a, b in zip(cpu[k], cpu[o]))
         print(f"  {k:34s} {med[k] / med[o]:7.3f} {low[k] / low[o]:7.3f} {rounds:7.3f}")
     print(f"rows of the {len(estimates)} estimates identical to 95a9436's, bit for bit: {same}")
