@@ -30,10 +30,10 @@ from pathlib import Path
 import pandas as pd
 
 from harness.run_folder import read_run
-from reports.html import SCENE_SECTIONS, cell_index, render_html, scene_block, scene_blocks
+from reports.html import SCENE_SECTIONS, cell_index, render_html, render_html_bytes, scene_block, scene_blocks
 from reports.load import RunData, load_cells, load_run, scene_base
 from reports.markdown import render_markdown
-from reports.model import build_model
+from reports.model import ReportModel, build_model
 from scenes.formats import atomic_write_bytes
 
 __all__ = ["write_report", "build_report", "figure_pool", "start_figures", "Figures"]
@@ -181,12 +181,20 @@ def build_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
                  progress: bool = False, table: pd.DataFrame | None = None,
                  figures: Figures | None = None) -> tuple[str, str]:
     """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`)."""
+    model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
+                                      workers=workers, progress=progress, table=table, figures=figures)
+    return render_html(model, blocks), render_markdown(model)
+
+
+def _model_and_blocks(run_dir: str | os.PathLike, *, baseline, gate_verdict, rules, workers: int | None,
+                      progress: bool, table: pd.DataFrame | None, figures: Figures | None
+                      ) -> tuple[ReportModel, dict[tuple[str, str], str]]:
+    """The numbers of the report and its scene blocks (see :func:`write_report`)."""
     # the processes start while the table is read; blocks handed out early come with their own
     with nullcontext(figures.pool) if figures is not None else figure_pool(run_dir, workers) as pool:
         data = load_run(run_dir, table=table)
-        model, blocks = _draw_blocks(data, pool, progress, lambda: build_model(
+        return _draw_blocks(data, pool, progress, lambda: build_model(
             run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules, data=data), early=figures)
-    return render_html(model, blocks), render_markdown(model)
 
 
 def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | None = None,
@@ -225,10 +233,10 @@ def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
     dict
         ``{"html": Path, "md": Path}``.
     """
-    html_text, md_text = build_report(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
+    model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
                                       workers=workers, progress=progress, table=table, figures=figures)
     out = Path(out_dir) if out_dir is not None else Path(run_dir)
     paths = {"html": out / "report.html", "md": out / "report.md"}
-    atomic_write_bytes(paths["html"], html_text.encode("utf-8"))
-    atomic_write_bytes(paths["md"], md_text.encode("utf-8"))
+    atomic_write_bytes(paths["html"], render_html_bytes(model, blocks))  # the text of build_report, encoded
+    atomic_write_bytes(paths["md"], render_markdown(model).encode("utf-8"))
     return paths

@@ -294,3 +294,25 @@ def test_a_figure_process_that_dies_before_the_report_costs_no_figure(run_dir, r
         drawn = write_report(run_dir, out_dir=tmp_path, figures=early)
     assert drawn["html"].read_bytes() == report["html"].read_bytes()
     assert "a report figure process died" in capsys.readouterr().err
+
+
+def test_the_page_as_bytes_is_the_page_encoded_even_when_a_table_spans_two_blocks(run_dir):
+    from reports.html import cell_index, render_html, render_html_bytes, scene_block, scene_blocks
+    from reports.load import load_run
+    from reports.model import build_model
+
+    data = load_run(run_dir)
+    model = build_model(run_dir, data=data)
+    cells = cell_index(data)
+    blocks = {key: scene_block(data, cells, *key) for key in scene_blocks(cells)}
+    page = render_html(model, blocks)
+    assert render_html_bytes(model, blocks) == page.encode("utf-8")
+    assert "\u2193" in page and 'data-cards="1"' in page  # not ASCII; tables marked for the narrow layout
+    # a table opened in one block and closed in the next is marked as a whole, as on the joined page
+    first, second = list(blocks)[:2]
+    split = dict(blocks)
+    split[first] += '<table><thead><tr><th>speed</th></tr></thead><tbody><tr><td>'
+    split[second] = "7</td></tr></tbody></table>" + split[second]
+    page = render_html(model, split)
+    assert render_html_bytes(model, split) == page.encode("utf-8")
+    assert '<td data-label="speed">7</td>' in page
