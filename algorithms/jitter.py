@@ -26,7 +26,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from algorithms.registry import register_stage
 
@@ -163,6 +162,8 @@ def fit_flight_path(path: np.ndarray, *, model: str = "line", window_frames: int
         raise ValueError(f"polyorder: expected >= 0, got {polyorder}")
     w = min(window_frames, n if n % 2 else n - 1)
     k = min(polyorder, w - 1)
+    from scipy.signal import savgol_filter  # here: importing scipy.signal takes a second, most importers never smooth
+
     return savgol_filter(p, w, k, axis=0, mode="interp")
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from skimage.registration import optical_flow_ilk, optical_flow_tvl1
 
 from algorithms.flow import FLOW_DTYPE, check_frame_pair
 from algorithms.pyramid import target_inside
@@ -106,6 +105,8 @@ def tvl1(frame0: np.ndarray, frame1: np.ndarray, *, attachment: float = 15.0, ti
     returns ``(v, u)``: both frames share one map onto [0, 1], and the output is
     reordered to (u, v).
     """
+    from skimage.registration import optical_flow_tvl1  # here: skimage.registration takes 0.3 s to import
+
     g0, g1 = check_frame_pair(frame0, frame1)
     n0, n1 = _joint_unit_range(g0, g1)
     vu = optical_flow_tvl1(n0, n1, attachment=attachment, tightness=tightness, num_warp=num_warp,
@@ -117,6 +118,8 @@ def tvl1(frame0: np.ndarray, frame1: np.ndarray, *, attachment: float = 15.0, ti
 def ilk(frame0: np.ndarray, frame1: np.ndarray, *, radius: int = 7, num_warp: int = 10,
         gaussian: bool = False, prefilter: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Iterative dense Lucas-Kanade (``skimage.registration.optical_flow_ilk``), output reordered from (v, u)."""
+    from skimage.registration import optical_flow_ilk  # here: skimage.registration takes 0.3 s to import
+
     g0, g1 = check_frame_pair(frame0, frame1)
     n0, n1 = _joint_unit_range(g0, g1)
     vu = optical_flow_ilk(n0, n1, radius=radius, num_warp=num_warp, gaussian=gaussian, prefilter=prefilter,

@@ -57,7 +57,6 @@ import cv2
 import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.optimize import linear_sum_assignment
 
 from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
@@ -643,6 +642,8 @@ class MultiTargetTracker:
         if cost.size:
             # infeasible pairs cost more than any feasible assignment could
             big = self.gate_px * (1 + len(self._tracks) + len(det)) * 10
+            from scipy.optimize import linear_sum_assignment  # on first use: scipy.optimize takes 0.7 s to import
+
             rows, cols = linear_sum_assignment(np.where(cost <= self.gate_px, cost, big))
             pairs = [(r, c) for r, c in zip(rows, cols) if cost[r, c] <= self.gate_px]
         taken_t, taken_d = {r for r, _ in pairs}, {c for _, c in pairs}

@@ -27,6 +27,7 @@ import os
 import sys
 import textwrap
 from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
@@ -185,13 +186,30 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def _write_report(run_dir: Path, baseline: str | None = None, gate: str | None = None,
-                  rules: str | None = None, *, workers: int | None = None, progress: bool = True) -> Path | dict:
+                  rules: str | None = None, *, workers: int | None = None, progress: bool = True,
+                  **given: Any) -> Path | dict:
     """The run's report (``reports.write_report``): HTML and Markdown beside the results, its figures
-    drawn by ``workers`` processes (default one per core)."""
+    drawn by ``workers`` processes (default one per core); ``given``: the table and figures at hand."""
     from reports import write_report
 
     return write_report(run_dir, baseline=baseline, gate_verdict=gate, rules=rules, workers=workers,
-                        progress=progress)
+                        progress=progress, **given)
+
+
+def _start_figures(stack: ExitStack, run_dir: Path, cells: Any, workers: int | None) -> Any:
+    """The report's figure processes, started (in ``stack``) and given every scene block while the
+    runner collects the results (``reports.report.start_figures``); None if there is nothing to start."""
+    if cells is None:
+        return None
+    try:
+        from reports.report import figure_pool, start_figures
+
+        pool = stack.enter_context(figure_pool(run_dir, workers))
+        return start_figures(run_dir, cells, pool) if pool is not None else None
+    except Exception as exc:  # the report draws them itself then; a run must not fail for it
+        print(f"aerobench: warning: the report's figures could not be started early: {type(exc).__name__}: {exc}",
+              file=sys.stderr)
+        return None
 
 
 def _paths(report: Any) -> str:
@@ -204,18 +222,28 @@ def _paths(report: Any) -> str:
 def cmd_run(args: argparse.Namespace) -> int:
     from harness.runner import run_suite
 
-    result = run_suite(args.suite, args.out, workers=args.workers, resume=args.resume,
-                       executor=args.executor, scheduler=args.scheduler, cache_dir=args.cache,
-                       progress=not args.quiet)
-    print(f"{result.cells} cells ({result.reused_cells} reused), scenes {result.scenes_rendered} rendered / "
-          f"{result.scenes_reused} reused, {len(result.table)} rows, {result.elapsed_s:.1f} s -> {result.run_dir}")
-    if not args.no_report:
-        try:
-            report = _write_report(result.run_dir, workers=args.workers, progress=not args.quiet)
-        except Exception as exc:  # the results are written; a report failure must not hide them
-            print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-        else:
-            print(f"report: {_paths(report)}")
+    with ExitStack() as stack:  # the report's figure processes, if started early
+        early: dict[str, Any] = {}
+
+        def cells_done(run_dir: Path, cells: Any) -> None:
+            # the figures need only the cell folders: drawn while the results are collected
+            if not args.no_report:
+                early["figures"] = _start_figures(stack, run_dir, cells, args.workers)
+
+        result = run_suite(args.suite, args.out, workers=args.workers, resume=args.resume,
+                           executor=args.executor, scheduler=args.scheduler, cache_dir=args.cache,
+                           progress=not args.quiet, on_cells_done=cells_done)
+        print(f"{result.cells} cells ({result.reused_cells} reused), scenes {result.scenes_rendered} rendered / "
+              f"{result.scenes_reused} reused, {len(result.table)} rows, {result.elapsed_s:.1f} s -> "
+              f"{result.run_dir}")
+        if not args.no_report:
+            try:  # the table in hand: the report need not read results.parquet back
+                report = _write_report(result.run_dir, workers=args.workers, progress=not args.quiet,
+                                       table=result.table, figures=early.get("figures"))
+            except Exception as exc:  # the results are written; a report failure must not hide them
+                print(f"aerobench: warning: the report failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+            else:
+                print(f"report: {_paths(report)}")
     if not result.ok:
         for line in result.failed_cells:
             print(f"FAILED {line}", file=sys.stderr)

@@ -71,7 +71,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import pandas as pd
-from scipy.optimize import linear_sum_assignment
 
 from algorithms.flow import check_flow, endpoint_error
 from algorithms.jitter import least_squares_line
@@ -87,6 +86,15 @@ __all__ = [
     "score_sequence",
     "aggregate", "reduce_totals",
 ]
+
+
+def _linear_sum_assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scipy.optimize.linear_sum_assignment`, imported on first use (scipy.optimize takes 0.7 s
+    to import, and most processes that import this module never match tracks)."""
+    from scipy.optimize import linear_sum_assignment as lsa
+
+    return lsa(cost)
+
 
 REGIONS = ("all", "background", "vehicles", "interior")
 MOTIONS = ("total", "local")
@@ -984,7 +992,7 @@ def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
         if ra and rb:
             sub = D[np.ix_(ra, rb)]
             big = 1e6 * (1.0 + float(np.nanmax(sub, initial=0.0)))
-            ia, ib = linear_sum_assignment(np.where(sub <= gate_px, sub, big))
+            ia, ib = _linear_sum_assignment(np.where(sub <= gate_px, sub, big))
             for x, y in zip(ia, ib):
                 if sub[x, y] <= gate_px:
                     a, b = ra[x], rb[y]
@@ -1094,7 +1102,7 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0)
         W = np.zeros((len(vs), len(ts)))
         for (v, t), n in overlap.items():
             W[vs.index(v), ts.index(t)] = n
-        ia, ib = linear_sum_assignment(-W)
+        ia, ib = _linear_sum_assignment(-W)
         idtp = int(W[ia, ib].sum())
     return MOTCounts(objects=objects, predictions=predictions, matches=matches, misses=objects - matches,
                      false_positives=predictions - matches, switches=switches, dist_sum_px=dist_sum,
@@ -1248,7 +1256,7 @@ def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0
             fn += len(a)
             fp += len(b)
             continue
-        ra, rb = linear_sum_assignment(-(align[np.ix_(a, b)] * S))
+        ra, rb = _linear_sum_assignment(-(align[np.ix_(a, b)] * S))
         s = S[ra, rb]
         for k, alpha in enumerate(HOTA_ALPHAS):
             ok = s >= alpha - 1e-10

@@ -35,6 +35,7 @@ read_table(path)                      read one parquet file, schema version chec
 read_results(run_dir)                 RUN/results.parquet, schema version checked
 summarize(df)                         per pipeline x scene x sweep x metric x region x motion
 collect_cells(run_dir)                cells/*/rows.parquet -> results.parquet + summary.csv
+cell_table(df)                        one row per cell: its cell columns, in table order
 write_run_json(run_dir, data), read_run_json(run_dir)   RUN/run.json, atomic
 aggregate (re-exported from harness.metrics)
 """
@@ -58,7 +59,8 @@ from scenes.formats import atomic_write_bytes
 __all__ = [
     "SCHEMA_VERSION", "SCHEMA", "COLUMNS", "CELL_COLUMNS", "SUMMARY_KEYS", "ResultsError", "SchemaError",
     "rows_to_frame", "check_schema", "write_table", "read_table", "read_results", "summarize",
-    "collect_cells", "CellRowsReader", "read_cell_rows", "ROW_ORDER", "write_run_json", "read_run_json", "aggregate",
+    "collect_cells", "cell_table", "CellRowsReader", "read_cell_rows", "ROW_ORDER", "write_run_json",
+    "read_run_json", "aggregate",
     "RESULTS_FILE", "SUMMARY_FILE", "RUN_FILE", "ROWS_FILE",
 ]
 
@@ -267,10 +269,48 @@ class CellRowsReader:
             return None
         return hit[1]
 
+    def cells_table(self) -> pd.DataFrame | None:
+        """:func:`cell_table` of the table :func:`collect_cells` is about to write, from the rows read
+        so far (no file is read: milliseconds, where collecting takes seconds).
+
+        None when a cell folder holds rows not read here (a cell kept by ``resume``, a folder
+        rewritten since), or when the folders are not named by their rows' cell_id.
+        """
+        heads = []
+        for path in _row_files(self.cells_dir):
+            part = self.get(path)
+            if part is None:
+                return None
+            heads.append(part.iloc[:1])
+        if not heads:
+            return None
+        df = pd.concat(heads, ignore_index=True)
+        if not df["cell_id"].is_monotonic_increasing:  # collect_cells re-sorts such a table: leave it to it
+            return None
+        return cell_table(df)
+
 
 def _stamp(path: Path) -> tuple[int, int]:
     st = path.stat()
     return st.st_mtime_ns, st.st_size
+
+
+def _row_files(cells_dir: Path) -> list[Path]:
+    """The cells' rows.parquet files that make the results table, in its order.
+
+    Cell folders are named by cell_id: in name order, each cell's rows in ROW_ORDER is the
+    table's order. Folders whose name starts with "." (cells still being written) are left out.
+    """
+    return [p for p in sorted(cells_dir.glob(f"*/{ROWS_FILE}")) if not p.parent.name.startswith(".")]
+
+
+def cell_table(df: pd.DataFrame) -> pd.DataFrame:
+    """One row per cell of the results table ``df``: the :data:`CELL_COLUMNS` of its first row.
+
+    Cells in the order of ``df``; index 0..n-1, dtypes as in ``df``. Every row of a cell holds
+    the same cell columns (:func:`rows_to_frame` sets them on each), so the first says it all.
+    """
+    return df.drop_duplicates("cell_id")[list(CELL_COLUMNS)].reset_index(drop=True)
 
 
 def collect_cells(run_dir: str | os.PathLike, *, read: CellRowsReader | None = None) -> pd.DataFrame:
@@ -283,10 +323,7 @@ def collect_cells(run_dir: str | os.PathLike, *, read: CellRowsReader | None = N
     """
     run_dir = Path(run_dir)
     parts = []
-    # cell folders are named by cell_id: in name order, each cell's rows in ROW_ORDER is the table's order
-    for p in sorted((run_dir / "cells").glob(f"*/{ROWS_FILE}")):
-        if p.parent.name.startswith("."):
-            continue
+    for p in _row_files(run_dir / "cells"):
         part = read.get(p) if read is not None else None
         parts.append(part if part is not None else read_cell_rows(p))
     df = pd.concat(parts, ignore_index=True) if parts else rows_to_frame([])

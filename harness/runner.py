@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -85,6 +86,7 @@ def run_suite(
     scheduler: str | None = None,
     cache_dir: str | os.PathLike | None = None,
     progress: bool = True,
+    on_cells_done: Callable[[Path, pd.DataFrame | None], object] | None = None,
 ) -> RunResult:
     """Run every cell of ``suite`` into the run folder ``out_dir`` and collect the results.
 
@@ -105,6 +107,13 @@ def run_suite(
         The render cache shared between runs; default :func:`default_cache_dir`.
     progress : bool
         Progress bar and status lines on stderr.
+    on_cells_done : callable, optional
+        Called here once every cell is done, before the results are collected, with the run
+        folder and :meth:`harness.results.CellRowsReader.cells_table` (one row per cell of the
+        table about to be written; None when it is not at hand without reading every cell,
+        e.g. cells kept by ``resume``). Work that needs only the cell folders can start then
+        (``aerobench run`` starts drawing the report's figures while the results are collected);
+        what it raises propagates.
 
     Returns
     -------
@@ -177,6 +186,8 @@ def run_suite(
         say(progress, f"scenes: {rendered} rendered, {reused} reused from the cache ({cache})")
 
         remove_strays(cells_dir, cells)
+        if on_cells_done is not None:
+            on_cells_done(run_dir, read.cells_table())
         table = collect_cells(run_dir, read=read)  # sorted rows: independent of the order cells finished
         failed_cells = failures(cells_dir, cells)
         status = "failed" if failed_cells else "ok"

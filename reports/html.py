@@ -26,7 +26,8 @@ from reports.load import (RunData, open_scene_sequence, picture_frames, read_cel
 from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.tables import Column, MetricTable, format_value
 
-__all__ = ["SCENE_SECTIONS", "cell_index", "render_html", "scene_block", "scene_blocks", "stylesheet"]
+__all__ = ["SCENE_SECTIONS", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
+           "stylesheet"]
 
 _MAX_PICTURE_FRAMES = 2
 _PICTURE_MIN_WIDTH_PX = 320  # tiny suites render 160 x 120: enlarge pictures to at least this width
@@ -601,42 +602,79 @@ def render_html(model: ReportModel, blocks: dict[tuple[str, str], str] | None = 
     ``blocks``: the :func:`scene_block` of every (section, scene) of :func:`scene_blocks`, drawn
     beforehand (by other processes); None draws them here, one after the other.
     """
+    return "".join(_page_parts(model, blocks))
+
+
+def render_html_bytes(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> bytes:
+    """:func:`render_html` encoded as UTF-8, the same bytes.
+
+    Encoded part by part: the scene blocks (all but a few kB of a page that may reach 150 MB) are
+    ASCII, and joined into one ``str`` with the few non-ASCII sections they would be copied into
+    a string of 2 bytes a character, then encoded again, at the end of every report.
+    """
+    return b"".join(part.encode("utf-8") for part in _page_parts(model, blocks))
+
+
+_TABLE = re.compile(r"<table\b.*?</table>", flags=re.S)
+
+
+def _card_tables(text: str) -> str | None:
+    """``text`` with each table marked by :func:`_cards`; None when a table may run on past its end
+    (a ``<table`` after the last complete table, or ``text`` ending in the start of one)."""
+    out, end = [], 0
+    for m in _TABLE.finditer(text):
+        out += [text[end:m.start()], _cards(m.group(0))]
+        end = m.end()
+    rest = text[end:]
+    if "<table" in rest or any(rest.endswith("<table"[:k]) for k in range(1, 6)):
+        return None
+    return "".join([*out, rest]) if out else text
+
+
+def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -> list[str]:
+    """The page of :func:`render_html` in pieces whose concatenation is the page (blocks not copied)."""
     data = model.data
     colors = plots.pipeline_colors(data.pipelines)
     cells = cell_index(data)
     keys = scene_blocks(cells)
     if blocks is None:
         blocks = {key: scene_block(data, cells, *key) for key in keys}
-    by_section = {section: "".join(blocks[key] for key in keys if key[0] == section)
-                  or _missing(_NO_SCENE_BLOCK[section]) for section in SCENE_SECTIONS}
-    sec: dict[str, str] = {}
-    sec["verdict"] = _verdict_html(model.gate, model.baseline, model.baseline_note)
-    sec["lk-vs-hs"] = _lkhs_html(model)
-    sec["provenance"] = ('<div class="scroll"><table class="meta"><tbody>'
+    by_section = {section: [blocks[key] for key in keys if key[0] == section]
+                  or [_missing(_NO_SCENE_BLOCK[section])] for section in SCENE_SECTIONS}
+    sec: dict[str, list[str]] = {}
+    sec["verdict"] = [_verdict_html(model.gate, model.baseline, model.baseline_note)]
+    sec["lk-vs-hs"] = [_lkhs_html(model)]
+    sec["provenance"] = ['<div class="scroll"><table class="meta"><tbody>'
                          + "".join(f'<tr><th scope="row">{_e(k)}</th><td>{_e(v)}</td></tr>'
                                    for k, v in model.provenance)
-                         + "</tbody></table></div>")
-    sec["headline"] = (
+                         + "</tbody></table></div>"]
+    sec["headline"] = [
         '<p class="note">Pipelines side by side, pooled over every scene, sweep value and seed. '
         "\u2193 lower is better, \u2191 higher is better; the best value per column is shaded and starred "
         "(\u2605) when one pipeline alone holds it (pipelines that share a stage tie on its metrics: no star). "
         "Flow errors here are over all pixels, which the background dominates; LK vs HS above splits them.</p>"
         + (_metric_table_html(model.headline) if model.columns else
-           _missing("None of the headline metrics is in the results table.")))
-    sec["per-scene"] = "".join(f"<h3>{_e(s)}</h3>{_metric_table_html(t)}" for s, t in model.per_scene.items()) \
-        or _missing("No scenes.")
-    sec["regions"] = _regions_html(model)
-    sec["all-metrics"] = (_metric_table_html(model.all_metrics)
+           _missing("None of the headline metrics is in the results table."))]
+    sec["per-scene"] = ["".join(f"<h3>{_e(s)}</h3>{_metric_table_html(t)}" for s, t in model.per_scene.items())
+                        or _missing("No scenes.")]
+    sec["regions"] = [_regions_html(model)]
+    sec["all-metrics"] = [_metric_table_html(model.all_metrics)
                           + '<p class="note">Every metric in the results table, tracking and stabilisation '
-                          "metrics included (aerobench list explains each).</p>")
-    sec["difficulty"] = _difficulty_html(data, model.curves, model.columns, colors)
+                          "metrics included (aerobench list explains each).</p>"]
+    sec["difficulty"] = [_difficulty_html(data, model.curves, model.columns, colors)]
     for section in SCENE_SECTIONS:
-        sec[section] = by_section[section] if len(cells) else _missing("No completed cells.")
-    sec["failed"] = _failed_html(data)
+        sec[section] = by_section[section] if len(cells) else [_missing("No completed cells.")]
+    sec["failed"] = [_failed_html(data)]
     nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
-    body = "".join(f'<section id="{k}"><h2>{_e(v)}</h2>{sec[k]}</section>' for k, v in _SECTIONS)
-    body = re.sub(r"<table\b.*?</table>", lambda m: _cards(m.group(0)), body, flags=re.S)
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+    body = []
+    for k, v in _SECTIONS:
+        body += [f'<section id="{k}"><h2>{_e(v)}</h2>', *sec[k], "</section>"]
+    # every table of the body becomes cards; part by part when no table runs on into the next part
+    # (as it cannot: each part is whole elements), else over the joined body as one string
+    carded = [_card_tables(part) for part in body]
+    if any(part is None for part in carded):
+        carded = [_TABLE.sub(lambda m: _cards(m.group(0)), "".join(body))]
+    return ["<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{_e(model.title)}</title><style>{stylesheet()}</style></head><body><main>"
-            f"<h1>{_e(model.title)}</h1><nav><ul>{nav}</ul></nav>{body}</main></body></html>\n")
+            f"<h1>{_e(model.title)}</h1><nav><ul>{nav}</ul></nav>", *carded, "</main></body></html>\n"]

@@ -26,6 +26,7 @@ from scenes.sequence import Sequence, open_sequence
 __all__ = [
     "RunData",
     "load_run",
+    "load_cells",
     "pooled",
     "primary_rows",
     "scene_base",
@@ -130,20 +131,47 @@ def _distinct(col: pd.Series) -> list:
     return pd.unique(col).tolist()
 
 
-def load_run(run_dir: str | os.PathLike) -> RunData:
-    """Read ``RUN/run.json`` and ``RUN/results.parquet``; see :class:`RunData`."""
+def _pipelines(folder: RunFolder, table: pd.DataFrame) -> list[str]:
+    """The pipelines of ``table``: in the suite's order (run.json's resolved pipelines), then the table's."""
+    in_table = _distinct(table["pipeline"].astype(str))
+    return [p for p in _ordered_unique([*folder.pipelines, *in_table]) if p in set(in_table)]
+
+
+def load_run(run_dir: str | os.PathLike, *, table: pd.DataFrame | None = None) -> RunData:
+    """Read ``RUN/run.json`` and ``RUN/results.parquet``; see :class:`RunData`.
+
+    ``table``: the results table when the caller holds it already, as
+    :func:`harness.results.collect_cells` returned it (the rows, columns, dtypes and order
+    that reading results.parquet gives back); then the file is not read.
+    """
     folder = read_run(run_dir)
-    table = folder.results()
+    if table is None:
+        table = folder.results()
     ok = table[(table["status"] == "ok") & ~table["metric"].isin(["", "cell_failed"])].copy()
     failed = folder.failed_cells(table)
     ok = ok[~ok["cell_id"].astype(str).isin(set(failed["cell_id"]))]
-    # the suite's order (run.json's resolved pipelines), then the table's
-    in_table = _distinct(table["pipeline"].astype(str))
-    pipelines = [p for p in _ordered_unique([*folder.pipelines, *in_table]) if p in set(in_table)]
-    return RunData(run_dir=folder.path, folder=folder, table=table, ok=ok, failed=failed, pipelines=pipelines,
+    return RunData(run_dir=folder.path, folder=folder, table=table, ok=ok, failed=failed,
+                   pipelines=_pipelines(folder, table),
                    scenes=_ordered_unique(_distinct(table["scene"].astype(str))),
                    seeds=sorted(_ordered_unique(_distinct(table["seed"]))),
                    metrics=_ordered_unique(_distinct(ok["metric"].astype(str))))
+
+
+def load_cells(run_dir: str | os.PathLike, cells: pd.DataFrame) -> RunData:
+    """What the scene blocks need of a run folder before its results table is written.
+
+    ``cells`` is :func:`harness.results.cell_table` of the table to come (one row per cell,
+    its cell columns). The :class:`RunData` has no rows (``table`` and ``failed`` empty,
+    no metrics); ``ok`` holds the ok cells' rows of ``cells``, ``pipelines`` is what
+    :func:`load_run` will find. An ok cell without a metric row is not told apart here:
+    :func:`reports.report.build_report` compares its cell index with the table's.
+    """
+    folder = read_run(run_dir)
+    ok = cells[cells["status"] == "ok"]
+    return RunData(run_dir=folder.path, folder=folder, table=cells.iloc[:0], ok=ok,
+                   failed=folder.failed_cells(cells.iloc[:0]), pipelines=_pipelines(folder, cells),
+                   scenes=_ordered_unique(_distinct(cells["scene"].astype(str))),
+                   seeds=sorted(_ordered_unique(_distinct(cells["seed"]))), metrics=[])
 
 
 # ---------------------------------------------------------------- cell artifacts and sequences

@@ -9,6 +9,10 @@ run.json names. The output is deterministic: the same run folder gives the same 
 Nearly all of a report's time is its pictures and figures, drawn scene by scene
 (:func:`reports.html.scene_block`). With ``workers > 1`` they are drawn by that many
 spawned processes while this one computes the numbers; the page is the same bytes.
+The blocks read only the run folder and the sequences, so they can be handed out before
+the results table exists (:func:`start_figures`: ``aerobench run`` does so when its
+cells are done, and the figures are drawn while the results are collected); the report
+uses them only if the cells they were drawn for are the table's.
 """
 
 from __future__ import annotations
@@ -20,19 +24,19 @@ import sys
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import pandas as pd
 
 from harness.run_folder import read_run
-from reports.html import SCENE_SECTIONS, cell_index, render_html, scene_block, scene_blocks
-from reports.load import RunData, load_run, scene_base
+from reports.html import SCENE_SECTIONS, cell_index, render_html, render_html_bytes, scene_block, scene_blocks
+from reports.load import RunData, load_cells, load_run, scene_base
 from reports.markdown import render_markdown
-from reports.model import build_model
+from reports.model import ReportModel, build_model
 from scenes.formats import atomic_write_bytes
 
-__all__ = ["write_report", "build_report"]
+__all__ = ["write_report", "build_report", "figure_pool", "start_figures", "Figures"]
 
 
 def _warm_up() -> None:
@@ -47,7 +51,7 @@ def _draw_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> 
 
 
 @contextmanager
-def _figure_pool(run_dir: str | os.PathLike, workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
+def figure_pool(run_dir: str | os.PathLike, workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
     """``workers`` spawned figure processes (None: one per core), started and importing at once; None when
     one process (this one) is all there is to use. No more than the run has scene blocks."""
     from harness.executors import default_workers, worker_setup, worker_threads
@@ -70,11 +74,55 @@ def _figure_pool(run_dir: str | os.PathLike, workers: int | None) -> Iterator[Pr
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+@dataclasses.dataclass
+class Figures:
+    """Scene blocks handed to figure processes before the report is built (:func:`start_figures`)."""
+
+    pool: ProcessPoolExecutor
+    data: RunData                # the run folder without rows: what the blocks read
+    cells: pd.DataFrame          # the cell index (:func:`reports.html.cell_index`) they are drawn for
+    futures: dict[tuple[str, str], Future]
+    lost: BrokenProcessPool | None = None  # the pool broke while they were handed out
+
+    def fit(self, data: RunData, cells: pd.DataFrame) -> bool:
+        """Whether these blocks are the ones ``data`` (with its cell index ``cells``) calls for:
+        the same run folder, cells of run.json, pipelines (their colours) and cell index."""
+        return (self.data.run_dir == data.run_dir and self.data.folder.cells == data.folder.cells
+                and self.data.pipelines == data.pipelines and list(self.cells.columns) == list(cells.columns)
+                and list(self.cells.dtypes) == list(cells.dtypes) and self.cells.equals(cells))
+
+    def cancel(self) -> None:
+        for fut in self.futures.values():
+            fut.cancel()
+
+
+def start_figures(run_dir: str | os.PathLike, cells: pd.DataFrame, pool: ProcessPoolExecutor) -> Figures:
+    """Hand ``pool`` (:func:`figure_pool`) every scene block of ``run_dir`` before its results table exists.
+
+    ``cells`` is :func:`harness.results.cell_table` of the table to come (the runner has it from
+    the cells' rows: :meth:`harness.results.CellRowsReader.cells_table`). :func:`build_report`
+    given the result uses the blocks when its own cell index, pipelines and run.json cells are the
+    same (else it draws them again); a figure process that dies meanwhile costs only time.
+    """
+    data = load_cells(run_dir, cells)
+    index = cell_index(data)
+    light = dataclasses.replace(data, ok=data.ok.iloc[:0])
+    figures = Figures(pool=pool, data=light, cells=index, futures={})
+    try:
+        for key in scene_blocks(index):
+            figures.futures[key] = pool.submit(_draw_block, light, index, *key)
+    except BrokenProcessPool as exc:  # already broken: the report draws the blocks not handed out
+        figures.lost = exc
+    return figures
+
+
 def _draw_blocks(data: RunData, pool: ProcessPoolExecutor | None, progress: bool,
-                 numbers: Callable[[], object]) -> tuple[object, dict[tuple[str, str], str]]:
+                 numbers: Callable[[], object], early: Figures | None = None
+                 ) -> tuple[object, dict[tuple[str, str], str]]:
     """``numbers()`` here while ``pool`` draws the scene blocks: (its result, the blocks).
 
-    Without a pool, the numbers and then each block in this process. A figure process that
+    Without a pool, the numbers and then each block in this process. ``early``: blocks handed
+    out already (:func:`start_figures`), used when they fit ``data``. A figure process that
     dies (killed, out of memory) costs nothing but time: the blocks it left are drawn here.
     """
     from tqdm import tqdm
@@ -92,8 +140,17 @@ def _draw_blocks(data: RunData, pool: ProcessPoolExecutor | None, progress: bool
                   file=sys.stderr)
         broken.append(exc)
 
+    if early is not None and not early.fit(data, cells):
+        early.cancel()  # drawn for other cells: drawn again below
+        early = None
     try:
-        if pool is not None and len(keys) > 1:
+        if early is not None:
+            futures = {key: early.futures[key] for key in keys if key in early.futures}
+            for fut in futures.values():
+                fut.add_done_callback(lambda _: bar.update())
+            if early.lost is not None:
+                died(early.lost)
+        elif pool is not None and len(keys) > 1:
             # the processes need the folder, not its rows: the table is left out of what is pickled to them
             light = dataclasses.replace(data, table=data.table.iloc[:0], ok=data.ok.iloc[:0])
             try:
@@ -121,19 +178,30 @@ def _draw_blocks(data: RunData, pool: ProcessPoolExecutor | None, progress: bool
 def build_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | None = None,
                  gate_verdict: str | os.PathLike | Mapping | None = None,
                  rules: str | os.PathLike | None = None, workers: int | None = 1,
-                 progress: bool = False) -> tuple[str, str]:
+                 progress: bool = False, table: pd.DataFrame | None = None,
+                 figures: Figures | None = None) -> tuple[str, str]:
     """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`)."""
-    with _figure_pool(run_dir, workers) as pool:  # the processes start while the table is read
-        data = load_run(run_dir)
-        model, blocks = _draw_blocks(data, pool, progress, lambda: build_model(
-            run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules, data=data))
+    model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
+                                      workers=workers, progress=progress, table=table, figures=figures)
     return render_html(model, blocks), render_markdown(model)
+
+
+def _model_and_blocks(run_dir: str | os.PathLike, *, baseline, gate_verdict, rules, workers: int | None,
+                      progress: bool, table: pd.DataFrame | None, figures: Figures | None
+                      ) -> tuple[ReportModel, dict[tuple[str, str], str]]:
+    """The numbers of the report and its scene blocks (see :func:`write_report`)."""
+    # the processes start while the table is read; blocks handed out early come with their own
+    with nullcontext(figures.pool) if figures is not None else figure_pool(run_dir, workers) as pool:
+        data = load_run(run_dir, table=table)
+        return _draw_blocks(data, pool, progress, lambda: build_model(
+            run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules, data=data), early=figures)
 
 
 def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | None = None,
                  gate_verdict: str | os.PathLike | Mapping | None = None, rules: str | os.PathLike | None = None,
                  out_dir: str | os.PathLike | None = None, workers: int | None = 1,
-                 progress: bool = False) -> dict[str, Path]:
+                 progress: bool = False, table: pd.DataFrame | None = None,
+                 figures: Figures | None = None) -> dict[str, Path]:
     """Write ``report.html`` and ``report.md`` for the run folder ``run_dir``.
 
     Parameters
@@ -153,16 +221,22 @@ def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
         per core). The bytes written do not depend on it.
     progress : bool
         A progress bar of the figures on stderr.
+    table : DataFrame, optional
+        The run's results table as :func:`harness.results.collect_cells` returned it (the same
+        rows, dtypes and order as results.parquet reads back); default: read results.parquet.
+    figures : Figures, optional
+        Scene blocks handed out already (:func:`start_figures`); drawn by their pool, not
+        ``workers`` new processes. Used only if they are the blocks of this run's table.
 
     Returns
     -------
     dict
         ``{"html": Path, "md": Path}``.
     """
-    html_text, md_text = build_report(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
-                                      workers=workers, progress=progress)
+    model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
+                                      workers=workers, progress=progress, table=table, figures=figures)
     out = Path(out_dir) if out_dir is not None else Path(run_dir)
     paths = {"html": out / "report.html", "md": out / "report.md"}
-    atomic_write_bytes(paths["html"], html_text.encode("utf-8"))
-    atomic_write_bytes(paths["md"], md_text.encode("utf-8"))
+    atomic_write_bytes(paths["html"], render_html_bytes(model, blocks))  # the text of build_report, encoded
+    atomic_write_bytes(paths["md"], render_markdown(model).encode("utf-8"))
     return paths

@@ -141,5 +141,25 @@ def test_cells_read_during_the_run_give_the_same_bytes_and_a_rewritten_cell_is_r
         assert hashlib.sha256((alone / name).read_bytes()).digest() == hashlib.sha256((during / name).read_bytes()).digest()
     assert list(dict.fromkeys(a["cell_id"])) == ["c1", "c2", "c3"]
     assert (a[a["cell_id"] == "c1"]["value"].max()) > 8  # the re-written rows, not the first ones
+    assert reader.cells_table() is None  # c1's rows were re-written after they were read: not at hand
+    reader.add("c1")
+    cells = reader.cells_table()
+    pd.testing.assert_frame_equal(cells, R.cell_table(a), check_exact=True)
+    assert cells["cell_id"].tolist() == ["c1", "c2", "c3"] and list(cells.columns) == list(R.CELL_COLUMNS)
     order = a[a["cell_id"] == "c2"][list(R.ROW_ORDER)].astype(str).values.tolist()
     assert order == sorted(order, key=lambda r: r[:3])  # metric, region, motion ascending within a cell
+
+
+def test_the_collected_table_is_what_results_parquet_reads_back(tmp_path):
+    """The report takes the table collect_cells returns instead of reading the file: it must be the same frame."""
+    for k, cid in enumerate(["c2", "c1", "c3"]):
+        rows = _cell(cid, "lk" if k else "hs", 0.25 * (k + 1), frames=3, seed=k)
+        rows.loc[rows.index[0], "frame"] = pd.NA  # a nullable integer with a gap
+        R.write_table(rows, tmp_path / "cells" / cid / R.ROWS_FILE)
+    collected = R.collect_cells(tmp_path)
+    read = R.read_results(tmp_path)
+    pd.testing.assert_frame_equal(collected, read, check_exact=True, check_index_type=True,
+                                  check_column_type=True)
+    assert list(collected.dtypes) == list(read.dtypes) and collected.equals(read)
+    assert isinstance(collected.index, pd.RangeIndex) and isinstance(read.index, pd.RangeIndex)
+    assert collected["hist"].map(type).tolist() == read["hist"].map(type).tolist()

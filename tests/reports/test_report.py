@@ -250,3 +250,69 @@ def test_a_figure_process_that_dies_costs_no_figure(run_dir, capsys):
         drawn = _draw_blocks(data, pool, False, lambda: "numbers")
     assert drawn == alone and len(drawn[1]) == 6  # 2 scenes x 3 sections, each drawn here instead
     assert "a report figure process died" in capsys.readouterr().err
+
+
+def _early(run_dir, pool, cells=None):
+    """Blocks handed out before the report is built, as ``aerobench run`` does when its cells are done."""
+    from harness.results import cell_table, read_results
+    from reports.report import start_figures
+
+    return start_figures(run_dir, cell_table(read_results(run_dir)) if cells is None else cells, pool)
+
+
+def test_figures_handed_out_before_the_report_give_the_same_bytes(run_dir, report, tmp_path):
+    from harness.results import cell_table, read_results
+    from reports.html import cell_index
+    from reports.load import load_run
+    from reports.report import figure_pool
+
+    with figure_pool(run_dir, 2) as pool:
+        early = _early(run_dir, pool)
+        assert len(early.futures) == 6  # 2 scenes x 3 sections
+        table = read_results(run_dir)  # the table in hand, as the runner has it
+        data = load_run(run_dir, table=table)
+        assert early.fit(data, cell_index(data))  # the report uses them (does not draw them again)
+        drawn = write_report(run_dir, out_dir=tmp_path / "early", table=table, figures=early)
+        # blocks drawn for other cells (one cell fewer) are not used: the report draws its own
+        other = _early(run_dir, pool, cell_table(table).iloc[1:].reset_index(drop=True))
+        assert not other.fit(data, cell_index(data))
+        again = write_report(run_dir, out_dir=tmp_path / "other", figures=other)
+    for got in (drawn, again):
+        assert got["html"].read_bytes() == report["html"].read_bytes()
+        assert got["md"].read_bytes() == report["md"].read_bytes()
+
+
+def test_a_figure_process_that_dies_before_the_report_costs_no_figure(run_dir, report, tmp_path, capsys):
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    # a pool whose process exits as it starts: every block handed out early is lost with it
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=os._exit,
+                             initargs=(3,)) as pool:
+        early = _early(run_dir, pool)
+        drawn = write_report(run_dir, out_dir=tmp_path, figures=early)
+    assert drawn["html"].read_bytes() == report["html"].read_bytes()
+    assert "a report figure process died" in capsys.readouterr().err
+
+
+def test_the_page_as_bytes_is_the_page_encoded_even_when_a_table_spans_two_blocks(run_dir):
+    from reports.html import cell_index, render_html, render_html_bytes, scene_block, scene_blocks
+    from reports.load import load_run
+    from reports.model import build_model
+
+    data = load_run(run_dir)
+    model = build_model(run_dir, data=data)
+    cells = cell_index(data)
+    blocks = {key: scene_block(data, cells, *key) for key in scene_blocks(cells)}
+    page = render_html(model, blocks)
+    assert render_html_bytes(model, blocks) == page.encode("utf-8")
+    assert "\u2193" in page and 'data-cards="1"' in page  # not ASCII; tables marked for the narrow layout
+    # a table opened in one block and closed in the next is marked as a whole, as on the joined page
+    first, second = list(blocks)[:2]
+    split = dict(blocks)
+    split[first] += '<table><thead><tr><th>speed</th></tr></thead><tbody><tr><td>'
+    split[second] = "7</td></tr></tbody></table>" + split[second]
+    page = render_html(model, split)
+    assert render_html_bytes(model, split) == page.encode("utf-8")
+    assert '<td data-label="speed">7</td>' in page
