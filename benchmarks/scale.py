@@ -46,8 +46,8 @@ table and the command lines it ran. Run from the project root:
   grouped and ordered as the runner does for 1, 2, 4, ... workers, on idle cores, plus the
   tail after the cells (``--serial`` measures, on a copy of the run, collection and the
   report's parts: its figure blocks, replayed on the same N workers in the order the report
-  submits them, beside the numbers the report computes meanwhile). Says where scaling
-  stops: the longest task, and what stays serial.
+  submits them, beside the collection and the numbers that the main process computes meanwhile,
+  as ``aerobench run`` does). Says where scaling stops: the longest task, and what stays serial.
 - ``scene``: the cells of one scene (``--presets``, seed 1, the standard's pipelines) run
   by ``aerobench run`` of this tree and of ``--reference`` (another source tree, e.g. a
   git worktree of an older commit), alternately, ``--repeats`` times each, warm cache, no
@@ -547,13 +547,15 @@ def cmd_replay(args: argparse.Namespace) -> None:
             shutil.rmtree(work, ignore_errors=True)
 
     def tail(w: int) -> float:
-        """The serial tail on ``w`` workers: collection, reading the table, the report's numbers beside its
-        figure blocks (one worker: after them), writing the page."""
+        """The serial tail on ``w`` workers as ``aerobench run`` has it: its figure blocks handed out when
+        the cells are done, beside the collection and then the report's numbers on the table in hand (not
+        read back: ``load`` is measured, not counted); one worker: all of it one after the other. Then the
+        page."""
         if not serial:
             return 0.0
         figures = replay_schedule([(0.0, b) for b in blocks], w, ordered=False) if w > 1 else sum(blocks)
-        side = max(serial["model"], figures) if w > 1 else serial["model"] + figures
-        return serial["collect"] + serial["load"] + side + serial["page"]
+        main = serial["collect"] + serial["model"]
+        return (max(main, figures) if w > 1 else main + figures) + serial["page"]
     total_cpu = sum(elapsed.values())
     rows, base = [], None
     for w in [int(x) for x in args.workers.split(",")]:
