@@ -8,11 +8,12 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from harness.metrics.histogram import HIST_NBINS, add_hist, encode_hist, hist_quantile
+from harness.metrics.histogram import HIST_NBINS, add_hist, encode_hist, hist_quantile, merge_tails
 from harness.metrics.registry import METRICS, metric_def
 
-def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None) -> float:
-    """The value of ``metric`` from summed totals (and a summed histogram for quantiles)."""
+def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None, *,
+                  tail: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """The value of ``metric`` from summed totals (and a summed histogram and its tail for quantiles)."""
     d = metric_def(metric) if metric in METRICS else None
     rule = d.reduce if d else "mean"
     if rule == "total":
@@ -29,14 +30,14 @@ def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | No
         return float(1.0 - total / count)
     if hist is None:
         return float("nan")
-    return hist_quantile(hist, d.q)
+    return hist_quantile(hist, d.q, tail=tail)
 
 
 def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
     """Aggregate rows over everything not in ``by`` (+ metric, region, motion), from totals.
 
     ``sum`` and ``count`` are summed and reduced by each metric's rule; quantile
-    metrics sum their ``hist``. Rows whose ``status`` (if present) is not "ok" are
+    metrics sum their ``hist`` and its overflow tail. Rows whose ``status`` (if present) is not "ok" are
     left out. Returns one row per group with ``by, metric, region, motion, kind,
     value, sum, count, unit, higher_is_better, n_rows`` (and ``hist`` for quantiles).
     """
@@ -74,16 +75,19 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
         # instead of silently dropping its sum while keeping its count
         total = math.fsum(sums[counts != 0])
         count = math.fsum(counts)
-        hist = None
+        hist = tail = None
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
-            hist = np.zeros(HIST_NBINS, np.int64)
+            hist, tails = np.zeros(HIST_NBINS, np.int64), []
             for h in ([] if hist_col is None else hist_col[order[a:b]]):
                 if isinstance(h, (bytes, bytearray)):
-                    add_hist(hist, h)
+                    add_hist(hist, h, tails=tails)
+            tail = merge_tails(tails)
+            if int(tail[1].sum()) != int(hist[-1]):  # a row written before tails were kept: the floor
+                tail = None
             total = float("nan")
-        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist), sum=total,
+        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist, tail=tail), sum=total,
                    count=count, unit=unit[g], higher_is_better=bool(hib[g]),
-                   n_rows=int(b - a), hist=encode_hist(hist) if hist is not None else b"")
+                   n_rows=int(b - a), hist=encode_hist(hist, tail=tail) if hist is not None else b"")
         out.append(rec)
     return pd.DataFrame(out, columns=cols)
