@@ -88,7 +88,7 @@ from harness.metrics.registry import (  # noqa: F401
 )
 from harness.metrics.histogram import (  # noqa: F401
     HIST_BIN_PX, HIST_MAX_PX, HIST_NBINS, NO_TAIL, add_hist, decode_hist, decode_tail, encode_hist, epe_histogram,
-    hist_quantile, merge_tails, overflow_tail,
+    hist_quantile, merge_tails, overflow_tail, encode_alpha_totals, decode_alpha_totals,
 )
 from harness.metrics.flow import (  # noqa: F401
     _KCOV, _KFL, _K1, _K3, _K5, _N, _S_AE, _S_EPE, _S_SQ, MOTIONS, OUTLIER_PX, REGIONS, PreparedTruth,
@@ -103,7 +103,10 @@ from harness.metrics.stabilisation import (  # noqa: F401
 from harness.metrics.trajectories import (  # noqa: F401
     _linear_sum_assignment, _mot_frames, _points_by_frame, associate_tracks, position_error_px, track_rows,
 )
-from harness.metrics.mot import HOTA_ALPHAS, HOTACounts, MOTCounts, hota_counts, mot_counts, mot_rows  # noqa: F401
+from harness.metrics.mot import (  # noqa: F401
+    HOTA_ALPHAS, HOTACounts, MOTCounts, alpha_mean_value, hota_counts, hota_rows, mot_counts, mot_rows,
+)
+from harness.metrics.matching import BOX_COLUMNS, IOU_MIN, box_iou, box_offset, correspondence  # noqa: F401
 from harness.metrics.sequence import score_sequence  # noqa: F401
 from harness.metrics.aggregate import aggregate, reduce_totals  # noqa: F401
 
@@ -116,7 +119,9 @@ __all__ = [
     "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair", "PreparedTruth", "prepare_pair_truth",
     "shift_rows", "detrend", "jitter_rows", "stabilisation_scores", "stabilisation_rows", "position_error_px",
     "associate_tracks", "track_rows", "MOTCounts", "mot_counts", "mot_rows",
-    "HOTA_ALPHAS", "HOTACounts", "hota_counts",
+    "HOTA_ALPHAS", "HOTACounts", "hota_counts", "hota_rows", "alpha_mean_value",
+    "encode_alpha_totals", "decode_alpha_totals",
+    "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
     "score_sequence",
     "aggregate", "reduce_totals",
 ]

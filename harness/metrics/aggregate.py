@@ -8,14 +8,21 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from harness.metrics.histogram import HIST_NBINS, add_hist, encode_hist, hist_quantile, merge_tails
+from harness.metrics.histogram import (
+    HIST_NBINS, add_hist, decode_alpha_totals, encode_alpha_totals, encode_hist, hist_quantile, merge_tails,
+)
+from harness.metrics.mot import alpha_mean_value
 from harness.metrics.registry import METRICS, metric_def
 
 def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None, *,
-                  tail: tuple[np.ndarray, np.ndarray] | None = None) -> float:
-    """The value of ``metric`` from summed totals (and a summed histogram and its tail for quantiles)."""
+                  tail: tuple[np.ndarray, np.ndarray] | None = None,
+                  alphas: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """The value of ``metric`` from summed totals (and a summed histogram and its tail for quantiles, the
+    summed per-alpha totals for HOTA's metrics)."""
     d = metric_def(metric) if metric in METRICS else None
     rule = d.reduce if d else "mean"
+    if rule == "alpha_mean":
+        return alpha_mean_value(metric, *alphas) if alphas is not None else float("nan")
     if rule == "total":
         return float(total)
     if count == 0 or not np.isfinite(count):
@@ -75,7 +82,8 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
         # instead of silently dropping its sum while keeping its count
         total = math.fsum(sums[counts != 0])
         count = math.fsum(counts)
-        hist = tail = None
+        hist = tail = alphas = None
+        packed = b""
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
             hist, tails = np.zeros(HIST_NBINS, np.int64), []
@@ -86,8 +94,17 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
             if int(tail[1].sum()) != int(hist[-1]):  # a row written before tails were kept: the floor
                 tail = None
             total = float("nan")
-        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist, tail=tail), sum=total,
-                   count=count, unit=unit[g], higher_is_better=bool(hib[g]),
-                   n_rows=int(b - a), hist=encode_hist(hist, tail=tail) if hist is not None else b"")
+            packed = encode_hist(hist, tail=tail)
+        elif d is not None and d.reduce == "alpha_mean":
+            parts = [decode_alpha_totals(h) for h in ([] if hist_col is None else hist_col[order[a:b]])
+                     if isinstance(h, (bytes, bytearray)) and len(h)]
+            if parts:
+                # exactly rounded sums per alpha, as the totals above: independent of the rows' order
+                alphas = tuple(np.array([math.fsum(v) for v in np.stack([p[k] for p in parts], 1)]) for k in (0, 1))
+                packed = encode_alpha_totals(*alphas)
+            total = float("nan")
+        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist, tail=tail, alphas=alphas),
+                   sum=total, count=count, unit=unit[g], higher_is_better=bool(hib[g]), n_rows=int(b - a),
+                   hist=packed)
         out.append(rec)
     return pd.DataFrame(out, columns=cols)

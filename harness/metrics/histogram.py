@@ -182,3 +182,30 @@ def hist_quantile(counts: np.ndarray, q: float, *, tail: tuple[np.ndarray, np.nd
         j = int(np.searchsorted(np.cumsum(tail[1]), rank - below))
         return (int(tail[0][j]) + 0.5) * HIST_BIN_PX
     return (b + 0.5) * HIST_BIN_PX
+
+
+# per-alpha totals of a HOTA row (harness.metrics.mot.hota_rows): format 16, the number of alphas, then
+# the numerators and the denominators, float64 little-endian
+_ALPHA_HEADER = struct.Struct("<BB")
+_ALPHA_FORMAT = 16
+
+
+def encode_alpha_totals(num: np.ndarray, den: np.ndarray) -> bytes:
+    """The ``hist`` bytes of a HOTA row: its per-alpha numerators and denominators, (K,) float each."""
+    num, den = np.asarray(num, "<f8").ravel(), np.asarray(den, "<f8").ravel()
+    if num.shape != den.shape or not 0 < num.size < 256:
+        raise ValueError(f"alpha totals: expected two arrays of the same size (1..255), got {num.size} and {den.size}")
+    return _ALPHA_HEADER.pack(_ALPHA_FORMAT, num.size) + num.tobytes() + den.tobytes()
+
+
+def decode_alpha_totals(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`encode_alpha_totals`: ``(num, den)`` float64."""
+    try:
+        fmt, k = _ALPHA_HEADER.unpack_from(data)
+    except (struct.error, TypeError) as exc:
+        raise ValueError(f"alpha totals: not encoded alpha totals ({exc})") from None
+    if fmt != _ALPHA_FORMAT or len(data) != _ALPHA_HEADER.size + 16 * k:
+        raise ValueError(f"alpha totals: expected format {_ALPHA_FORMAT} with 2 x {k} float64, got format {fmt}, "
+                         f"{len(data)} bytes")
+    a = np.frombuffer(bytes(data), "<f8", offset=_ALPHA_HEADER.size).astype(np.float64)
+    return a[:k], a[k:]
