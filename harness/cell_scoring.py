@@ -208,6 +208,7 @@ def _finish(run: _CellRun, seq: Any) -> list[dict]:
     rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks)  # fresh dicts: no copy
     artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
     artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))
+    artifacts.write_mot_tracks(run.tmp, getattr(run.seq_est, "tracks", None))
     if run.payload["metrics"] is not None:
         keep = set(run.payload["metrics"])
         rows = [r for r in rows if r["metric"] in keep]

@@ -10,7 +10,8 @@ Columns beyond docs/architecture.md:
 
 * ``kind``: "accuracy" or "timing" (the gate treats timings differently).
 * ``hist``: for quantile metrics (``epe_median``, ``epe_p95``) the row's EPE
-  histogram (0.01 px bins up to 100 px plus an overflow bin) as bytes in the
+  histogram (0.01 px bins up to 100 px plus an overflow bin, whose samples are
+  kept beside it as a sparse histogram of the same bins) as bytes in the
   compact binary form of :func:`harness.metrics.encode_hist` (the counts of the
   occupied bin range, zlib-compressed: about 0.5 kB for a 640x480 pair, where
   schema v1's "bin:count ..." text took about 2.5 kB); empty (``b""``) for every
