@@ -640,13 +640,13 @@ def export_frames(frames, out_dir: str | os.PathLike) -> Path:
 
 
 def export_video(frames, path: str | os.PathLike, *, fps: float = 25.0, codec: str = "ffv1") -> Path:
-    """Write ``frames`` as a video by PyAV: ``ffv1`` (lossless RGB, planar gbrp: the frames come back
+    """Write ``frames`` as a video by PyAV: ``ffv1`` (lossless RGB as bgr0: the frames come back
     bit for bit) or ``libx264rgb`` (H.264 in RGB at crf 0: lossless too), any container FFmpeg
     muxes them into (``.mkv``, ``.avi``; ``.mp4``/``.mov`` take libx264rgb)."""
     import av
     from fractions import Fraction
 
-    pix = {"ffv1": "gbrp", "libx264rgb": "rgb24"}
+    pix = {"ffv1": "bgr0", "libx264rgb": "rgb24"}
     if codec not in pix:
         raise ValueError(f"codec: expected one of {', '.join(pix)} (lossless), got {codec!r}")
     path = Path(path)
