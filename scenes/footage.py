@@ -57,7 +57,7 @@ import re
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import cv2
@@ -153,8 +153,6 @@ class FootageSpec:
     yolo: bool | None = None
     classes: tuple[str, ...] | None = None
     flow: str | None = None
-    # filled by check(): the files read, in a fixed order (what the hash covers)
-    _files: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     @property
     def kind(self) -> str:
@@ -163,7 +161,7 @@ class FootageSpec:
 
     def options(self) -> dict:
         """The options that change what ingestion writes (paths not included: the bytes are)."""
-        d = {k: v for k, v in asdict(self).items() if k not in ("_files", "source", "gt", "flow", "name")}
+        d = {k: v for k, v in asdict(self).items() if k not in ("source", "gt", "flow", "name")}
         d["classes"] = list(self.classes) if self.classes is not None else None
         d["kind"] = self.kind
         d["has_gt"], d["has_flow"] = self.gt is not None, self.flow is not None

@@ -142,3 +142,22 @@ def test_round_trip_rendered_sequence_as_footage_scores_the_same(tmp_path, rende
         return tr[tr["source"] == "multi"][["frame", "track_id", "x_filt_px", "y_filt_px"]].reset_index(drop=True)
 
     pd.testing.assert_frame_equal(multi(tmp_path / "synthetic"), multi(out))
+
+
+def test_export_writes_mot_files_and_a_lossless_video(tmp_path, render_cache, capsys):
+    from scenes import cached_sequence, load_scene_spec, open_sequence
+    from scenes.formats import read_mot_gt
+
+    pytest.importorskip("av")
+    seq_dir = cached_sequence(load_scene_spec("tiny", overrides={"seed": 1}), render_cache)
+    seq = open_sequence(seq_dir)
+    out = tmp_path / "mot"
+    assert main(["export", str(seq_dir), "--out", str(out), "--video", "tiny.mkv"]) == 0
+    assert sorted(p.name for p in (out / "img1").iterdir())[:2] == ["000001.png", "000002.png"]
+    gt = read_mot_gt(out / "gt" / "gt.txt")
+    visible = seq.tracks[seq.tracks["visible"] == 1]
+    assert len(gt) == len(visible) and gt["frame"].min() == 1 and not gt["ignore"].any()
+    assert (out / "tiny.mkv").stat().st_size > 0
+    capsys.readouterr()
+    assert main(["export", str(seq_dir), "--out", str(out)]) == 2  # not empty: refused
+    assert "not an empty folder" in capsys.readouterr().err
