@@ -207,7 +207,10 @@ def run_suite(
 def _sequence_dir(v: SceneVariant, cache: Path) -> Path:
     """Where the render cache keeps (or will keep) the sequence of ``v``: its absolute path."""
     from scenes.cache import cache_key
+    from scenes.footage import FootageSpec, footage_key
 
+    if isinstance(v.spec, FootageSpec):  # its scene hash is the footage hash: the files are not read again
+        return (cache / footage_key(v.spec, v.scene_hash)).resolve()
     return (cache / cache_key(v.spec)).resolve()
 
 
