@@ -19,7 +19,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-__all__ = ["THESIS_KALMAN", "scalar_kalman", "ConstantVelocityKalman", "CVFilterResult", "kalman_cv_filter"]
+__all__ = ["THESIS_KALMAN", "scalar_kalman", "ConstantVelocityKalman", "CVFilterResult", "kalman_cv_filter",
+           "BoxKalman"]
 
 # Thesis 4.1: "The X(1|1) is set to be -1, P(1|1) is 1, Q is 1, R is 0.05." Use as scalar_kalman(z, **THESIS_KALMAN).
 THESIS_KALMAN = MappingProxyType({"x0": -1.0, "p0": 1.0, "q": 1.0, "r": 0.05})
@@ -215,3 +216,89 @@ def kalman_cv_filter(measurements, *, x0=None, dt: float = 1.0, sigma_accel_px: 
             kf.update(z[k])
         filt[k], states[k], covs[k] = kf.x[:2], kf.x, kf.P
     return CVFilterResult(filt, pred, states, covs)
+
+
+class BoxKalman:
+    """Constant-velocity Kalman filter of a box: state ``x = (cx, cy, w, h, vcx, vcy, vw, vh)``.
+
+    Centre and size (px) each move at a constant rate (px/frame) disturbed by white
+    acceleration (Bar-Shalom, Li, Kirubarajan 2001, 6.3.3; per coordinate
+    Q = sigma_a^2 [[1/4, 1/2], [1/2, 1]] for dt = 1), as SORT (Bewley 2016) and
+    ByteTrack filter boxes, except that here the size has a rate (not the area and a
+    fixed aspect ratio: a vehicle that turns changes its box's aspect). A measurement
+    is the box ``(cx, cy, w, h)``, optionally with the centre's velocity ``(vcx, vcy)``
+    (a detection's mean flow).
+
+    Parameters
+    ----------
+    box : array-like, (4,)
+        Initial ``(cx, cy, w, h)``, px.
+    velocity : array-like, (2,), optional
+        Initial centre velocity, px/frame (default zero, with ``sigma_vel0_px``).
+    sigma_accel_px : float
+        Centre acceleration, px/frame^2.
+    sigma_size_accel_px : float
+        Size acceleration, px/frame^2.
+    sigma_meas_px : float
+        Centre and size measurement noise, px.
+    sigma_vel_meas_px : float
+        Velocity measurement noise, px/frame.
+    sigma_vel0_px : float
+        Initial centre velocity uncertainty, px/frame (the size rate starts at 0 +- sigma_meas_px).
+    """
+
+    def __init__(self, box, *, velocity=None, sigma_accel_px: float = 0.5, sigma_size_accel_px: float = 0.2,
+                 sigma_meas_px: float = 1.5, sigma_vel_meas_px: float = 1.0, sigma_vel0_px: float = 5.0):
+        sa = _check_positive("sigma_accel_px", sigma_accel_px, allow_zero=True)
+        ss = _check_positive("sigma_size_accel_px", sigma_size_accel_px, allow_zero=True)
+        sm = _check_positive("sigma_meas_px", sigma_meas_px)
+        svm = _check_positive("sigma_vel_meas_px", sigma_vel_meas_px)
+        sv = _check_positive("sigma_vel0_px", sigma_vel0_px, allow_zero=True)
+        b = np.asarray(box, dtype=np.float64).ravel()
+        if b.shape != (4,) or not np.isfinite(b).all():
+            raise ValueError(f"box: expected a finite (cx, cy, w, h), got {box!r}")
+        v0 = np.zeros(2) if velocity is None else np.asarray(velocity, dtype=np.float64).ravel()
+        known_v = v0.shape == (2,) and bool(np.isfinite(v0).all())
+        self.x = np.concatenate([b, v0 if known_v else np.zeros(2), np.zeros(2)])
+        self.P = np.diag([sm**2] * 4 + [(svm if known_v else sv) ** 2] * 2 + [sm**2] * 2)
+        self.F = np.eye(8)
+        self.F[:4, 4:] = np.eye(4)
+        G = np.vstack([0.5 * np.eye(4), np.eye(4)])  # w = G a, per coordinate (dt^2/2, dt), dt = 1
+        self.Q = G @ np.diag([sa**2, sa**2, ss**2, ss**2]) @ G.T
+        self.R = np.diag([sm**2] * 4 + [svm**2] * 2)
+
+    def predict(self) -> np.ndarray:
+        """Propagate one frame; returns the predicted box ``(cx, cy, w, h)``."""
+        # x = F x
+        self.x = self.F @ self.x
+        # P = F P F' + Q
+        self.P = self.F @ self.P @ self.F.T + self.Q
+        self.x[2:4] = np.maximum(self.x[2:4], 1.0)  # a size never shrinks below a pixel
+        return self.x[:4].copy()
+
+    def update(self, box, velocity=None) -> np.ndarray:
+        """Correct with a measured box ``(cx, cy, w, h)`` and, when finite, the centre velocity ``(vcx, vcy)``.
+
+        Returns the filtered box ``(cx, cy, w, h)``.
+        """
+        z = np.asarray(box, dtype=np.float64).ravel()
+        if z.shape != (4,) or not np.isfinite(z).all():
+            raise ValueError(f"box: expected a finite (cx, cy, w, h), got {box!r}")
+        rows = list(range(4))
+        if velocity is not None and np.isfinite(np.asarray(velocity, dtype=np.float64)).all():
+            z = np.concatenate([z, np.asarray(velocity, dtype=np.float64).ravel()])
+            rows += [4, 5]
+        H = np.eye(8)[rows]
+        R = self.R[np.ix_(range(len(rows)), range(len(rows)))]
+        # y = z - H x
+        y = z - H @ self.x
+        # S = H P H' + R
+        S = H @ self.P @ H.T + R
+        # K = P H' S^-1
+        K = np.linalg.solve(S, H @ self.P).T
+        # x = x + K y
+        self.x = self.x + K @ y
+        # P = (I - K H) P (I - K H)' + K R K'  (Joseph form)
+        I_KH = np.eye(8) - K @ H
+        self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T
+        return self.x[:4].copy()

@@ -47,6 +47,7 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
+from algorithms.detection import DETECTION_DEFAULTS
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, motion_mask
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
@@ -60,7 +61,7 @@ register_stage("tracking", name="multi")(MultiTargetTracker)
 GLOBAL_MOTION_METHODS = STAGES["global_motion"]
 # the stage functions the pipeline runs where its dict names no method
 _STAGE = {"jitter": "remove_jitter", "threshold": "threshold_flow", "spatial": "spatial_filter",
-          "temporal": "temporal_filter", "detection": "detect_moving_objects"}
+          "temporal": "temporal_filter", "detection": "detect_vehicles"}
 
 
 def _stage(kind: str):
@@ -96,9 +97,11 @@ class PairEstimate:
     valid : (H, W) bool
         Flow method's valid mask and the compensated sample inside frame t+1.
     motion_mask : (H, W) bool
-        ``valid & |flow_filtered| >= detection.min_magnitude_px``.
-    detections : list of (x_px, y_px, area_px)
-        Connected regions of ``motion_mask`` of at least ``detection.min_area_px``.
+        ``valid & |f| >= detection.min_magnitude_px`` for the field ``f`` detection runs on
+        (``detection.field``: ``flow_filtered`` or ``flow_local``).
+    detections : list of :class:`~algorithms.detection.Detection`
+        The moving vehicles :func:`~algorithms.detection.detect_vehicles` finds in that field
+        (centre, area, box, mean local flow; ``area_m2`` with a ground sampling distance).
     stage_ms : dict
         Wall time per stage, ms.
     """
@@ -216,11 +219,11 @@ class Pipeline:
         threshold: {direction: -90, tolerance_deg: 45, min_magnitude_px: 0.0, max_magnitude_px: null}  # or null
         spatial: true        # eq. 4.11
         temporal: true       # eq. 4.12
-        detection: {min_magnitude_px: 0.5, min_area_px: 20}
+        detection: {field: local | filtered, gsd_m_per_px: null, <keys of algorithms.detection.DETECTION_DEFAULTS>}
         tracking: {point: true | {field: filtered | local, kalman: {x0, p0, q, r}, recentre_px: null | 12.0,
                                   filter: flow | position, sigma_accel_px: 0.5, sigma_meas_px: 1.0,
                                   correlation: null | {template_px: 15, search_px: 3, min_ncc: 0.5, renew_ncc: 0.8}},
-                   multi: null | {gate_px, birth_hits, death_misses, sigma_accel_px, sigma_meas_px, sigma_vel0_px}}
+                   multi: null | {<keys of algorithms.tracking.MULTI_DEFAULTS>}}
 
     Method parameters are checked against the function's keyword parameters.
     Unknown keys, unknown names and wrong types raise :class:`PipelineError`
@@ -297,8 +300,8 @@ class Pipeline:
 
     # -- run ---------------------------------------------------------------------------------
 
-    def run(self, frames: Sequence, *, seeds: Sequence[tuple] | None = None, shared: SharedWork | None = None
-            ) -> Iterator[PairEstimate | SequenceEstimate]:
+    def run(self, frames: Sequence, *, seeds: Sequence[tuple] | None = None, shared: SharedWork | None = None,
+            gsd_m_per_px: float | None = None) -> Iterator[PairEstimate | SequenceEstimate]:
         """Run on ``frames`` (``len`` and ``frames[i]``), yielding a PairEstimate per pair, then a SequenceEstimate.
 
         Parameters
@@ -312,6 +315,10 @@ class Pipeline:
             shifts, compensated frames; :mod:`algorithms.shared_work`). Without it the run has
             one of its own, so a frame is still decoded once for both passes. The estimates
             are the same, bit for bit, with or without it.
+        gsd_m_per_px : float, optional
+            Ground sampling distance of the frames, m/px (e.g. from a sequence's intrinsics and
+            altitude): detections get an area in m^2 and the m^2 size limits apply. Default:
+            the pipeline's ``detection.gsd_m_per_px`` (null: sizes in px only).
 
         Yields
         ------
@@ -333,8 +340,8 @@ class Pipeline:
         totals: dict[str, float] = {}
         # every stage is resolved through algorithms.registry, the built-ins and plugins' alike
         remove_jitter, threshold_flow = _stage("jitter"), _stage("threshold")
-        spatial_filter, temporal_filter, detect_moving_objects = (_stage("spatial"), _stage("temporal"),
-                                                                  _stage("detection"))
+        spatial_filter, temporal_filter, detect_vehicles = (_stage("spatial"), _stage("temporal"),
+                                                            _stage("detection"))
         point_tracker, multi_tracker = get_stage("tracking", "point"), get_stage("tracking", "multi")
 
         # pass 1: global shifts of all pairs, jitter over the whole path
@@ -356,6 +363,8 @@ class Pipeline:
         flow_fn, flow_params = get_stage("flow", cfg["flow"]["method"]), cfg["flow"]["params"]
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
+        det_params = {k: det_cfg[k] for k in DETECTION_DEFAULTS}
+        gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
@@ -399,7 +408,8 @@ class Pipeline:
                 cleaned = spatial_filter(cleaned)
             ms["spatial"] = _ms(t0)
             return {"index": t, "flow_global": fg, "flow_total": total, "flow_local": w_local, "valid": valid,
-                    "cleaned": cleaned, "stage_ms": ms, "gray": (g0, g1)}
+                    "cleaned": cleaned, "stage_ms": ms, "gray": (g0, g1), "compensated": (g0, g1c),
+                    "global_px": shifts[t] if is_shift else fg}
 
         def finish(prev: dict | None, cur: dict, nxt: dict | None) -> PairEstimate:
             ms, t = cur["stage_ms"], cur["index"]
@@ -410,8 +420,10 @@ class Pipeline:
                 filtered = cur["cleaned"]
             ms["temporal"] = _ms(t0)
             t0 = time.perf_counter()
-            mask = motion_mask(filtered, cur["valid"], det_cfg["min_magnitude_px"])
-            dets = detect_moving_objects(mask, min_area_px=det_cfg["min_area_px"])
+            det_field = filtered if det_cfg["field"] == "filtered" else cur["flow_local"]
+            mask = motion_mask(det_field, cur["valid"], det_cfg["min_magnitude_px"])
+            dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
+                                   frames=cur["compensated"], gsd_m_per_px=gsd, **det_params)
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:
@@ -443,6 +455,8 @@ class Pipeline:
                 window = [nxt]
                 del cur, nxt
         yield finish(prev_done, window[0], None)
+        if multi is not None:
+            multi.extrapolate(n - 1, offset_px=cumulative[n - 1])
         del window, prev_done, g0
 
         rows = [r for p in points for r in p.rows()] + (multi.rows() if multi is not None else [])

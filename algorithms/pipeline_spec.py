@@ -38,7 +38,8 @@ from algorithms.filters import threshold_flow
 from algorithms.global_motion import affine_global_motion
 from algorithms.jitter import JITTER_MODELS
 from algorithms.registry import STAGES
-from algorithms.tracking import MultiTargetTracker, PointTracker
+from algorithms.detection import DETECTION_DEFAULTS, detect_vehicles
+from algorithms.tracking import MULTI_DEFAULTS, MultiTargetTracker, PointTracker
 
 __all__ = ["PipelineError", "PipelineSpec", "COMPENSATION_MODELS", "resolve_pipeline", "pipeline_hash",
            "builtin_pipelines", "BUILTIN_DIR"]
@@ -267,8 +268,44 @@ class ThresholdSpec(_Section):
 
 
 class DetectionSpec(_Section):
-    min_magnitude_px: float = 0.5
-    min_area_px: StrictInt = 20
+    """The keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (defaults and meaning there), checked by it."""
+
+    field: StrictStr = "local"
+    min_magnitude_px: float = DETECTION_DEFAULTS["min_magnitude_px"]
+    open_px: StrictInt = DETECTION_DEFAULTS["open_px"]
+    close_px: StrictInt = DETECTION_DEFAULTS["close_px"]
+    min_area_px: StrictInt = DETECTION_DEFAULTS["min_area_px"]
+    max_area_px: Any = DETECTION_DEFAULTS["max_area_px"]
+    split_px: float = DETECTION_DEFAULTS["split_px"]
+    split_rel: float = DETECTION_DEFAULTS["split_rel"]
+    merge_gap_px: float = DETECTION_DEFAULTS["merge_gap_px"]
+    merge_px: float = DETECTION_DEFAULTS["merge_px"]
+    merge_rel: float = DETECTION_DEFAULTS["merge_rel"]
+    parallax_max_ratio: float = DETECTION_DEFAULTS["parallax_max_ratio"]
+    parallax_perp_px: float = DETECTION_DEFAULTS["parallax_perp_px"]
+    parallax_perp_rel: float = DETECTION_DEFAULTS["parallax_perp_rel"]
+    min_explained: float = DETECTION_DEFAULTS["min_explained"]
+    min_area_m2: Any = DETECTION_DEFAULTS["min_area_m2"]
+    max_area_m2: Any = DETECTION_DEFAULTS["max_area_m2"]
+    core_rel: float = DETECTION_DEFAULTS["core_rel"]
+    ground_model: StrictStr = DETECTION_DEFAULTS["ground_model"]
+    gsd_m_per_px: Any = None
+
+    @model_validator(mode="after")
+    def _detector_accepts(self) -> DetectionSpec:
+        d = _dump(self)
+        gsd = d.pop("gsd_m_per_px")
+        if d.pop("field") not in ("local", "filtered"):
+            raise _fail(f"expected local or filtered, got {self.field!r}", at="field")
+        if gsd is not None and (isinstance(gsd, bool) or not isinstance(gsd, (int, float))
+                                or not math.isfinite(gsd) or not gsd > 0):
+            raise _fail(f"expected null or a finite number > 0, got {gsd!r}", at="gsd_m_per_px")
+        try:  # the detector's own checks, on a 1-pixel field, so errors come now and not mid-run
+            detect_vehicles(np.zeros((1, 1, 2), np.float32), np.zeros((1, 1), bool), **d)
+        except ValueError as e:
+            at, _, msg = str(e).partition(": ")
+            raise _fail(msg, at=at) from None
+        return self
 
 
 # the scalar Kalman filter of the thesis point tracker (eqs. 4.6-4.10): the keys a pipeline may give, and the
@@ -326,19 +363,28 @@ class PointSpec(_Section):
 
 
 class MultiSpec(_Section):
-    gate_px: float = 8.0
-    birth_hits: StrictInt = 3
-    death_misses: StrictInt = 3
-    sigma_accel_px: float = 0.5
-    sigma_meas_px: float = 1.0
-    sigma_vel0_px: float = 5.0
+    """The keys of :data:`algorithms.tracking.MULTI_DEFAULTS` (defaults and meaning there), checked by the tracker."""
+
+    gate_px: float = MULTI_DEFAULTS["gate_px"]
+    min_iou: float = MULTI_DEFAULTS["min_iou"]
+    birth_hits: StrictInt = MULTI_DEFAULTS["birth_hits"]
+    death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
+    coast_gate_growth: float = MULTI_DEFAULTS["coast_gate_growth"]
+    report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]
+    use_velocity: StrictBool = MULTI_DEFAULTS["use_velocity"]
+    sigma_accel_px: float = MULTI_DEFAULTS["sigma_accel_px"]
+    sigma_size_accel_px: float = MULTI_DEFAULTS["sigma_size_accel_px"]
+    sigma_meas_px: float = MULTI_DEFAULTS["sigma_meas_px"]
+    sigma_vel_meas_px: float = MULTI_DEFAULTS["sigma_vel_meas_px"]
+    sigma_vel0_px: float = MULTI_DEFAULTS["sigma_vel0_px"]
 
     @model_validator(mode="after")
     def _tracker_accepts(self) -> MultiSpec:
         try:
             MultiTargetTracker(**_dump(self))
         except ValueError as e:
-            raise _fail(str(e)) from None
+            at, _, msg = str(e).partition(": ")
+            raise _fail(msg, at=at) from None
         return self
 
 

@@ -35,16 +35,17 @@ or renewal. Placing the pixel's own template by eq. 3.1 is our reading of
 ``CORRELATION_DEFAULTS``. The Kalman filter is the thesis's (eqs. 4.6-4.10,
 P(1|1) = 1, Q = 1, R = 0.05) except X(1|1), see :class:`PointTracker`.
 
-Multi-target tracker (beyond the thesis): connected moving regions of the
-motion mask are detections; each track is a constant-velocity Kalman filter
-(:class:`~algorithms.kalman.ConstantVelocityKalman`); detections are assigned
-to tracks by the Hungarian method on the distance to each track's prediction,
-gated; a track is confirmed after ``birth_hits`` consecutive hits and dropped
-after ``death_misses`` consecutive misses. It can work in a ground-fixed
-frame: given the camera path (the cumulative global shift of frame t), it
-subtracts it from detections before filtering and adds it back to its output,
-so a car driving straight is a constant-velocity target even when the
-camera sways.
+Multi-target tracker (beyond the thesis): the moving regions of
+:func:`~algorithms.detection.detect_vehicles` are detections with a box and a
+velocity; each track is a constant-velocity Kalman filter of its box's centre
+and size (:class:`~algorithms.kalman.BoxKalman`); detections are assigned to
+tracks by the Hungarian method on IoU and distance to each track's prediction,
+gated; a track is confirmed after ``birth_hits`` consecutive hits, coasts
+through short occlusions and is dropped after ``death_misses`` consecutive
+misses. It works in a ground-fixed frame: given the camera path (the
+cumulative global shift of frame t), it subtracts it from detections before
+filtering and adds it back to its output, so a car driving straight is a
+constant-velocity target even when the camera sways.
 """
 
 from __future__ import annotations
@@ -58,16 +59,18 @@ import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from algorithms.detection import Detection
 from algorithms.global_motion import _parabola_offset
-from algorithms.kalman import THESIS_KALMAN, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
+from algorithms.kalman import THESIS_KALMAN, BoxKalman, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine",
+__all__ = ["Detection", "MULTI_DEFAULTS", "motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine",
            "CorrelationMatch", "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
+# Box columns are NaN where a tracker has no box (the point tracker).
 TRACK_COLUMNS = ("frame", "track_id", "x_px", "y_px", "x_filt_px", "y_filt_px", "x_pred_px", "y_pred_px",
-                 "source", "seed_vehicle_id")
+                 "source", "seed_vehicle_id", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")
 
 
 def motion_mask(flow: np.ndarray, valid: np.ndarray, min_magnitude_px: float) -> np.ndarray:
@@ -137,7 +140,7 @@ def _motion_mask(f, valid, t, lo, hi, out) -> None:
 
 @register_stage("detection")
 def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
-                          connectivity: int = 8) -> list[tuple[float, float, int]]:
+                          connectivity: int = 8) -> list[Detection]:
     """Connected regions of a motion mask as detections.
 
     Parameters
@@ -150,9 +153,11 @@ def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
 
     Returns
     -------
-    list of (x_px, y_px, area_px)
-        Centroid (frame t pixel coordinates, x right, y down) and area of each
-        region, largest first.
+    list of Detection
+        Centroid (frame t pixel coordinates, x right, y down), area and bounding box
+        of each region, largest first (no flow: ``u_px, v_px`` NaN). The pipeline's
+        detection stage is :func:`~algorithms.detection.detect_vehicles`, which
+        cleans, splits, merges and rejects these regions.
     """
     m = np.asarray(mask)
     if m.ndim != 2 or m.dtype != bool:
@@ -169,8 +174,13 @@ def detect_moving_objects(mask: np.ndarray, *, min_area_px: int = 20,
                                                                                cv2.CCL_BBDT)
     else:
         n, _, stats, centroids = cv2.connectedComponentsWithStats(image, connectivity=connectivity)
-    out = [(float(centroids[i, 0]), float(centroids[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
-           for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= min_area_px]
+    out = []
+    for i in range(1, n):
+        s = stats[i]
+        if s[cv2.CC_STAT_AREA] >= min_area_px:
+            x0, y0 = float(s[cv2.CC_STAT_LEFT]), float(s[cv2.CC_STAT_TOP])
+            out.append(Detection(float(centroids[i, 0]), float(centroids[i, 1]), int(s[cv2.CC_STAT_AREA]), x0, y0,
+                                 x0 + float(s[cv2.CC_STAT_WIDTH]) - 1, y0 + float(s[cv2.CC_STAT_HEIGHT]) - 1))
     return sorted(out, key=lambda d: -d[2])
 
 
@@ -580,96 +590,164 @@ class PointTracker:
     def _row(self, frame, x, y, xf, yf, xp, yp) -> dict:
         return {"frame": int(frame), "track_id": self.track_id, "x_px": float(x), "y_px": float(y),
                 "x_filt_px": float(xf), "y_filt_px": float(yf), "x_pred_px": float(xp), "y_pred_px": float(yp),
-                "source": "point", "seed_vehicle_id": self.seed_vehicle_id}
+                "source": "point", "seed_vehicle_id": self.seed_vehicle_id,
+                "bbox_x0_px": math.nan, "bbox_y0_px": math.nan, "bbox_x1_px": math.nan, "bbox_y1_px": math.nan}
 
 
 @dataclass
 class _Track:
     id: int
-    kf: ConstantVelocityKalman
+    kf: BoxKalman
     hits: int = 1
     misses: int = 0
     confirmed: bool = False
     pending: list = field(default_factory=list)  # rows held until confirmation
 
 
-class MultiTargetTracker:
-    """Constant-velocity Kalman tracks, Hungarian assignment with a distance gate, birth / death rules.
+# The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
+# gate_px: largest distance from a track's predicted centre to a detection it may take (a vehicle at 35 m/s,
+#   10 fps, 0.22 m/px moves 16 px a frame; the prediction, not the last position, is what is gated);
+# min_iou: a pair whose boxes overlap at least this much is feasible whatever its distance (a bus's centre
+#   can jump when its region is found whole after being found in part);
+# birth_hits: consecutive detections before a track is confirmed (the detections' minimum persistence);
+# death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
+#   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
+# coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
+# report_coasting: coasting frames are output with the prediction as position (false: with NaN, no
+#   prediction of a vehicle that is hidden);
+# use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
+#   new track at the vehicle's speed;
+# sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
+MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "report_coasting": False, "use_velocity": True, "sigma_accel_px": 0.5,
+                  "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
-    Parameters
-    ----------
-    gate_px : float
-        Largest distance between a track's predicted position and a detection
-        it may take.
-    birth_hits : int
-        M: a new track is confirmed (and its rows, from its first frame, are
-        output) after M consecutive frames with a detection; a miss before that
-        deletes it.
-    death_misses : int
-        K: a confirmed track is deleted after K consecutive misses (it coasts on
-        its prediction meanwhile; its rows have NaN raw positions then).
-    sigma_accel_px, sigma_meas_px, sigma_vel0_px : float
-        :class:`~algorithms.kalman.ConstantVelocityKalman` noise (px/frame^2, px, px/frame).
+
+def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
+    """``(cx, cy, w, h)`` and ``(u, v)`` of a detection; a plain ``(x, y, area)`` is a square of that area."""
+    if len(d) >= 7:
+        box = np.array([d[0], d[1], d[5] - d[3] + 1.0, d[6] - d[4] + 1.0], dtype=np.float64)
+    else:
+        side = math.sqrt(max(float(d[2]), 1.0))
+        box = np.array([d[0], d[1], side, side], dtype=np.float64)
+    vel = np.array([d[7], d[8]], dtype=np.float64) if len(d) >= 9 else np.full(2, np.nan)
+    return box, vel
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
+    ax0, ay0, ax1, ay1 = a[:, 0] - a[:, 2] / 2, a[:, 1] - a[:, 3] / 2, a[:, 0] + a[:, 2] / 2, a[:, 1] + a[:, 3] / 2
+    bx0, by0, bx1, by1 = b[:, 0] - b[:, 2] / 2, b[:, 1] - b[:, 3] / 2, b[:, 0] + b[:, 2] / 2, b[:, 1] + b[:, 3] / 2
+    iw = np.clip(np.minimum(ax1[:, None], bx1[None]) - np.maximum(ax0[:, None], bx0[None]), 0, None)
+    ih = np.clip(np.minimum(ay1[:, None], by1[None]) - np.maximum(ay0[:, None], by0[None]), 0, None)
+    inter = iw * ih
+    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None] - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+class MultiTargetTracker:
+    """Boxes tracked by constant-velocity Kalman filters, Hungarian assignment on IoU and distance, birth / death.
+
+    Each track is a :class:`~algorithms.kalman.BoxKalman` of its box's centre and size in a
+    ground-fixed frame: given the camera path (the cumulative global shift of frame t), it
+    subtracts it from detections before filtering and adds it back to its output, so a car
+    driving straight is a constant-velocity target even when the camera sways. A frame's
+    detections are assigned to the tracks' predictions by the Hungarian method
+    (``scipy.optimize.linear_sum_assignment``) on the cost ``(1 - IoU) + distance / gate``,
+    a pair feasible when the distance is within the gate (``gate_px``, growing by
+    ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
+    A new track is confirmed after ``birth_hits`` consecutive hits (its rows, from its first
+    frame, are then output; a miss before that deletes it); a confirmed track coasts on its
+    prediction through up to ``death_misses - 1`` frames without a detection (short
+    occlusions) and ends at the ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
 
     Use :meth:`step` once per frame, then :meth:`rows`.
     """
 
-    def __init__(self, *, gate_px: float = 8.0, birth_hits: int = 3, death_misses: int = 3,
-                 sigma_accel_px: float = 0.5, sigma_meas_px: float = 1.0, sigma_vel0_px: float = 5.0):
-        if not gate_px > 0:
-            raise ValueError(f"gate_px: expected > 0, got {gate_px}")
-        for name, v in (("birth_hits", birth_hits), ("death_misses", death_misses)):
-            if not isinstance(v, (int, np.integer)) or v < 1:
+    def __init__(self, **params):
+        unknown = sorted(set(params) - set(MULTI_DEFAULTS))
+        if unknown:
+            raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
+        p = {**MULTI_DEFAULTS, **params}
+        for name in ("birth_hits", "death_misses"):
+            v = p[name]
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
-        self.gate_px, self.birth_hits, self.death_misses = float(gate_px), int(birth_hits), int(death_misses)
-        self._kf_kw = dict(sigma_accel_px=sigma_accel_px, sigma_meas_px=sigma_meas_px,
-                           sigma_pos0_px=sigma_meas_px, sigma_vel0_px=sigma_vel0_px)
+        for name in ("report_coasting", "use_velocity"):
+            if not isinstance(p[name], bool):
+                raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
+        for name in ("gate_px", "min_iou", "coast_gate_growth"):
+            v = p[name]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+        if not p["gate_px"] > 0:
+            raise ValueError(f"gate_px: expected > 0, got {p['gate_px']}")
+        if not 0 < p["min_iou"] <= 1:
+            raise ValueError(f"min_iou: expected a number in (0, 1], got {p['min_iou']}")
+        self.params = p
+        self.gate_px, self.birth_hits, self.death_misses = float(p["gate_px"]), int(p["birth_hits"]), int(p["death_misses"])
+        self._kf_kw = {k: p[k] for k in ("sigma_accel_px", "sigma_size_accel_px", "sigma_meas_px",
+                                          "sigma_vel_meas_px", "sigma_vel0_px")}
+        BoxKalman((0.0, 0.0, 1.0, 1.0), **self._kf_kw)  # its own checks of the noise keys, now
         self._tracks: list[_Track] = []
         self._rows: list[dict] = []
         self._next_id = 0
 
     def step(self, frame: int, detections, *, offset_px=(0.0, 0.0)) -> None:
-        """Take the detections ``[(x_px, y_px, ...), ...]`` of ``frame``.
+        """Take the detections of ``frame`` (:class:`~algorithms.detection.Detection` s, or ``(x_px, y_px, area_px)``).
 
         ``offset_px`` is the camera path at this frame (ground content displacement
         since frame 0); tracks live in ``image - offset`` coordinates.
         """
+        p = self.params
         off = np.asarray(offset_px, dtype=np.float64)
-        det = np.array([[d[0], d[1]] for d in detections], dtype=np.float64).reshape(-1, 2) - off
-        preds = np.array([t.kf.predict() for t in self._tracks]).reshape(-1, 2)
-        cost = np.linalg.norm(preds[:, None, :] - det[None, :, :], axis=2)
+        parsed = [_box_of(d) for d in detections]
+        boxes = np.array([b for b, _ in parsed], dtype=np.float64).reshape(-1, 4)
+        boxes[:, :2] -= off
+        vels = np.array([v for _, v in parsed], dtype=np.float64).reshape(-1, 2)
+        if not p["use_velocity"]:
+            vels[:] = np.nan
+        # x = F x, P = F P F' + Q for every track (BoxKalman.predict)
+        preds = np.array([t.kf.predict() for t in self._tracks]).reshape(-1, 4)
         pairs = []
-        if cost.size:
+        if len(preds) and len(boxes):
+            dist = np.hypot(preds[:, None, 0] - boxes[None, :, 0], preds[:, None, 1] - boxes[None, :, 1])
+            iou = _iou(preds, boxes)
+            gate = self.gate_px * (1.0 + p["coast_gate_growth"] * np.array([t.misses for t in self._tracks]))
+            feasible = (dist <= gate[:, None]) | (iou >= p["min_iou"])
+            cost = (1.0 - iou) + dist / gate[:, None]
             # infeasible pairs cost more than any feasible assignment could
-            big = self.gate_px * (1 + len(self._tracks) + len(det)) * 10
+            big = 10.0 * (2.0 + float(cost[feasible].max(initial=0.0))) * (len(preds) + len(boxes))
             from scipy.optimize import linear_sum_assignment  # on first use: scipy.optimize takes 0.7 s to import
 
-            rows, cols = linear_sum_assignment(np.where(cost <= self.gate_px, cost, big))
-            pairs = [(r, c) for r, c in zip(rows, cols) if cost[r, c] <= self.gate_px]
-        taken_t, taken_d = {r for r, _ in pairs}, {c for _, c in pairs}
+            r_idx, c_idx = linear_sum_assignment(np.where(feasible, cost, big))
+            pairs = [(r, c) for r, c in zip(r_idx, c_idx) if feasible[r, c]]
+        det_of = dict(pairs)
+        taken_d = set(det_of.values())
         survivors = []
         for i, trk in enumerate(self._tracks):
             pred = preds[i]
-            if i in taken_t:
-                z = det[[c for r, c in pairs if r == i][0]]
-                trk.kf.update(z)
+            if i in det_of:
+                c = det_of[i]
+                trk.kf.update(boxes[c], vels[c])
                 trk.hits, trk.misses = trk.hits + 1, 0
+                z = boxes[c]
             else:
-                z = np.full(2, np.nan)
                 trk.misses += 1
                 if not trk.confirmed or trk.misses >= self.death_misses:
                     continue
-            self._emit(trk, frame, z, trk.kf.x[:2], pred, off)
+                z = None
+            self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
             if not trk.confirmed and trk.hits >= self.birth_hits:
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
             survivors.append(trk)
-        for c in range(len(det)):
+        for c in range(len(boxes)):
             if c not in taken_d:
-                trk = _Track(self._next_id, ConstantVelocityKalman(det[c], **self._kf_kw))
+                trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw))
                 self._next_id += 1
-                self._emit(trk, frame, det[c], det[c], det[c], off)
+                self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
                 if self.birth_hits == 1:
                     trk.confirmed = True
                     self._rows.extend(trk.pending)
@@ -677,12 +755,32 @@ class MultiTargetTracker:
                 survivors.append(trk)
         self._tracks = survivors
 
-    def _emit(self, trk: _Track, frame, z, filt, pred, off) -> None:
-        z, filt, pred = z + off, filt + off, pred + off
-        row = {"frame": int(frame), "track_id": trk.id, "x_px": float(z[0]), "y_px": float(z[1]),
-               "x_filt_px": float(filt[0]), "y_filt_px": float(filt[1]),
-               "x_pred_px": float(pred[0]), "y_pred_px": float(pred[1]), "source": "multi",
-               "seed_vehicle_id": None}
+    def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0)) -> None:
+        """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) at the prediction
+        of every confirmed track that had a detection in the frame before: its box moved by its velocity."""
+        off = np.asarray(offset_px, dtype=np.float64)
+        for trk in self._tracks:
+            if trk.confirmed and trk.misses == 0:
+                pred = trk.kf.F @ trk.kf.x
+                self._emit(trk, frame, None, pred[:4], pred[:4], off, shown=True)
+
+    def _emit(self, trk: _Track, frame, z, filt, pred, off, *, shown: bool = False) -> None:
+        """A row: the detection's centre (NaN when coasting), the filtered centre and box, the prediction."""
+        nan = math.nan
+        coasting = z is None
+        shown = filt if (shown or not coasting or self.params["report_coasting"]) else None
+        zx, zy = (nan, nan) if coasting else (z[0] + off[0], z[1] + off[1])
+        if shown is None:
+            fx = fy = x0 = y0 = x1 = y1 = nan
+        else:
+            fx, fy = shown[0] + off[0], shown[1] + off[1]
+            hw, hh = (shown[2] - 1.0) / 2, (shown[3] - 1.0) / 2
+            x0, y0, x1, y1 = fx - hw, fy - hh, fx + hw, fy + hh
+        row = {"frame": int(frame), "track_id": trk.id, "x_px": float(zx), "y_px": float(zy),
+               "x_filt_px": float(fx), "y_filt_px": float(fy),
+               "x_pred_px": float(pred[0] + off[0]), "y_pred_px": float(pred[1] + off[1]), "source": "multi",
+               "seed_vehicle_id": None, "bbox_x0_px": float(x0), "bbox_y0_px": float(y0),
+               "bbox_x1_px": float(x1), "bbox_y1_px": float(y1)}
         (self._rows if trk.confirmed else trk.pending).append(row)
 
     def rows(self) -> list[dict]:

@@ -1,0 +1,275 @@
+"""Multi-target tracking quality per pipeline: MOTA, IDF1, false positives, identity switches.
+
+Not a speed benchmark: the accuracy check of the detection stage and the multi-target
+tracker (``tracking.multi``) over whole synthetic sequences, and on KIT AIS frames.
+Run from the project root:
+
+    python benchmarks/tracking_quality.py [--scene nominal ...] [--pipeline dis ...] [--frames 30] [--seed 1]
+    python benchmarks/tracking_quality.py --kit-ais [--pipeline dis ...]
+
+Synthetic: renders (or reuses from ``$AEROBENCH_CACHE``, default ``.aerobench-cache``)
+each scene (default ``nominal realistic urban-parallax fast-vehicles``; ``--frames``
+and ``--seed`` override the preset's), runs each pipeline with the sequence's ground
+sampling distance (``meta.json`` ``gsd_m``), and scores its ``multi`` tracks with
+:func:`harness.metrics.mot_counts` (a track point corresponds to a vehicle within
+``--gate`` px of its centre, 20 px as the harness scores) twice: against the
+vehicles that move (``parked == 0``; what a motion detector can find, the figure the
+targets are about) and against every visible vehicle (what the harness's ``mota``
+row counts today). Also the detections per frame and the tracker's output per frame.
+
+KIT AIS (``--kit-ais``, ``/work/shared/external/kit_ais``, or ``--kit-dir``): three
+Munich street sequences, YOLO boxes of every vehicle, parked or moving, without
+identities. Which vehicles move is told from the boxes alone: consecutive frames are
+registered by the global shift (the pipeline's own pass-1 NCC shift, the cumulative
+path), every box is moved into frame 0's ground-fixed coordinates, boxes are chained
+across frames by nearest centre (Hungarian, within ``--kit-link-px``), and a chain
+whose ground-fixed centre moves by more than ``--kit-move-px`` between its first and
+last frame (after at least 3 frames) is a moving vehicle; boxes of unchained or short
+chains count as unknown and are left out of both precision and recall. A detection
+is a true positive when its centre lies inside a moving vehicle's box (one detection
+per box), a false positive when it lies in no moving vehicle's box; the boxes of
+parked vehicles that a detection hits are counted separately.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E402
+from harness.metrics import mot_counts  # noqa: E402
+
+SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles")
+KIT_DIR = Path("/work/shared/external/kit_ais")
+
+
+def _value(text: str):
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _pipeline(name: str, sets: list[str]) -> Pipeline:
+    """A built-in pipeline with ``section.key=value`` overrides (e.g. ``detection.close_px=3``)."""
+    d = copy.deepcopy(PIPELINES[name])
+    for kv in sets:
+        key, value = kv.split("=", 1)
+        *path, leaf = key.split(".")
+        node = d
+        for k in path:
+            if node.get(k) is None:
+                node[k] = {}
+            node = node[k]
+        node[leaf] = {"true": True, "false": False, "null": None}.get(value, _value(value))
+    return Pipeline.from_dict(d)
+
+
+def run_multi(pipeline: Pipeline, frames, *, gsd_m_per_px=None):
+    """(multi tracks DataFrame, detections per pair, SequenceEstimate, seconds)."""
+    t0 = time.perf_counter()
+    dets, est = [], None
+    for e in pipeline.run(frames, gsd_m_per_px=gsd_m_per_px):
+        if isinstance(e, SequenceEstimate):
+            est = e
+        else:
+            dets.append(e.detections)
+    tracks = est.tracks[est.tracks["source"] == "multi"]
+    return tracks, dets, est, time.perf_counter() - t0
+
+
+def synthetic(args) -> int:
+    from scenes import load_scene_spec, open_sequence
+    from scenes.cache import cached_sequence
+
+    cache = os.environ.get("AEROBENCH_CACHE", ".aerobench-cache")
+    rows = []
+    for scene in args.scene:
+        over = {}
+        if args.frames:
+            over["image.n_frames"] = args.frames
+        if args.seed is not None:
+            over["seed"] = args.seed
+        seq = open_sequence(cached_sequence(load_scene_spec(scene, over), cache))
+        frames = [seq.frame(i) for i in range(len(seq))]
+        truth = seq.tracks
+        moving = truth[truth["parked"].astype(int) == 0] if "parked" in truth.columns else truth
+        vis = moving[moving["visible"].astype(bool)]
+        n_moving = vis.groupby("frame").size().reindex(range(len(seq)), fill_value=0)
+        gsd = seq.meta.get("gsd_m")
+        print(f"scene {scene} {over}: {len(seq)} frames, {n_moving.mean():.1f} moving vehicles visible a frame, "
+              f"gsd {gsd} m/px", flush=True)
+        for name in args.pipeline:
+            tracks, dets, _, secs = run_multi(_pipeline(name, args.set), frames, gsd_m_per_px=gsd)
+            cm = mot_counts(tracks, moving, gate_px=args.gate)
+            ca = mot_counts(tracks, truth, gate_px=args.gate)
+            row = {"scene": scene, "pipeline": name, "mota": cm.mota, "idf1": cm.idf1, "fp": cm.false_positives,
+                   "fn": cm.misses, "idsw": cm.switches, "motp_px": cm.motp_px,
+                   "dets/frame": np.mean([len(d) for d in dets]),
+                   "tracks/frame": tracks.dropna(subset=["x_filt_px"]).groupby("frame").size().mean()
+                   if len(tracks) else 0.0,
+                   "mota_all": ca.mota, "idf1_all": ca.idf1, "s": secs}
+            rows.append(row)
+            print("  " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()),
+                  flush=True)
+    df = pd.DataFrame(rows)
+    print()
+    print(df.round(3).to_string(index=False))
+    return 0
+
+
+# ------------------------------------------------------------------------------------------- KIT AIS
+
+def _read_yolo(path: Path, w: int, h: int) -> np.ndarray:
+    """(N, 4) boxes x0, y0, x1, y1 in px of a YOLO label file (``class cx cy w h`` as fractions)."""
+    if not path.is_file():
+        return np.zeros((0, 4))
+    a = np.loadtxt(path, ndmin=2)
+    if a.size == 0:
+        return np.zeros((0, 4))
+    cx, cy, bw, bh = a[:, 1] * w, a[:, 2] * h, a[:, 3] * w, a[:, 4] * h
+    return np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=1)
+
+
+def moving_labels(boxes: list[np.ndarray], path_px: np.ndarray, *, link_px: float, move_px: float,
+                  min_frames: int = 3) -> list[np.ndarray]:
+    """Per frame, a label per box: 1 moving, 0 parked, -1 unknown (see the module docstring).
+
+    ``path_px`` (N, 2): cumulative global shift of frame t (ground content displacement since frame 0).
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    chains: list[list[tuple[int, int, np.ndarray]]] = []  # (frame, box index, ground-fixed centre)
+    open_chains: list[int] = []
+    for t, b in enumerate(boxes):
+        c = np.stack([(b[:, 0] + b[:, 2]) / 2, (b[:, 1] + b[:, 3]) / 2], 1) - path_px[t] if len(b) else np.zeros((0, 2))
+        taken = set()
+        still_open = []
+        if open_chains and len(c):
+            last = np.array([chains[k][-1][2] for k in open_chains])
+            D = np.hypot(last[:, None, 0] - c[None, :, 0], last[:, None, 1] - c[None, :, 1])
+            r, q = linear_sum_assignment(np.where(D <= link_px, D, 1e9))
+            for i, j in zip(r, q):
+                if D[i, j] <= link_px:
+                    chains[open_chains[i]].append((t, int(j), c[j]))
+                    taken.add(int(j))
+                    still_open.append(open_chains[i])
+        # a chain survives one frame without its box (labels sometimes miss a vehicle)
+        still_open += [k for k in open_chains if k not in still_open and chains[k][-1][0] >= t - 1]
+        for j in range(len(c)):
+            if j not in taken:
+                chains.append([(t, j, c[j])])
+                still_open.append(len(chains) - 1)
+        open_chains = still_open
+    labels = [np.full(len(b), -1) for b in boxes]
+    for ch in chains:
+        if len(ch) < min_frames:
+            continue
+        disp = float(np.hypot(*(ch[-1][2] - ch[0][2])))
+        for t, j, _ in ch:
+            labels[t][j] = 1 if disp > move_px else 0
+    return labels
+
+
+def kit_ais(args) -> int:
+    import cv2
+
+    root = Path(args.kit_dir)
+    seqs = sorted(p for p in root.iterdir() if p.is_dir())
+    if not seqs:
+        print(f"--kit-dir: no sequence folders in {root}", file=sys.stderr)
+        return 2
+    total: dict[str, dict[str, int]] = {}
+    for folder in seqs:
+        pngs = sorted(folder.glob("*.png"), key=lambda p: int("".join(ch for ch in p.stem.split("MOS")[-1]
+                                                                          if ch.isdigit()) or 0))
+        frames = [cv2.cvtColor(cv2.imread(str(p)), cv2.COLOR_BGR2RGB) for p in pngs]
+        h, w = frames[0].shape[:2]
+        boxes = [_read_yolo(p.with_suffix(".txt"), w, h) for p in pngs]
+        for name in args.pipeline:
+            _, dets, est, secs = run_multi(_pipeline(name, args.set), frames)
+            labels = moving_labels(boxes, est.cumulative_px, link_px=args.kit_link_px, move_px=args.kit_move_px)
+            tracks = est.tracks[est.tracks["source"] == "multi"]
+            tp = fp = parked_hits = n_moving = n_parked = 0
+            ttp = tfp = 0
+            for t, d in enumerate(dets):  # pair t's detections lie in frame t
+                b, lab = boxes[t], labels[t]
+                n_moving += int((lab == 1).sum())
+                n_parked += int((lab == 0).sum())
+                used = set()
+                for det in d:
+                    inside = np.flatnonzero((b[:, 0] <= det[0]) & (det[0] <= b[:, 2])
+                                            & (b[:, 1] <= det[1]) & (det[1] <= b[:, 3])) if len(b) else []
+                    mov = [j for j in inside if lab[j] == 1 and j not in used]
+                    if mov:
+                        tp += 1
+                        used.add(mov[0])
+                    elif any(lab[j] == 0 for j in inside):
+                        parked_hits += 1
+                        fp += 1
+                    elif not any(lab[j] == -1 for j in inside):
+                        fp += 1
+                # confirmed tracks' points of this frame, scored the same way
+                tt = tracks[(tracks["frame"] == t)].dropna(subset=["x_filt_px"])
+                used = set()
+                for x, y in zip(tt["x_filt_px"], tt["y_filt_px"]):
+                    inside = np.flatnonzero((b[:, 0] <= x) & (x <= b[:, 2]) & (b[:, 1] <= y) & (y <= b[:, 3])) \
+                        if len(b) else []
+                    mov = [j for j in inside if lab[j] == 1 and j not in used]
+                    if mov:
+                        ttp += 1
+                        used.add(mov[0])
+                    elif not any(lab[j] == -1 for j in inside):
+                        tfp += 1
+            n_mov_pairs = sum(int((labels[t] == 1).sum()) for t in range(len(dets)))
+            prec = tp / (tp + fp) if tp + fp else math.nan
+            rec = tp / n_mov_pairs if n_mov_pairs else math.nan
+            tprec = ttp / (ttp + tfp) if ttp + tfp else math.nan
+            trec = ttp / n_mov_pairs if n_mov_pairs else math.nan
+            print(f"{folder.name} {w}x{h} {len(frames)} frames, {name}: moving boxes {n_moving}, parked {n_parked}; "
+                  f"detections precision {prec:.3f} recall {rec:.3f} (tp {tp}, fp {fp} of which on parked {parked_hits}); "
+                  f"tracks precision {tprec:.3f} recall {trec:.3f}; {secs:.1f} s", flush=True)
+            agg = total.setdefault(name, {"tp": 0, "fp": 0, "n": 0, "ttp": 0, "tfp": 0, "parked": 0})
+            for k, v in (("tp", tp), ("fp", fp), ("n", n_mov_pairs), ("ttp", ttp), ("tfp", tfp),
+                         ("parked", parked_hits)):
+                agg[k] += v
+    print()
+    for name, a in total.items():
+        print(f"all KIT AIS, {name}: detections precision {a['tp'] / max(1, a['tp'] + a['fp']):.3f} "
+              f"recall {a['tp'] / max(1, a['n']):.3f} (on parked vehicles {a['parked']}); tracks precision "
+              f"{a['ttp'] / max(1, a['ttp'] + a['tfp']):.3f} recall {a['ttp'] / max(1, a['n']):.3f}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", nargs="+", default=list(SCENES), help="preset names or YAML paths")
+    ap.add_argument("--pipeline", nargs="+", default=sorted(PIPELINES), choices=sorted(PIPELINES))
+    ap.add_argument("--frames", type=int, default=None, help="image.n_frames override")
+    ap.add_argument("--seed", type=int, default=None, help="seed override")
+    ap.add_argument("--gate", type=float, default=20.0, help="MOT correspondence gate, px")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="pipeline override, e.g. detection.close_px=3 or tracking.multi.gate_px=15")
+    ap.add_argument("--kit-ais", action="store_true", help="score on the KIT AIS frames instead")
+    ap.add_argument("--kit-dir", default=str(KIT_DIR))
+    ap.add_argument("--kit-link-px", type=float, default=8.0, help="box chaining radius, px (ground-fixed)")
+    ap.add_argument("--kit-move-px", type=float, default=6.0, help="chain displacement above which it moves, px")
+    args = ap.parse_args(argv)
+    return kit_ais(args) if args.kit_ais else synthetic(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
