@@ -113,6 +113,9 @@ def test_round_trip_rendered_sequence_as_footage_scores_the_same(tmp_path, rende
     assert main(["eval-video", str(video), "--gt", str(gt), "--pipelines", "dis", "--out", str(out),
                  "--cache", str(render_cache), "--workers", "1", "--quiet"]) == 0
     assert (out / "report.html").is_file() and (out / "report.md").is_file()
+    from harness.run_folder import read_run
+
+    assert read_run(out).real_scenes == ["tiny"] and read_run(tmp_path / "synthetic").real_scenes == []
     real_table = pd.read_parquet(out / "results.parquet")
     assert set(real_table["status"]) == {"ok"}
 
