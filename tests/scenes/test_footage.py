@@ -47,9 +47,9 @@ def test_mot_gt_columns_classes_and_ignored_rows(tmp_path):
     assert df.loc[0, "class"] == "car" and df.loc[3, "class"] == "motorbike"
     assert df.loc[0, "visible_fraction"] == 0.5 and df["line"].tolist() == [1, 2, 3, 5]
     # MOT15 (10 columns: 8-10 world coordinates) and 6 columns: class car, visibility 1
-    p.write_text("3,1,5,5,2,2,1,-1,-1,-1\n4,1,5,5,2,2\n")
+    p.write_text("3,1,5,5,2,2,1,-1,-1,-1\n4,1,5,5,2,2\n5,1,5,5,2,2,1,-1,-1\n")
     df = read_mot_gt(p)
-    assert df["class"].tolist() == ["car", "car"] and df["visible_fraction"].tolist() == [1.0, 1.0]
+    assert df["class"].tolist() == ["car"] * 3 and df["visible_fraction"].tolist() == [1.0] * 3
 
 
 def test_visdrone_and_uavdt_layouts(tmp_path):
