@@ -208,12 +208,15 @@ def test_mp4_decode_range_scale_and_fps(tmp_path):
         validate_footage(FootageSpec(name="b", source=str(bad)))
 
 
-def test_lossless_video_export_reads_back_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("name", ["v.mkv", "v.avi", "v.mp4"])
+def test_lossless_video_export_reads_back_bit_for_bit(tmp_path, name):
     pytest.importorskip("av")
     frames = [_texture(24, 40, k) for k in range(3)]
-    video = export_video(frames, tmp_path / "v.mkv", fps=10)
+    video = export_video(frames, tmp_path / name, fps=10)
     seq = open_sequence(ingest_footage(FootageSpec(name="v", source=str(video)), tmp_path / "seq"))
-    assert all(np.array_equal(seq.frame(k), frames[k]) for k in range(3))
+    assert len(seq) == 3 and all(np.array_equal(seq.frame(k), frames[k]) for k in range(3))
+    with pytest.raises(ValueError, match="codec: expected one of ffv1, libx264rgb"):
+        export_video(frames, tmp_path / "x.mp4", codec="libx264")
 
 
 # --------------------------------------------------------------------------- cache
