@@ -340,8 +340,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UsageError(f"--out {out}: exists and is not an empty folder")
     seq = open_sequence(args.seq_dir)
-    if args.video is not None and Path(args.video).suffix.lower() not in (".mkv", ".avi"):
-        raise UsageError(f"--video: expected a .mkv or .avi name (FFV1, lossless), got {args.video!r}")
+    if args.video is not None and Path(args.video).suffix.lower() not in (".mkv", ".avi", ".mp4", ".mov"):
+        raise UsageError(f"--video: expected a .mkv, .avi (FFV1), .mp4 or .mov (H.264 RGB, crf 0) name, "
+                         f"got {args.video!r}")
     export_frames(seq, out / "img1")
     if seq.tracks is not None:
         export_mot_gt(seq.tracks, out / "gt" / "gt.txt")
@@ -512,7 +513,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "and optionally a lossless video")
     s.add_argument("seq_dir", help="a sequence folder (aerobench render, or an entry of the render cache)")
     s.add_argument("--out", required=True, help="the folder to write (must be empty)")
-    s.add_argument("--video", default=None, help="also write the frames as this FFV1 video (NAME.mkv or NAME.avi)")
+    s.add_argument("--video", default=None, help="also write the frames as this lossless video (NAME.mkv or .avi: "
+                                                  "FFV1; NAME.mp4 or .mov: H.264 in RGB at crf 0)")
     s.set_defaults(fn=cmd_export)
 
     s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")

@@ -215,6 +215,10 @@ def _sequence_dir(v: SceneVariant, cache: Path) -> Path:
 
 
 def _cell_entry(c: Cell, cache: Path) -> dict:
-    """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache."""
+    """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache;
+    ``source`` says whether it is real footage (the report's "Synthetic vs real" splits by it)."""
+    from scenes.footage import FootageSpec
+
     return cell_entry(cell_id=c.cell_id, scene=c.variant.label, seed=c.variant.seed, pipeline=c.pipeline,
-                      config_hash=c.config_hash, sequence=_sequence_dir(c.variant, cache))
+                      config_hash=c.config_hash, sequence=_sequence_dir(c.variant, cache),
+                      source="real" if isinstance(c.variant.spec, FootageSpec) else "synthetic")

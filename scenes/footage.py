@@ -637,16 +637,24 @@ def export_frames(frames, out_dir: str | os.PathLike) -> Path:
     return out_dir
 
 
-def export_video(frames, path: str | os.PathLike, *, fps: float = 25.0, codec: str = "ffv1") -> Path:
-    """Write ``frames`` as a video by PyAV: ``ffv1`` (lossless RGB as bgr0: the frames come back
-    bit for bit) or ``libx264rgb`` (H.264 in RGB at crf 0: lossless too), any container FFmpeg
-    muxes them into (``.mkv``, ``.avi``; ``.mp4``/``.mov`` take libx264rgb)."""
+def export_video(frames, path: str | os.PathLike, *, fps: float = 25.0, codec: str | None = None) -> Path:
+    """Write ``frames`` (an indexable of (H, W, 3) uint8 RGB) as a lossless video by PyAV.
+
+    ``codec``: ``ffv1`` (RGB as bgr0) or ``libx264rgb`` (H.264 in RGB at crf 0); default by the
+    suffix: ffv1 for ``.mkv`` and ``.avi``, libx264rgb for ``.mp4`` and ``.mov``. Either way the
+    frames decode back bit for bit (``tests/scenes/test_footage.py``).
+    """
     import av
     from fractions import Fraction
 
     pix = {"ffv1": "bgr0", "libx264rgb": "rgb24"}
+    suffix = Path(path).suffix.lower()
+    if codec is None:
+        codec = "libx264rgb" if suffix in (".mp4", ".mov") else "ffv1"
     if codec not in pix:
         raise ValueError(f"codec: expected one of {', '.join(pix)} (lossless), got {codec!r}")
+    if suffix not in VIDEO_SUFFIXES:
+        raise ValueError(f"path: expected a {', '.join(VIDEO_SUFFIXES)} file, got {path}")
     path = Path(path)
     first = np.asarray(frames[0])
     with av.open(str(path), "w") as container:

@@ -585,7 +585,7 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame
       bb_height (px, bb_left 1-based), 7 the "consider" flag (0: ignored). With exactly 9
       columns (MOT16/17/20) also 8 class (1, 2, 7 pedestrian, 3 car, 4 and 6 cyclist,
       5 motorbike, -1 unspecified: car; 8-13 distractors, occluders, reflections, crowds:
-      ignored) and 9 visibility (0..1). 6, 7 or 10 columns (MOT15: 8-10 are world
+      ignored) and 9 visibility (0..1; -1, "not given", reads as 1). 6, 7 or 10 columns (MOT15: 8-10 are world
       coordinates) are read as class car, visibility 1; columns 8-10 are then not read.
     * ``visdrone`` (VisDrone2019-MOT ``annotations/*.txt``, 10 columns): 1-6 as above, 7 score
       (0: ignored), 8 object_category (0 ignored region and 11 others: ignored; 1, 2
@@ -653,8 +653,11 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame
                 else:
                     raise FormatError(f"{where}: class (column 8): expected -1 or 1..13 (MOTChallenge), got {f[7]!r}")
                 vis = _number(f[8], "visibility (column 9)", where)
-                if not 0.0 <= vis <= 1.0:
-                    raise FormatError(f"{where}: visibility (column 9): expected 0..1, got {f[8]!r}")
+                if vis == -1.0:  # MOTChallenge's "not given"
+                    vis = 1.0
+                elif not 0.0 <= vis <= 1.0:
+                    raise FormatError(f"{where}: visibility (column 9): expected 0..1 (or -1: not given), "
+                                      f"got {f[8]!r}")
         elif layout == "visdrone":
             ignore = _coded(f[6], "score (column 7)", where, {0, 1}) == 0
             c = _coded(f[7], "object_category (column 8)", where, set(range(12)))

@@ -9,7 +9,7 @@ from harness.metrics.stabilisation import jitter_rows, shift_rows, stabilisation
 from harness.metrics.trajectories import track_rows
 
 
-def score_sequence(seq_estimate, camera_df: pd.DataFrame, tracks_df: pd.DataFrame | None, *,
+def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.DataFrame | None, *,
                    gate_px: float = 20.0) -> list[dict]:
     """Rows of a whole sequence: global shift errors, residual jitter, trajectories.
 

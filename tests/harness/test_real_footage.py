@@ -54,9 +54,11 @@ def test_real_scene_paths_start_at_the_suite_file(tmp_path):
     ({"real": "clip", "gt": "gt.txt", "gt_format": "kitti"}, r"scenes\[0\]\.gt_format"),
     ({"real": "clip", "gt": "gt.txt"}, r"gt\.txt: line 2: id \(column 2\): expected a number"),
     ({"real": "clip", "stop": 9}, r"clip: stop 9: the folder holds 4 frames"),
+    ({"real": "clip"}, r"clip/1\.txt: line 2: expected 5 YOLO fields"),
 ])
 def test_bad_real_scenes_are_refused_naming_field_file_and_line(tmp_path, scene, match):
     _frames(tmp_path / "clip")
+    (tmp_path / "clip" / "1.txt").write_text("0 0.5 0.5 0.1 0.1\n0 0.5 0.5 0.1\n")  # a YOLO label, bad line 2
     (tmp_path / "gt.txt").write_text("1,1,5,5,6,6,1,3,1\n2,one,6,5,6,6,1,3,1\n")
     with pytest.raises(SuiteError, match=match):
         expand(parse_suite({"name": "r", "seeds": [1], "pipelines": ["dis"], "scenes": [scene]},
@@ -111,6 +113,9 @@ def test_round_trip_rendered_sequence_as_footage_scores_the_same(tmp_path, rende
     assert main(["eval-video", str(video), "--gt", str(gt), "--pipelines", "dis", "--out", str(out),
                  "--cache", str(render_cache), "--workers", "1", "--quiet"]) == 0
     assert (out / "report.html").is_file() and (out / "report.md").is_file()
+    from harness.run_folder import read_run
+
+    assert read_run(out).real_scenes == ["tiny"] and read_run(tmp_path / "synthetic").real_scenes == []
     real_table = pd.read_parquet(out / "results.parquet")
     assert set(real_table["status"]) == {"ok"}
 

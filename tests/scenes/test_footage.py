@@ -47,9 +47,9 @@ def test_mot_gt_columns_classes_and_ignored_rows(tmp_path):
     assert df.loc[0, "class"] == "car" and df.loc[3, "class"] == "motorbike"
     assert df.loc[0, "visible_fraction"] == 0.5 and df["line"].tolist() == [1, 2, 3, 5]
     # MOT15 (10 columns: 8-10 world coordinates) and 6 columns: class car, visibility 1
-    p.write_text("3,1,5,5,2,2,1,-1,-1,-1\n4,1,5,5,2,2\n")
+    p.write_text("3,1,5,5,2,2,1,-1,-1,-1\n4,1,5,5,2,2\n5,1,5,5,2,2,1,-1,-1\n")
     df = read_mot_gt(p)
-    assert df["class"].tolist() == ["car", "car"] and df["visible_fraction"].tolist() == [1.0, 1.0]
+    assert df["class"].tolist() == ["car"] * 3 and df["visible_fraction"].tolist() == [1.0] * 3
 
 
 def test_visdrone_and_uavdt_layouts(tmp_path):
@@ -208,12 +208,15 @@ def test_mp4_decode_range_scale_and_fps(tmp_path):
         validate_footage(FootageSpec(name="b", source=str(bad)))
 
 
-def test_lossless_video_export_reads_back_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("name", ["v.mkv", "v.avi", "v.mp4"])
+def test_lossless_video_export_reads_back_bit_for_bit(tmp_path, name):
     pytest.importorskip("av")
     frames = [_texture(24, 40, k) for k in range(3)]
-    video = export_video(frames, tmp_path / "v.mkv", fps=10)
+    video = export_video(frames, tmp_path / name, fps=10)
     seq = open_sequence(ingest_footage(FootageSpec(name="v", source=str(video)), tmp_path / "seq"))
-    assert all(np.array_equal(seq.frame(k), frames[k]) for k in range(3))
+    assert len(seq) == 3 and all(np.array_equal(seq.frame(k), frames[k]) for k in range(3))
+    with pytest.raises(ValueError, match="codec: expected one of ffv1, libx264rgb"):
+        export_video(frames, tmp_path / "x.mp4", codec="libx264")
 
 
 # --------------------------------------------------------------------------- cache
