@@ -9,7 +9,7 @@ tracker's positions as crosses.
 
 Public functions
 ----------------
-real_scenes(data) -> [scene label]                      scenes whose sequence folder is real footage
+real_scenes(data) -> [scene label]                      the real scenes, in the run's scene order
 picture_frame(data, scene) -> int | None                 the frame the pictures show (the middle one)
 truth_boxes(seq, frame) -> DataFrame                     ground-truth boxes of one frame (x0, y0, x1, y1)
 cell_tracks_at(cell_dir, frame) -> DataFrame             a cell's estimated tracks on one frame, boxes where kept
@@ -37,19 +37,10 @@ REAL_METRIC_ORDER = ["mota", "idf1", "hota", "deta", "assa", "motp", "mot_false_
                      "stab_stability", "epe_mean", "time_total_ms"]
 
 
-def _is_real(seq) -> bool:
-    return seq is not None and getattr(seq, "source", "synthetic") == "real"
-
-
 def real_scenes(data: RunData) -> list[str]:
-    """Scene labels of ``data`` whose sequence folder is real footage, in the run's scene order."""
-    out = []
-    for scene in data.scenes:
-        seeds = data.table.loc[data.table["scene"] == scene, "seed"]
-        seed = seeds.iloc[0] if len(seeds) else None
-        if seed is not None and _is_real(open_scene_sequence(data, scene=scene, seed=seed)):
-            out.append(scene)
-    return out
+    """Scene labels of ``data`` that are real footage (run.json's cells say so), in the run's scene order."""
+    real = set(data.folder.real_scenes)
+    return [s for s in data.scenes if s in real]
 
 
 def picture_frame(data: RunData, scene: str) -> int | None:
