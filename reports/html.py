@@ -21,8 +21,8 @@ import pandas as pd
 from harness.metrics import endpoint_error, position_error_px
 from reports import pictures, plots
 from reports.lkhs import LEVEL, N_BOOT
-from reports.load import (RunData, open_scene_sequence, picture_frames, read_cell_flow, read_stabilisation,
-                          read_tracks, read_true_tracks, scene_base)
+from reports.load import (RunData, open_scene_sequence, picture_frames, point_errors_by_frame, read_cell_flow,
+                          read_stabilisation, read_tracks, read_true_tracks, scene_base)
 from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.tables import Column, MetricTable, format_value
 
@@ -469,7 +469,8 @@ def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None, 
     pipe = next((p for p in tracks if (specs.get(p, {}).get("tracking") or {}).get("point") is True),
                 next(iter(tracks)))
     t = tracks[pipe]
-    pts = t[(t["source"] == "point") & t["seed_vehicle_id"].notna() & t[["x_true", "y_true"]].notna().all(axis=1)]
+    pts = t[(t["source"] == "point") & t["seed_vehicle_id"].notna() & t[["x_true", "y_true"]].notna().all(axis=1)
+            & (t["visible"].fillna(1.0) > 0)]  # frames where the vehicle is in view, as the metrics score
     if pts.empty:
         return None
     seeds = sorted(int(v) for v in pts["seed_vehicle_id"].unique())
@@ -508,18 +509,14 @@ def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
                + "</figcaption></figure>")
     have_truth = all(t[["x_true", "y_true"]].notna().all(axis=1).any() for t in tracks.values())
     if have_truth:
-        errs = {}
-        for pipe, t in tracks.items():
-            t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
-            e = pd.DataFrame({"frame": t["frame"],
-                              "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
-                              "err_kalman": position_error_px(t["x_filt"], t["y_filt"],
-                                                              t["x_true"], t["y_true"])})
-            errs[pipe] = e.groupby("frame", as_index=False).mean()
+        # the rows track_error scores (visible seed vehicles): a figure shows what the metric scores
+        errs = {pipe: point_errors_by_frame(t) for pipe, t in tracks.items()}
         esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
         out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '
-                   "its seed vehicle's true centre per frame [px], mean over the seed vehicles. The "
-                   "multi-target tracker is scored in the track metrics (region 'multi').</figcaption></figure>")
+                   "its seed vehicle's true centre per frame [px], mean over the seed vehicles in view: the "
+                   "rows the track_error (solid) and track_raw_error (dashed) metrics score; a vehicle that "
+                   "has left the view is not scored. The multi-target tracker is scored in the track metrics "
+                   "(region 'multi').</figcaption></figure>")
         chosen = _table41_track(tracks, truth, data.folder.pipelines)
         if chosen is not None:
             pipe, vehicle, t = chosen
