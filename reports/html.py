@@ -1,18 +1,26 @@
-"""report.html: one self-contained page rendered from a :class:`reports.model.ReportModel`.
+"""report.html: one page rendered from a :class:`reports.model.ReportModel`, with its pictures beside it.
 
-No external resource: the stylesheet (``reports/report.css``, package data) is
-inlined, figures are inline SVG, pictures base64 PNG. The output is
-deterministic: the same run folder gives the same bytes (the date shown is the
-run's, from run.json). Figures (pictures, stabilisation, tracking) read the
+No network resource: the stylesheet (``reports/report.css``, package data) is inlined, plots are
+inline SVG, and the pictures (flow, error maps, frames, legends, the trajectories figure with its
+frame) are files of the folder :data:`FILES_DIR` next to the page, referenced by relative paths and
+loaded lazily (``loading="lazy"``), downscaled to the size they are shown at
+(:func:`reports.pictures.picture_file`): the page opens offline from the run folder, its first
+screen without waiting for hundreds of pictures. A scene block returns its HTML and its files
+(:class:`SceneBlock`); :func:`reports.report.write_report` writes both. The output is
+deterministic: the same run folder gives the same bytes and files (named by their content; the
+date shown is the run's, from run.json). Figures (pictures, stabilisation, tracking) read the
 cell artifacts and sequences through :mod:`reports.load`.
 """
 
 from __future__ import annotations
 
+import contextvars
 import functools
+import hashlib
 import html
 import math
 import re
+from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
@@ -26,9 +34,10 @@ from reports.load import (RunData, open_scene_sequence, picture_frames, point_er
 from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.tables import Column, MetricTable, format_value
 
-__all__ = ["SCENE_SECTIONS", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
+__all__ = ["FILES_DIR", "SceneBlock", "SCENE_SECTIONS", "block_files", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
            "stylesheet"]
 
+FILES_DIR = "report_files"  # the pictures' folder, beside report.html
 _MAX_PICTURE_FRAMES = 2
 _PICTURE_MIN_WIDTH_PX = 320  # tiny suites render 160 x 120: enlarge pictures to at least this width
 _LOCAL_FLOOR_PX = 1.0  # colour scale floor of the local-motion row (a scene may have no moving vehicle)
@@ -99,6 +108,38 @@ def _cards(table_html: str, labels: list[str] | None = None) -> str:
 
 def _missing(text: str) -> str:
     return f'<p class="missing">{_e(text)}</p>'
+
+
+@dataclass(frozen=True)
+class SceneBlock:
+    """One (section, scene) block of the page: its HTML and the files it references (name in
+    :data:`FILES_DIR` -> bytes)."""
+
+    html: str
+    files: dict[str, bytes]
+
+
+# the files of the scene block being drawn (scene_block sets it): pictures are kept here as they are made
+_BLOCK_FILES: contextvars.ContextVar[dict[str, bytes] | None] = contextvars.ContextVar("report_block_files",
+                                                                                         default=None)
+
+
+def _keep(pic: pictures.PictureFile) -> str:
+    """Keep ``pic`` as a file of the scene block being drawn; its path relative to report.html."""
+    files = _BLOCK_FILES.get()
+    if files is None:
+        raise RuntimeError("a picture file made outside scene_block: nothing would write it")
+    files[pic.name] = pic.data
+    return f"{FILES_DIR}/{pic.name}"
+
+
+def block_files(blocks) -> dict[str, bytes]:
+    """Every file the blocks reference, by name (sorted): what :data:`FILES_DIR` must hold."""
+    out: dict[str, bytes] = {}
+    for b in blocks.values():
+        if isinstance(b, SceneBlock):
+            out.update(b.files)
+    return dict(sorted(out.items()))
 
 
 # ------------------------------------------------------------------------------ sections
@@ -239,30 +280,36 @@ def _variant_for(data: RunData, cells: pd.DataFrame, base: str, want):
     return sub.iloc[:0], None
 
 
-def _img(uri: str, *, cls: str = "", alt: str) -> str:
-    return f'<img class="{cls}" src="{uri}" alt="{_e(alt)}">'
+def _img(pic: pictures.PictureFile, *, cls: str = "", alt: str, scale: int = 1) -> str:
+    """An ``<img>`` of ``pic``, a file of the report's folder (kept for :func:`scene_block` to return),
+    loaded when scrolled near; ``scale``: shown enlarged that many times (the browser repeats pixels)."""
+    src = _keep(pic)
+    return (f'<img class="{cls}" src="{src}" width="{pic.width_px * scale}" height="{pic.height_px * scale}" '
+            f'loading="lazy" decoding="async" alt="{_e(alt)}">')
 
 
-# the legends are the same picture in every row: encoded once per process
+# the legends are the same picture in every row: encoded once per process (one file for the report)
 @functools.cache
-def _wheel_uri() -> str:
-    return pictures.png_data_uri(pictures.wheel_legend())
+def _wheel_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.wheel_legend())
 
 
 @functools.cache
-def _colorbar_uri() -> str:
-    return pictures.png_data_uri(pictures.epe_colorbar())
+def _colorbar_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.epe_colorbar())
 
 
 @functools.cache
-def _no_truth_uri() -> str:
-    return pictures.png_data_uri(pictures.swatch(pictures.NO_TRUTH_RGB))
+def _no_truth_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.swatch(pictures.NO_TRUTH_RGB))
 
 
 def _tile(rgb: np.ndarray, *, scale: int, alt: str, caption: str) -> str:
-    """A picture tile: ``rgb`` enlarged ``scale`` x by nearest neighbour, with its caption."""
-    uri = pictures.png_data_uri(pictures.upscale_nearest(rgb, scale))
-    return f"<figure>{_img(uri, cls='pix' if scale > 1 else '', alt=alt)}<figcaption>{_e(caption)}</figcaption></figure>"
+    """A picture tile: ``rgb`` shown ``scale`` x enlarged by nearest neighbour (stored at its own size), or,
+    wider than it is shown, downscaled to that width (:func:`reports.pictures.picture_file`); with its caption."""
+    pic = pictures.picture_file(rgb)
+    return (f"<figure>{_img(pic, cls='pix' if scale > 1 else '', alt=alt, scale=scale)}"
+            f"<figcaption>{_e(caption)}</figcaption></figure>")
 
 
 def _empty_tile(text: str) -> str:
@@ -287,7 +334,7 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
     for pipe, flow in ests.items():
         tiles.append(_tile(pictures.flow_row(flow, max_magnitude=max_mag), scale=scale, alt=f"{pipe} {what} flow",
                            caption=pipe) if flow is not None else _empty_tile(f"{pipe}: no {what} flow saved"))
-    tiles.append(f"<figure>{_img(_wheel_uri(), cls='legend', alt='colour wheel')}"
+    tiles.append(f"<figure>{_img(_wheel_file(), cls='legend', alt='colour wheel')}"
                  f"<figcaption>hue = direction (+x right, +y down), full saturation = {max_mag:.2f} px"
                  "</figcaption></figure>")
     out = [f"<div class=\"gallery flow\">{''.join(tiles)}</div>"]
@@ -308,10 +355,10 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
         rgb, mean = pictures.epe_map(flow, truth, max_epe_px=err_max, valid=valid)
         etiles.append(_tile(rgb, scale=scale, alt=f"{pipe} {what} endpoint error",
                             caption=f"{pipe}: mean EPE {format_value(mean)} px"))
-    bar = _img(_colorbar_uri(), cls="bar", alt="EPE colour scale")
+    bar = _img(_colorbar_file(), cls="bar", alt="EPE colour scale")
     etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {err_max:.2f} px (largest 99th percentile "
                   "of the row; brighter is worse; black = zero error)</figcaption></figure>")
-    no_truth = _img(_no_truth_uri(), cls="swatch", alt="teal swatch")
+    no_truth = _img(_no_truth_file(), cls="swatch", alt="teal swatch")
     etiles.append(f"<figure>{no_truth}<figcaption>teal = no ground truth (occluded or leaving the view)"
                   "</figcaption></figure>")
     out.append(f"<div class=\"gallery flow\">{''.join(etiles)}</div>")
@@ -495,8 +542,16 @@ def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
     truth = read_true_tracks(seq)
     out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
     svg = plots.tracking_figure(frame, tracks, truth=truth, title=f"trajectories over frame {first}")
+    # a file of its own, loaded when scrolled near: with a marker per point and frame, per pipeline, it
+    # is the page's largest figure (about 1 MB for 7 pipelines and 20 frames), and it holds the frame
+    doc, width, height = plots.svg_document(svg)
+    name = f"{hashlib.sha1(doc).hexdigest()[:16]}.svg"
+    src = _keep(pictures.PictureFile(name, doc, round(width), round(height)))
     multi = any((t["source"] != "point").any() for t in tracks.values())
-    out.append(f'<figure class="plot">{svg}<figcaption>Ground truth: every vehicle\'s true centre (black on '
+    alt = f"trajectories of every pipeline's tracks and the true vehicle centres, {label}, seed {seed}"
+    out.append(f'<figure class="plot"><img class="svg" src="{src}" width="{round(width)}" height="{round(height)}" '
+               f'style="max-width:{round(width)}px" loading="lazy" decoding="async" alt="{_e(alt)}">'
+               '<figcaption>Ground truth: every vehicle\'s true centre (black on '
                "white, v&lt;id&gt; at its first frame). Point tracker (blue; thesis 4.1): one track per seed "
                "vehicle, started at its true centre in the first frame. "
                + ("Multi-target tracker (orange-red, m&lt;id&gt; at the last frame): tracks born from "
@@ -582,27 +637,38 @@ def scene_blocks(cells: pd.DataFrame) -> list[tuple[str, str]]:
     return [(section, base) for section in SCENE_SECTIONS for base in bases]
 
 
-def scene_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> str:
-    """The HTML of ``section`` (one of :data:`SCENE_SECTIONS`) for scene ``base``.
+def scene_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> SceneBlock:
+    """The HTML of ``section`` (one of :data:`SCENE_SECTIONS`) for scene ``base``, with its picture files.
 
     Reads only the run folder and the sequences (``data.folder``, ``data.run_dir``,
     ``data.pipelines``), never the results table: ``data`` may come without its rows.
     """
     if section not in _SCENE_SECTIONS:
         raise ValueError(f"section: expected one of {', '.join(SCENE_SECTIONS)}, got {section!r}")
-    return _SCENE_SECTIONS[section](data, cells, base, plots.pipeline_colors(data.pipelines))
+    files: dict[str, bytes] = {}
+    token = _BLOCK_FILES.set(files)
+    try:
+        text = _SCENE_SECTIONS[section](data, cells, base, plots.pipeline_colors(data.pipelines))
+    finally:
+        _BLOCK_FILES.reset(token)
+    return SceneBlock(text, dict(sorted(files.items())))
 
 
-def render_html(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> str:
+def _block_html(block: SceneBlock | str) -> str:
+    return block.html if isinstance(block, SceneBlock) else block
+
+
+def render_html(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None = None) -> str:
     """The report page of ``model``.
 
     ``blocks``: the :func:`scene_block` of every (section, scene) of :func:`scene_blocks`, drawn
-    beforehand (by other processes); None draws them here, one after the other.
+    beforehand (by other processes); None draws them here, one after the other. The page references
+    the blocks' files (:func:`block_files`) in :data:`FILES_DIR`; writing them is the caller's.
     """
     return "".join(_page_parts(model, blocks))
 
 
-def render_html_bytes(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> bytes:
+def render_html_bytes(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None = None) -> bytes:
     """:func:`render_html` encoded as UTF-8, the same bytes.
 
     Encoded part by part: the scene blocks (all but a few kB of a page that may reach 150 MB) are
@@ -628,7 +694,7 @@ def _card_tables(text: str) -> str | None:
     return "".join([*out, rest]) if out else text
 
 
-def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -> list[str]:
+def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None) -> list[str]:
     """The page of :func:`render_html` in pieces whose concatenation is the page (blocks not copied)."""
     data = model.data
     colors = plots.pipeline_colors(data.pipelines)
@@ -636,7 +702,7 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -
     keys = scene_blocks(cells)
     if blocks is None:
         blocks = {key: scene_block(data, cells, *key) for key in keys}
-    by_section = {section: [blocks[key] for key in keys if key[0] == section]
+    by_section = {section: [_block_html(blocks[key]) for key in keys if key[0] == section]
                   or [_missing(_NO_SCENE_BLOCK[section])] for section in SCENE_SECTIONS}
     sec: dict[str, list[str]] = {}
     sec["verdict"] = [_verdict_html(model.gate, model.baseline, model.baseline_note)]
