@@ -185,9 +185,13 @@ def _gate_html(gate: dict) -> str:
 
 
 def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> str:
+    if gate is None and diffs is None:  # one line, at the end of the page (see _sections)
+        return ('<p class="note">No gate verdict and no baseline were given. To judge this run against a '
+                "baseline: <code>aerobench gate RUN --baseline B --json V</code>, then "
+                "<code>aerobench report RUN --baseline B --gate V</code>.</p>")
     out = [_gate_html(gate) if gate is not None else
-           _missing("No gate verdict was given (aerobench gate RUN --baseline B --json V, then "
-                    "aerobench report RUN --gate V).")]
+           '<p class="missing">No gate verdict was given (<code>aerobench gate RUN --baseline B --json V</code>, '
+           "then <code>aerobench report RUN --gate V</code>).</p>"]
     if diffs is None:
         out.append(_missing("No baseline was given: no comparison."))
     elif note:
@@ -208,31 +212,70 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
     return "".join(out)
 
 
+_WINNER_CLASS = {"LK": " lk-better", "HS": " hs-better"}
+_NA = "n/a"
+
+
+def _lkhs_legend() -> str:
+    return ('<p class="legend-line"><span class="swatch lk-better"></span> LK better '
+            '<span class="swatch hs-better"></span> HS better (the interval excludes 0; for an error LK better '
+            "is a negative difference, for a score such as MOTA a positive one); unshaded: no clear difference"
+            "</p>")
+
+
+def _diff_cells(c) -> str:
+    """The difference, interval and count cells of a comparison; "n/a" where a side has no value."""
+    if c.n_units == 0 or not np.isfinite(c.diff):
+        return f'<td class="num">{_NA}</td><td class="num">{_NA}</td><td class="num">{_NA}</td>'
+    cls = _WINNER_CLASS.get(c.better, "")
+    return (f'<td class="num{cls}">{c.diff:+.3f}</td><td class="num">{c.lo:+.3f} to {c.hi:+.3f}</td>'
+            f'<td class="num">{c.n_lk_better} / {c.n_units}</td>')
+
+
+def _value_cell(v: float) -> str:
+    return f'<td class="num">{format_value(v) if np.isfinite(v) else _NA}</td>'
+
+
+def _lkhs_tracking_html(pair) -> str:
+    if not pair.tracking:
+        return _missing(f"No tracking rows for {pair.lk} or {pair.hs}.")
+    rows = []
+    for c in pair.tracking:
+        unit = f" [{_e(c.unit)}]" if c.unit and c.unit != "ratio" else ""
+        arrow = "\u2191" if c.higher_is_better else "\u2193"
+        rows.append(f'<tr><th scope="row">{_e(c.metric)}{unit} {arrow}</th><td>{_e(c.region)}</td>'
+                    f"{_value_cell(c.lk_value)}{_value_cell(c.hs_value)}{_diff_cells(c)}</tr>")
+    return ('<div class="scroll"><table class="lkhs-track"><caption class="note">Trajectories: paired per '
+            "sequence (scene, seed); n/a where a side has no such rows (e.g. no multi-target tracker)."
+            "</caption><thead><tr><th>Metric</th><th>Tracker</th><th>LK</th><th>HS</th><th>LK \u2212 HS</th>"
+            f"<th>{LEVEL:.0%} CI</th><th>LK better / sequences</th></tr></thead><tbody>{''.join(rows)}"
+            "</tbody></table></div>")
+
+
 def _lkhs_html(model: ReportModel) -> str:
     if not model.lkhs:
         return _missing(model.lkhs_note)
-    out = [f'<p class="note">{_e(LOCAL_VS_TOTAL)}</p>',
-           f'<p class="note">Each row pairs the two pipelines frame pair by frame pair (same scene, seed and '
-           f"frame) and gives the difference LK \u2212 HS of the pooled endpoint error (epe_mean, per pixel) "
-           f"with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} resamples, "
-           f"seeded: the same results give the same interval). Negative: LK has the lower error. An interval "
-           f"that contains 0 is no clear difference.</p>"]
+    out = []
     for pair in model.lkhs:
         out.append(f"<h3>{_e(pair.lk)} vs {_e(pair.hs)}</h3>")
-        out.append("<ul class=\"verdicts\">" + "".join(f"<li>{_e(c.sentence)}</li>" for c in pair.comparisons)
-                   + "</ul>")
         rows = []
         for c in pair.comparisons:
-            cls = " best" if c.hi < 0 or c.lo > 0 else ""
             rows.append(f'<tr><th scope="row">{_e(c.region)}</th><td>{_e(c.motion)}</td>'
-                        f'<td class="num">{format_value(c.lk_value)}</td><td class="num">{format_value(c.hs_value)}</td>'
-                        f'<td class="num{cls}">{c.diff:+.3f}</td><td class="num">{c.lo:+.3f} to {c.hi:+.3f}</td>'
-                        f'<td class="num">{c.n_lk_lower} / {c.n_units}</td></tr>')
+                        f"{_value_cell(c.lk_value)}{_value_cell(c.hs_value)}{_diff_cells(c)}</tr>")
         unit = _e(pair.comparisons[0].unit) if pair.comparisons else "px"
-        out.append('<div class="scroll"><table class="lkhs"><thead><tr><th>Region</th><th>Motion</th>'
-                   f"<th>LK [{unit}]</th><th>HS [{unit}]</th><th>LK \u2212 HS [{unit}]</th>"
-                   f"<th>{LEVEL:.0%} CI</th><th>LK lower / pairs</th></tr></thead><tbody>{''.join(rows)}"
-                   "</tbody></table></div>")
+        if rows:
+            out.append('<div class="scroll"><table class="lkhs"><caption class="note">Flow: endpoint error '
+                       "(epe_mean), paired per frame pair.</caption><thead><tr><th>Region</th><th>Motion</th>"
+                       f"<th>LK [{unit}]</th><th>HS [{unit}]</th><th>LK \u2212 HS [{unit}]</th>"
+                       f"<th>{LEVEL:.0%} CI</th><th>LK lower / pairs</th></tr></thead><tbody>{''.join(rows)}"
+                       "</tbody></table></div>")
+        else:
+            out.append(_missing(f"No frame pair with epe_mean scored by both {pair.lk} and {pair.hs}."))
+        out.append(_lkhs_tracking_html(pair))
+        out.append(_lkhs_legend())
+        sentences = [c.sentence for c in pair.comparisons] + [c.sentence for c in pair.tracking]
+        out.append("<details><summary>In words</summary><ul class=\"verdicts\">"
+                   + "".join(f"<li>{_e(x)}</li>" for x in sentences) + "</ul></details>")
         per = pair.by_scene_seed
         if len(per):
             cols = [c for c in per.columns if c not in ("scene", "seed")]
@@ -244,6 +287,14 @@ def _lkhs_html(model: ReportModel) -> str:
                        '<div class="scroll"><table class="lkhs-scene"><thead><tr><th>Scene, seed</th>'
                        + "".join(f"<th>{_e(c)}</th>" for c in cols)
                        + f"</tr></thead><tbody>{body}</tbody></table></div></details>")
+    out.append("<details><summary>How the comparison is made</summary>"
+               f'<p class="note">Each flow row pairs the two pipelines frame pair by frame pair (same scene, seed '
+               f"and frame) and gives the difference LK \u2212 HS of the pooled endpoint error (epe_mean, per "
+               f"pixel) with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} "
+               "resamples, seeded: the same results give the same interval). Negative: LK has the lower error. "
+               "Each tracking row pairs whole sequences (scene, seed), since MOTA, IDF1 and HOTA are ratios of "
+               "counts summed over a sequence; its values are pooled from the summed counts. An interval that "
+               f"contains 0 is no clear difference.</p><p class=\"note\">{_e(LOCAL_VS_TOTAL)}</p></details>")
     return "".join(out)
 
 
@@ -728,9 +779,13 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | s
     for section in SCENE_SECTIONS:
         sec[section] = by_section[section] if len(cells) else [_missing("No completed cells.")]
     sec["failed"] = [_failed_html(data)]
-    nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
+    order = _SECTIONS
+    if model.gate is None and model.baseline is None:  # nothing to show at the top: a hint at the end
+        order = [x for x in _SECTIONS if x[0] not in ("verdict", "failed")] + [
+            ("failed", "Failed cells"), ("verdict", "Gate and baseline")]
+    nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in order)
     body = []
-    for k, v in _SECTIONS:
+    for k, v in order:
         body += [f'<section id="{k}"><h2>{_e(v)}</h2>', *sec[k], "</section>"]
     # every table of the body becomes cards; part by part when no table runs on into the next part
     # (as it cannot: each part is whole elements), else over the joined body as one string
@@ -740,4 +795,13 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | s
     return ["<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{_e(model.title)}</title><style>{stylesheet()}</style></head><body><main>"
-            f"<h1>{_e(model.title)}</h1><nav><ul>{nav}</ul></nav>", *carded, "</main></body></html>\n"]
+            f"<h1>{_e(model.title)}</h1>{_summary_html(model)}<nav><ul>{nav}</ul></nav>", *carded,
+            "</main></body></html>\n"]
+
+
+def _summary_html(model: ReportModel) -> str:
+    """The one-line verdict under the title (:func:`reports.model.summary_parts`)."""
+    if not model.summary:
+        return ""
+    return ('<p class="summary">' + ' <span class="sep">\u00b7</span> '.join(_e(x) for x in model.summary)
+            + "</p>")
