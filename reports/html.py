@@ -1,18 +1,26 @@
-"""report.html: one self-contained page rendered from a :class:`reports.model.ReportModel`.
+"""report.html: one page rendered from a :class:`reports.model.ReportModel`, with its pictures beside it.
 
-No external resource: the stylesheet (``reports/report.css``, package data) is
-inlined, figures are inline SVG, pictures base64 PNG. The output is
-deterministic: the same run folder gives the same bytes (the date shown is the
-run's, from run.json). Figures (pictures, stabilisation, tracking) read the
+No network resource: the stylesheet (``reports/report.css``, package data) is inlined, plots are
+inline SVG, and the pictures (flow, error maps, frames, legends, the trajectories figure with its
+frame) are files of the folder :data:`FILES_DIR` next to the page, referenced by relative paths and
+loaded lazily (``loading="lazy"``), downscaled to the size they are shown at
+(:func:`reports.pictures.picture_file`): the page opens offline from the run folder, its first
+screen without waiting for hundreds of pictures. A scene block returns its HTML and its files
+(:class:`SceneBlock`); :func:`reports.report.write_report` writes both. The output is
+deterministic: the same run folder gives the same bytes and files (named by their content; the
+date shown is the run's, from run.json). Figures (pictures, stabilisation, tracking) read the
 cell artifacts and sequences through :mod:`reports.load`.
 """
 
 from __future__ import annotations
 
+import contextvars
 import functools
+import hashlib
 import html
 import math
 import re
+from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
@@ -21,14 +29,15 @@ import pandas as pd
 from harness.metrics import endpoint_error, position_error_px
 from reports import pictures, plots
 from reports.lkhs import LEVEL, N_BOOT
-from reports.load import (RunData, open_scene_sequence, picture_frames, read_cell_flow, read_stabilisation,
-                          read_tracks, read_true_tracks, scene_base)
+from reports.load import (RunData, open_scene_sequence, picture_frames, point_errors_by_frame, read_cell_flow,
+                          read_stabilisation, read_tracks, read_true_tracks, scene_base)
 from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.tables import Column, MetricTable, format_value
 
-__all__ = ["SCENE_SECTIONS", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
+__all__ = ["FILES_DIR", "SceneBlock", "SCENE_SECTIONS", "block_files", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
            "stylesheet"]
 
+FILES_DIR = "report_files"  # the pictures' folder, beside report.html
 _MAX_PICTURE_FRAMES = 2
 _PICTURE_MIN_WIDTH_PX = 320  # tiny suites render 160 x 120: enlarge pictures to at least this width
 _LOCAL_FLOOR_PX = 1.0  # colour scale floor of the local-motion row (a scene may have no moving vehicle)
@@ -101,6 +110,38 @@ def _missing(text: str) -> str:
     return f'<p class="missing">{_e(text)}</p>'
 
 
+@dataclass(frozen=True)
+class SceneBlock:
+    """One (section, scene) block of the page: its HTML and the files it references (name in
+    :data:`FILES_DIR` -> bytes)."""
+
+    html: str
+    files: dict[str, bytes]
+
+
+# the files of the scene block being drawn (scene_block sets it): pictures are kept here as they are made
+_BLOCK_FILES: contextvars.ContextVar[dict[str, bytes] | None] = contextvars.ContextVar("report_block_files",
+                                                                                         default=None)
+
+
+def _keep(pic: pictures.PictureFile) -> str:
+    """Keep ``pic`` as a file of the scene block being drawn; its path relative to report.html."""
+    files = _BLOCK_FILES.get()
+    if files is None:
+        raise RuntimeError("a picture file made outside scene_block: nothing would write it")
+    files[pic.name] = pic.data
+    return f"{FILES_DIR}/{pic.name}"
+
+
+def block_files(blocks) -> dict[str, bytes]:
+    """Every file the blocks reference, by name (sorted): what :data:`FILES_DIR` must hold."""
+    out: dict[str, bytes] = {}
+    for b in blocks.values():
+        if isinstance(b, SceneBlock):
+            out.update(b.files)
+    return dict(sorted(out.items()))
+
+
 # ------------------------------------------------------------------------------ sections
 
 def _col_header(c: Column) -> str:
@@ -144,9 +185,13 @@ def _gate_html(gate: dict) -> str:
 
 
 def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> str:
+    if gate is None and diffs is None:  # one line, at the end of the page (see _sections)
+        return ('<p class="note">No gate verdict and no baseline were given. To judge this run against a '
+                "baseline: <code>aerobench gate RUN --baseline B --json V</code>, then "
+                "<code>aerobench report RUN --baseline B --gate V</code>.</p>")
     out = [_gate_html(gate) if gate is not None else
-           _missing("No gate verdict was given (aerobench gate RUN --baseline B --json V, then "
-                    "aerobench report RUN --gate V).")]
+           '<p class="missing">No gate verdict was given (<code>aerobench gate RUN --baseline B --json V</code>, '
+           "then <code>aerobench report RUN --gate V</code>).</p>"]
     if diffs is None:
         out.append(_missing("No baseline was given: no comparison."))
     elif note:
@@ -167,31 +212,70 @@ def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> s
     return "".join(out)
 
 
+_WINNER_CLASS = {"LK": " lk-better", "HS": " hs-better"}
+_NA = "n/a"
+
+
+def _lkhs_legend() -> str:
+    return ('<p class="legend-line"><span class="swatch lk-better"></span> LK better '
+            '<span class="swatch hs-better"></span> HS better (the interval excludes 0; for an error LK better '
+            "is a negative difference, for a score such as MOTA a positive one); unshaded: no clear difference"
+            "</p>")
+
+
+def _diff_cells(c) -> str:
+    """The difference, interval and count cells of a comparison; "n/a" where a side has no value."""
+    if c.n_units == 0 or not np.isfinite(c.diff):
+        return f'<td class="num">{_NA}</td><td class="num">{_NA}</td><td class="num">{_NA}</td>'
+    cls = _WINNER_CLASS.get(c.better, "")
+    return (f'<td class="num{cls}">{c.diff:+.3f}</td><td class="num">{c.lo:+.3f} to {c.hi:+.3f}</td>'
+            f'<td class="num">{c.n_lk_better} / {c.n_units}</td>')
+
+
+def _value_cell(v: float) -> str:
+    return f'<td class="num">{format_value(v) if np.isfinite(v) else _NA}</td>'
+
+
+def _lkhs_tracking_html(pair) -> str:
+    if not pair.tracking:
+        return _missing(f"No tracking rows for {pair.lk} or {pair.hs}.")
+    rows = []
+    for c in pair.tracking:
+        unit = f" [{_e(c.unit)}]" if c.unit and c.unit != "ratio" else ""
+        arrow = "\u2191" if c.higher_is_better else "\u2193"
+        rows.append(f'<tr><th scope="row">{_e(c.metric)}{unit} {arrow}</th><td>{_e(c.region)}</td>'
+                    f"{_value_cell(c.lk_value)}{_value_cell(c.hs_value)}{_diff_cells(c)}</tr>")
+    return ('<div class="scroll"><table class="lkhs-track"><caption class="note">Trajectories: paired per '
+            "sequence (scene, seed); n/a where a side has no such rows (e.g. no multi-target tracker)."
+            "</caption><thead><tr><th>Metric</th><th>Tracker</th><th>LK</th><th>HS</th><th>LK \u2212 HS</th>"
+            f"<th>{LEVEL:.0%} CI</th><th>LK better / sequences</th></tr></thead><tbody>{''.join(rows)}"
+            "</tbody></table></div>")
+
+
 def _lkhs_html(model: ReportModel) -> str:
     if not model.lkhs:
         return _missing(model.lkhs_note)
-    out = [f'<p class="note">{_e(LOCAL_VS_TOTAL)}</p>',
-           f'<p class="note">Each row pairs the two pipelines frame pair by frame pair (same scene, seed and '
-           f"frame) and gives the difference LK \u2212 HS of the pooled endpoint error (epe_mean, per pixel) "
-           f"with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} resamples, "
-           f"seeded: the same results give the same interval). Negative: LK has the lower error. An interval "
-           f"that contains 0 is no clear difference.</p>"]
+    out = []
     for pair in model.lkhs:
         out.append(f"<h3>{_e(pair.lk)} vs {_e(pair.hs)}</h3>")
-        out.append("<ul class=\"verdicts\">" + "".join(f"<li>{_e(c.sentence)}</li>" for c in pair.comparisons)
-                   + "</ul>")
         rows = []
         for c in pair.comparisons:
-            cls = " best" if c.hi < 0 or c.lo > 0 else ""
             rows.append(f'<tr><th scope="row">{_e(c.region)}</th><td>{_e(c.motion)}</td>'
-                        f'<td class="num">{format_value(c.lk_value)}</td><td class="num">{format_value(c.hs_value)}</td>'
-                        f'<td class="num{cls}">{c.diff:+.3f}</td><td class="num">{c.lo:+.3f} to {c.hi:+.3f}</td>'
-                        f'<td class="num">{c.n_lk_lower} / {c.n_units}</td></tr>')
+                        f"{_value_cell(c.lk_value)}{_value_cell(c.hs_value)}{_diff_cells(c)}</tr>")
         unit = _e(pair.comparisons[0].unit) if pair.comparisons else "px"
-        out.append('<div class="scroll"><table class="lkhs"><thead><tr><th>Region</th><th>Motion</th>'
-                   f"<th>LK [{unit}]</th><th>HS [{unit}]</th><th>LK \u2212 HS [{unit}]</th>"
-                   f"<th>{LEVEL:.0%} CI</th><th>LK lower / pairs</th></tr></thead><tbody>{''.join(rows)}"
-                   "</tbody></table></div>")
+        if rows:
+            out.append('<div class="scroll"><table class="lkhs"><caption class="note">Flow: endpoint error '
+                       "(epe_mean), paired per frame pair.</caption><thead><tr><th>Region</th><th>Motion</th>"
+                       f"<th>LK [{unit}]</th><th>HS [{unit}]</th><th>LK \u2212 HS [{unit}]</th>"
+                       f"<th>{LEVEL:.0%} CI</th><th>LK lower / pairs</th></tr></thead><tbody>{''.join(rows)}"
+                       "</tbody></table></div>")
+        else:
+            out.append(_missing(f"No frame pair with epe_mean scored by both {pair.lk} and {pair.hs}."))
+        out.append(_lkhs_tracking_html(pair))
+        out.append(_lkhs_legend())
+        sentences = [c.sentence for c in pair.comparisons] + [c.sentence for c in pair.tracking]
+        out.append("<details><summary>In words</summary><ul class=\"verdicts\">"
+                   + "".join(f"<li>{_e(x)}</li>" for x in sentences) + "</ul></details>")
         per = pair.by_scene_seed
         if len(per):
             cols = [c for c in per.columns if c not in ("scene", "seed")]
@@ -203,6 +287,14 @@ def _lkhs_html(model: ReportModel) -> str:
                        '<div class="scroll"><table class="lkhs-scene"><thead><tr><th>Scene, seed</th>'
                        + "".join(f"<th>{_e(c)}</th>" for c in cols)
                        + f"</tr></thead><tbody>{body}</tbody></table></div></details>")
+    out.append("<details><summary>How the comparison is made</summary>"
+               f'<p class="note">Each flow row pairs the two pipelines frame pair by frame pair (same scene, seed '
+               f"and frame) and gives the difference LK \u2212 HS of the pooled endpoint error (epe_mean, per "
+               f"pixel) with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} "
+               "resamples, seeded: the same results give the same interval). Negative: LK has the lower error. "
+               "Each tracking row pairs whole sequences (scene, seed), since MOTA, IDF1 and HOTA are ratios of "
+               "counts summed over a sequence; its values are pooled from the summed counts. An interval that "
+               f"contains 0 is no clear difference.</p><p class=\"note\">{_e(LOCAL_VS_TOTAL)}</p></details>")
     return "".join(out)
 
 
@@ -239,30 +331,36 @@ def _variant_for(data: RunData, cells: pd.DataFrame, base: str, want):
     return sub.iloc[:0], None
 
 
-def _img(uri: str, *, cls: str = "", alt: str) -> str:
-    return f'<img class="{cls}" src="{uri}" alt="{_e(alt)}">'
+def _img(pic: pictures.PictureFile, *, cls: str = "", alt: str, scale: int = 1) -> str:
+    """An ``<img>`` of ``pic``, a file of the report's folder (kept for :func:`scene_block` to return),
+    loaded when scrolled near; ``scale``: shown enlarged that many times (the browser repeats pixels)."""
+    src = _keep(pic)
+    return (f'<img class="{cls}" src="{src}" width="{pic.width_px * scale}" height="{pic.height_px * scale}" '
+            f'loading="lazy" decoding="async" alt="{_e(alt)}">')
 
 
-# the legends are the same picture in every row: encoded once per process
+# the legends are the same picture in every row: encoded once per process (one file for the report)
 @functools.cache
-def _wheel_uri() -> str:
-    return pictures.png_data_uri(pictures.wheel_legend())
+def _wheel_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.wheel_legend())
 
 
 @functools.cache
-def _colorbar_uri() -> str:
-    return pictures.png_data_uri(pictures.epe_colorbar())
+def _colorbar_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.epe_colorbar())
 
 
 @functools.cache
-def _no_truth_uri() -> str:
-    return pictures.png_data_uri(pictures.swatch(pictures.NO_TRUTH_RGB))
+def _no_truth_file() -> pictures.PictureFile:
+    return pictures.picture_file(pictures.swatch(pictures.NO_TRUTH_RGB))
 
 
 def _tile(rgb: np.ndarray, *, scale: int, alt: str, caption: str) -> str:
-    """A picture tile: ``rgb`` enlarged ``scale`` x by nearest neighbour, with its caption."""
-    uri = pictures.png_data_uri(pictures.upscale_nearest(rgb, scale))
-    return f"<figure>{_img(uri, cls='pix' if scale > 1 else '', alt=alt)}<figcaption>{_e(caption)}</figcaption></figure>"
+    """A picture tile: ``rgb`` shown ``scale`` x enlarged by nearest neighbour (stored at its own size), or,
+    wider than it is shown, downscaled to that width (:func:`reports.pictures.picture_file`); with its caption."""
+    pic = pictures.picture_file(rgb)
+    return (f"<figure>{_img(pic, cls='pix' if scale > 1 else '', alt=alt, scale=scale)}"
+            f"<figcaption>{_e(caption)}</figcaption></figure>")
 
 
 def _empty_tile(text: str) -> str:
@@ -287,7 +385,7 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
     for pipe, flow in ests.items():
         tiles.append(_tile(pictures.flow_row(flow, max_magnitude=max_mag), scale=scale, alt=f"{pipe} {what} flow",
                            caption=pipe) if flow is not None else _empty_tile(f"{pipe}: no {what} flow saved"))
-    tiles.append(f"<figure>{_img(_wheel_uri(), cls='legend', alt='colour wheel')}"
+    tiles.append(f"<figure>{_img(_wheel_file(), cls='legend', alt='colour wheel')}"
                  f"<figcaption>hue = direction (+x right, +y down), full saturation = {max_mag:.2f} px"
                  "</figcaption></figure>")
     out = [f"<div class=\"gallery flow\">{''.join(tiles)}</div>"]
@@ -308,10 +406,10 @@ def _flow_rows(truth: np.ndarray | None, ests: dict[str, np.ndarray | None], val
         rgb, mean = pictures.epe_map(flow, truth, max_epe_px=err_max, valid=valid)
         etiles.append(_tile(rgb, scale=scale, alt=f"{pipe} {what} endpoint error",
                             caption=f"{pipe}: mean EPE {format_value(mean)} px"))
-    bar = _img(_colorbar_uri(), cls="bar", alt="EPE colour scale")
+    bar = _img(_colorbar_file(), cls="bar", alt="EPE colour scale")
     etiles.append(f"<figure>{bar}<figcaption>endpoint error 0 \u2192 {err_max:.2f} px (largest 99th percentile "
                   "of the row; brighter is worse; black = zero error)</figcaption></figure>")
-    no_truth = _img(_no_truth_uri(), cls="swatch", alt="teal swatch")
+    no_truth = _img(_no_truth_file(), cls="swatch", alt="teal swatch")
     etiles.append(f"<figure>{no_truth}<figcaption>teal = no ground truth (occluded or leaving the view)"
                   "</figcaption></figure>")
     out.append(f"<div class=\"gallery flow\">{''.join(etiles)}</div>")
@@ -470,7 +568,8 @@ def _table41_track(tracks: dict[str, pd.DataFrame], truth: pd.DataFrame | None, 
     pipe = next((p for p in tracks if (specs.get(p, {}).get("tracking") or {}).get("point") is True),
                 next(iter(tracks)))
     t = tracks[pipe]
-    pts = t[(t["source"] == "point") & t["seed_vehicle_id"].notna() & t[["x_true", "y_true"]].notna().all(axis=1)]
+    pts = t[(t["source"] == "point") & t["seed_vehicle_id"].notna() & t[["x_true", "y_true"]].notna().all(axis=1)
+            & (t["visible"].fillna(1.0) > 0)]  # frames where the vehicle is in view, as the metrics score
     if pts.empty:
         return None
     seeds = sorted(int(v) for v in pts["seed_vehicle_id"].unique())
@@ -495,8 +594,16 @@ def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
     truth = read_true_tracks(seq)
     out.append(f"<h3>{_e(label)}, seed {_e(seed)}</h3>")
     svg = plots.tracking_figure(frame, tracks, truth=truth, title=f"trajectories over frame {first}")
+    # a file of its own, loaded when scrolled near: with a marker per point and frame, per pipeline, it
+    # is the page's largest figure (about 1 MB for 7 pipelines and 20 frames), and it holds the frame
+    doc, width, height = plots.svg_document(svg)
+    name = f"{hashlib.sha1(doc).hexdigest()[:16]}.svg"
+    src = _keep(pictures.PictureFile(name, doc, round(width), round(height)))
     multi = any((t["source"] != "point").any() for t in tracks.values())
-    out.append(f'<figure class="plot">{svg}<figcaption>Ground truth: every vehicle\'s true centre (black on '
+    alt = f"trajectories of every pipeline's tracks and the true vehicle centres, {label}, seed {seed}"
+    out.append(f'<figure class="plot"><img class="svg" src="{src}" width="{round(width)}" height="{round(height)}" '
+               f'style="max-width:{round(width)}px" loading="lazy" decoding="async" alt="{_e(alt)}">'
+               '<figcaption>Ground truth: every vehicle\'s true centre (black on '
                "white, v&lt;id&gt; at its first frame). Point tracker (blue; thesis 4.1): one track per seed "
                "vehicle, started at its true centre in the first frame. "
                + ("Multi-target tracker (orange-red, m&lt;id&gt; at the last frame): tracks born from "
@@ -509,18 +616,14 @@ def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
                + "</figcaption></figure>")
     have_truth = all(t[["x_true", "y_true"]].notna().all(axis=1).any() for t in tracks.values())
     if have_truth:
-        errs = {}
-        for pipe, t in tracks.items():
-            t = t[(t["source"] == "point") & t[["x_true", "y_true"]].notna().all(axis=1)]
-            e = pd.DataFrame({"frame": t["frame"],
-                              "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
-                              "err_kalman": position_error_px(t["x_filt"], t["y_filt"],
-                                                              t["x_true"], t["y_true"])})
-            errs[pipe] = e.groupby("frame", as_index=False).mean()
+        # the rows track_error scores (visible seed vehicles): a figure shows what the metric scores
+        errs = {pipe: point_errors_by_frame(t) for pipe, t in tracks.items()}
         esvg = plots.tracking_error_figure(errs, colors=colors, title="per-frame position error, point tracker")
         out.append(f'<figure class="plot">{esvg}<figcaption>Distance from the point tracker\'s position to '
-                   "its seed vehicle's true centre per frame [px], mean over the seed vehicles. The "
-                   "multi-target tracker is scored in the track metrics (region 'multi').</figcaption></figure>")
+                   "its seed vehicle's true centre per frame [px], mean over the seed vehicles in view: the "
+                   "rows the track_error (solid) and track_raw_error (dashed) metrics score; a vehicle that "
+                   "has left the view is not scored. The multi-target tracker is scored in the track metrics "
+                   "(region 'multi').</figcaption></figure>")
         chosen = _table41_track(tracks, truth, data.folder.pipelines)
         if chosen is not None:
             pipe, vehicle, t = chosen
@@ -586,27 +689,38 @@ def scene_blocks(cells: pd.DataFrame) -> list[tuple[str, str]]:
     return [(section, base) for section in SCENE_SECTIONS for base in bases]
 
 
-def scene_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> str:
-    """The HTML of ``section`` (one of :data:`SCENE_SECTIONS`) for scene ``base``.
+def scene_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> SceneBlock:
+    """The HTML of ``section`` (one of :data:`SCENE_SECTIONS`) for scene ``base``, with its picture files.
 
     Reads only the run folder and the sequences (``data.folder``, ``data.run_dir``,
     ``data.pipelines``), never the results table: ``data`` may come without its rows.
     """
     if section not in _SCENE_SECTIONS:
         raise ValueError(f"section: expected one of {', '.join(SCENE_SECTIONS)}, got {section!r}")
-    return _SCENE_SECTIONS[section](data, cells, base, plots.pipeline_colors(data.pipelines))
+    files: dict[str, bytes] = {}
+    token = _BLOCK_FILES.set(files)
+    try:
+        text = _SCENE_SECTIONS[section](data, cells, base, plots.pipeline_colors(data.pipelines))
+    finally:
+        _BLOCK_FILES.reset(token)
+    return SceneBlock(text, dict(sorted(files.items())))
 
 
-def render_html(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> str:
+def _block_html(block: SceneBlock | str) -> str:
+    return block.html if isinstance(block, SceneBlock) else block
+
+
+def render_html(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None = None) -> str:
     """The report page of ``model``.
 
     ``blocks``: the :func:`scene_block` of every (section, scene) of :func:`scene_blocks`, drawn
-    beforehand (by other processes); None draws them here, one after the other.
+    beforehand (by other processes); None draws them here, one after the other. The page references
+    the blocks' files (:func:`block_files`) in :data:`FILES_DIR`; writing them is the caller's.
     """
     return "".join(_page_parts(model, blocks))
 
 
-def render_html_bytes(model: ReportModel, blocks: dict[tuple[str, str], str] | None = None) -> bytes:
+def render_html_bytes(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None = None) -> bytes:
     """:func:`render_html` encoded as UTF-8, the same bytes.
 
     Encoded part by part: the scene blocks (all but a few kB of a page that may reach 150 MB) are
@@ -632,7 +746,7 @@ def _card_tables(text: str) -> str | None:
     return "".join([*out, rest]) if out else text
 
 
-def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -> list[str]:
+def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | str] | None) -> list[str]:
     """The page of :func:`render_html` in pieces whose concatenation is the page (blocks not copied)."""
     data = model.data
     colors = plots.pipeline_colors(data.pipelines)
@@ -640,7 +754,7 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -
     keys = scene_blocks(cells)
     if blocks is None:
         blocks = {key: scene_block(data, cells, *key) for key in keys}
-    by_section = {section: [blocks[key] for key in keys if key[0] == section]
+    by_section = {section: [_block_html(blocks[key]) for key in keys if key[0] == section]
                   or [_missing(_NO_SCENE_BLOCK[section])] for section in SCENE_SECTIONS}
     sec: dict[str, list[str]] = {}
     sec["verdict"] = [_verdict_html(model.gate, model.baseline, model.baseline_note)]
@@ -666,9 +780,13 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -
     for section in SCENE_SECTIONS:
         sec[section] = by_section[section] if len(cells) else [_missing("No completed cells.")]
     sec["failed"] = [_failed_html(data)]
-    nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in _SECTIONS)
+    order = _SECTIONS
+    if model.gate is None and model.baseline is None:  # nothing to show at the top: a hint at the end
+        order = [x for x in _SECTIONS if x[0] not in ("verdict", "failed")] + [
+            ("failed", "Failed cells"), ("verdict", "Gate and baseline")]
+    nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in order)
     body = []
-    for k, v in _SECTIONS:
+    for k, v in order:
         body += [f'<section id="{k}"><h2>{_e(v)}</h2>', *sec[k], "</section>"]
     # every table of the body becomes cards; part by part when no table runs on into the next part
     # (as it cannot: each part is whole elements), else over the joined body as one string
@@ -678,4 +796,13 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], str] | None) -
     return ["<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{_e(model.title)}</title><style>{stylesheet()}</style></head><body><main>"
-            f"<h1>{_e(model.title)}</h1><nav><ul>{nav}</ul></nav>", *carded, "</main></body></html>\n"]
+            f"<h1>{_e(model.title)}</h1>{_summary_html(model)}<nav><ul>{nav}</ul></nav>", *carded,
+            "</main></body></html>\n"]
+
+
+def _summary_html(model: ReportModel) -> str:
+    """The one-line verdict under the title (:func:`reports.model.summary_parts`)."""
+    if not model.summary:
+        return ""
+    return ('<p class="summary">' + ' <span class="sep">\u00b7</span> '.join(_e(x) for x in model.summary)
+            + "</p>")

@@ -16,12 +16,21 @@ with replacement, :data:`N_BOOT` times, an explicit seeded ``numpy.random.Genera
 so the same results give the same interval. The verdict says "no clear difference"
 whenever the interval contains 0.
 
+Trajectories are compared the same way (:func:`compare_tracking`: MOTA, IDF1, HOTA and the point
+error ``track_error``, per tracker), with one difference: their unit is a sequence (scene, seed),
+since MOTA, IDF1 and HOTA are ratios of counts summed over a whole sequence. Each side's pooled
+value is the metric's own reduction of the summed counts (``1 - sum / count`` for MOTA), so the
+difference is that of the values the report's tables show. A metric one side lacks (a pipeline
+without a multi-target tracker, a metric the run did not compute) is a comparison with no unit,
+shown as "n/a", never as a zero.
+
 Public functions
 ----------------
 pair_pipelines(specs) -> [(lk, hs)]            twins by flow method in the resolved pipeline dicts
-paired_units(table, lk, hs, *, metric, region, motion) -> DataFrame
-bootstrap_difference(sum_a, count_a, sum_b, count_b, *, rng, n_boot, level) -> (d, lo, hi)
+paired_units(table, lk, hs, *, metric, region, motion, by) -> DataFrame
+bootstrap_difference(sum_a, count_a, sum_b, count_b, *, rng, n_boot, level, reduce) -> (d, lo, hi)
 compare_pair(table, lk, hs, *, metric, regions, motions, seed) -> [Comparison]
+compare_tracking(table, lk, hs, *, metrics, seed) -> [Comparison]       per tracker and metric
 by_scene_seed(table, lk, hs, *, metric, regions, motions) -> DataFrame   the difference per (scene, seed)
 """
 
@@ -33,13 +42,22 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-__all__ = ["LK", "HS", "N_BOOT", "LEVEL", "Comparison", "pair_pipelines", "paired_units", "bootstrap_difference",
-           "compare_pair", "by_scene_seed", "verdict"]
+__all__ = ["LK", "HS", "N_BOOT", "LEVEL", "TRACKING_METRICS", "Comparison", "pair_pipelines", "paired_units",
+           "bootstrap_difference", "compare_pair", "compare_tracking", "by_scene_seed", "verdict"]
 
 LK, HS = "lucas_kanade", "horn_schunck"
 N_BOOT = 4000
 LEVEL = 0.95
 _UNIT = ["scene", "seed", "frame"]
+_SEQUENCE = ["scene", "seed"]
+# the trajectory rows of the comparison (issue 21): multi-target scores, then the point error
+TRACKING_METRICS = ("mota", "idf1", "hota", "track_error")
+# their direction where neither harness.metrics nor the table says it (a metric this run did not compute)
+_HIGHER_IS_BETTER = {"mota": True, "idf1": True, "hota": True, "track_error": False}
+_TRACKERS = ("point", "multi")  # region of a track row: the tracker; others after these, sorted
+# pooled value from summed totals, per reduction rule of harness.metrics (vectorised over resamples)
+_REDUCE = {"mean": lambda s, c: s / c, "complement": lambda s, c: 1.0 - s / c,
+           "rate": lambda s, c: 100.0 * s / c, "rms": lambda s, c: np.sqrt(s / c)}
 
 
 def _flow_method(spec: Mapping) -> str | None:
@@ -72,26 +90,33 @@ def pair_pipelines(specs: Mapping[str, Mapping]) -> list[tuple[str, str]]:
 
 
 def paired_units(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_mean", region: str = "all",
-                 motion: str = "total") -> pd.DataFrame:
-    """One row per frame pair both pipelines scored: ``scene, seed, frame, sum_lk, count_lk, sum_hs, count_hs``.
+                 motion: str = "total", by: tuple[str, ...] = tuple(_UNIT)) -> pd.DataFrame:
+    """One row per unit both pipelines scored: ``*by, sum_lk, count_lk, sum_hs, count_hs``.
 
-    ``table`` is a results table (rows of failed cells are left out here); a unit present for one
-    pipeline only is dropped (it cannot be paired).
+    The unit is a frame pair (``by`` = scene, seed, frame) by default; ``("scene", "seed")`` pools
+    each sequence (the unit of sequence-level scores such as MOTA). ``table`` is a results table
+    (rows of failed cells are left out here); a unit present for one pipeline only is dropped (it
+    cannot be paired).
     """
+    by = list(by)
     rows = table[(table["metric"] == metric) & (table["region"] == region) & (table["motion"] == motion)
                  & (table["status"] == "ok") & (table["count"] > 0)]
     sides = []
     for pipe, tag in ((lk, "lk"), (hs, "hs")):
-        g = rows[rows["pipeline"] == pipe].groupby(_UNIT, as_index=False)[["sum", "count"]].sum()
+        g = rows[rows["pipeline"] == pipe].groupby(by, as_index=False)[["sum", "count"]].sum()
         sides.append(g.rename(columns={"sum": f"sum_{tag}", "count": f"count_{tag}"}))
-    return sides[0].merge(sides[1], on=_UNIT, how="inner").sort_values(_UNIT, kind="stable").reset_index(drop=True)
+    return sides[0].merge(sides[1], on=by, how="inner").sort_values(by, kind="stable").reset_index(drop=True)
 
 
 def bootstrap_difference(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray, count_b: np.ndarray, *,
-                         rng: np.random.Generator, n_boot: int = N_BOOT, level: float = LEVEL
-                         ) -> tuple[float, float, float]:
+                         rng: np.random.Generator, n_boot: int = N_BOOT, level: float = LEVEL,
+                         reduce: str = "mean") -> tuple[float, float, float]:
     """Difference of pooled means ``sum(sum_a)/sum(count_a) - sum(sum_b)/sum(count_b)`` and its
     percentile-bootstrap interval over the paired units.
+
+    With ``reduce`` another rule of :mod:`harness.metrics` turns each side's summed totals into its
+    value before the difference: ``complement`` (1 - sum / count, MOTA), ``rate`` (100 sum / count),
+    ``rms`` (sqrt(sum / count)); ``mean`` is sum / count.
 
     Parameters
     ----------
@@ -115,12 +140,15 @@ def bootstrap_difference(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarr
         raise ValueError(f"expected four (n,) arrays of one length, got shapes {[a.shape for a in arrays]}")
     if not 0.0 < level < 1.0:
         raise ValueError(f"level: expected a probability in (0, 1), got {level}")
+    if reduce not in _REDUCE:
+        raise ValueError(f"reduce: expected one of {', '.join(_REDUCE)}, got {reduce!r}")
     if n == 0:
         return float("nan"), float("nan"), float("nan")
+    f = _REDUCE[reduce]
     sa, ca, sb, cb = arrays
-    d = sa.sum() / ca.sum() - sb.sum() / cb.sum()
+    d = f(sa.sum(), ca.sum()) - f(sb.sum(), cb.sum())
     idx = rng.integers(0, n, size=(n_boot, n))
-    boot = sa[idx].sum(1) / ca[idx].sum(1) - sb[idx].sum(1) / cb[idx].sum(1)
+    boot = f(sa[idx].sum(1), ca[idx].sum(1)) - f(sb[idx].sum(1), cb[idx].sum(1))
     lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
     return float(d), float(lo), float(hi)
 
@@ -136,20 +164,41 @@ class Comparison:
     region: str
     motion: str
     n_units: int
-    n_lk_lower: int       # units where LK's error is the lower one
-    lk_value: float       # pooled over the units
+    n_lk_lower: int       # units where LK's value (an error: LK's error) is the lower one
+    lk_value: float       # pooled over the units (over every unit of its own where the pair has none)
     hs_value: float
     diff: float           # lk_value - hs_value
     lo: float
     hi: float
+    higher_is_better: bool = False
+    n_lk_higher: int = 0  # units where LK's value is the higher one
 
     @property
     def sentence(self) -> str:
         return verdict(self)
 
+    @property
+    def n_lk_better(self) -> int:
+        """Units where LK's value is the better one (by the metric's direction)."""
+        return self.n_lk_higher if self.higher_is_better else self.n_lk_lower
+
+    @property
+    def better(self) -> str | None:
+        """``"LK"`` or ``"HS"`` when the interval excludes 0, else None (no clear difference, or no unit)."""
+        if self.n_units == 0 or not (np.isfinite(self.lo) and np.isfinite(self.hi)):
+            return None
+        if self.hi < 0:
+            return "HS" if self.higher_is_better else "LK"
+        if self.lo > 0:
+            return "LK" if self.higher_is_better else "HS"
+        return None
+
 
 def verdict(c: Comparison) -> str:
-    """One sentence from the numbers: who has the lower error and by how much, or no clear difference."""
+    """One sentence from the numbers: who has the lower error (the higher score) and by how much, or no
+    clear difference."""
+    if c.motion == "track":
+        return _tracking_verdict(c)
     where = f"{c.region} pixels, {c.motion} motion"
     ci = f"95 % CI {c.lo:+.3f} to {c.hi:+.3f} {c.unit}"
     if c.n_units == 0 or not np.isfinite(c.diff):
@@ -162,6 +211,24 @@ def verdict(c: Comparison) -> str:
         return (f"{where}: HS ({c.hs}) is better, its error {c.diff:.3f} {c.unit} lower than LK ({c.lk}) "
                 f"({ci}; {count}).")
     return f"{where}: no clear difference between {c.lk} and {c.hs} (the {ci} contains 0; {count})."
+
+
+def _tracking_verdict(c: Comparison) -> str:
+    where = f"{c.metric}, {c.region} tracker"
+    unit = f" {c.unit}" if c.unit not in ("", "ratio") else ""
+    if c.n_units == 0 or not np.isfinite(c.diff):
+        missing = [name for name, v in ((c.lk, c.lk_value), (c.hs, c.hs_value)) if not np.isfinite(v)]
+        return (f"{where}: n/a ({' and '.join(missing)} without it)." if missing else
+                f"{where}: n/a (no sequence scored by both {c.lk} and {c.hs}).")
+    ci = f"95 % CI {c.lo:+.3f} to {c.hi:+.3f}{unit}"
+    count = f"LK better on {c.n_lk_better} of {c.n_units} sequences"
+    better = c.better
+    if better is None:
+        return f"{where}: no clear difference between {c.lk} and {c.hs} (the {ci} contains 0; {count})."
+    word = "higher" if c.higher_is_better else "lower"
+    name, other = (c.lk, c.hs) if better == "LK" else (c.hs, c.lk)
+    return (f"{where}: {better} ({name}) is better, its {c.metric} {abs(c.diff):.3f}{unit} {word} than "
+            f"{'HS' if better == 'LK' else 'LK'} ({other}) ({ci}; {count}).")
 
 
 def _paired_by_region(table: pd.DataFrame, lk: str, hs: str, *, metric: str, regions: tuple[str, ...],
@@ -209,3 +276,60 @@ def by_scene_seed(table: pd.DataFrame, lk: str, hs: str, *, metric: str = "epe_m
     if not parts:
         return pd.DataFrame(columns=["scene", "seed"])
     return pd.concat(parts, axis=1).reset_index()
+
+
+def _metric_rule(table: pd.DataFrame, metric: str) -> tuple[str, bool, str] | None:
+    """(reduce rule, higher_is_better, unit) of ``metric``: harness.metrics' definition, else the table's
+    columns with the rule ``mean``; None for a rule a difference of pooled values cannot use."""
+    from harness.metrics import METRICS
+
+    rows = table.loc[table["metric"] == metric, ["unit", "higher_is_better"]]
+    unit = str(rows["unit"].iloc[0]) if len(rows) else ""
+    d = METRICS.get(metric)
+    if d is not None:
+        return (d.reduce, bool(d.higher_is_better), unit or d.unit) if d.reduce in _REDUCE else None
+    hib = bool(rows["higher_is_better"].iloc[0]) if len(rows) else _HIGHER_IS_BETTER.get(metric, False)
+    return ("mean", hib, unit)
+
+
+def compare_tracking(table: pd.DataFrame, lk: str, hs: str, *, metrics: tuple[str, ...] = TRACKING_METRICS,
+                     seed: int = 0) -> list[Comparison]:
+    """:class:`Comparison` of ``lk`` against ``hs`` per tracker (``point``, ``multi``: the ``region`` of the
+    track rows, motion ``track``) and metric, paired per sequence (scene, seed).
+
+    Every tracker either pipeline has rows for gets every metric of ``metrics``: where one side (or
+    both) lacks the metric, a comparison with no unit whose missing side's value is NaN ("n/a" in
+    the report). Each interval uses ``numpy.random.default_rng(seed)`` of its own.
+    """
+    rows = table[(table["motion"] == "track") & (table["status"] == "ok") & table["pipeline"].isin([lk, hs])]
+    present = set(pd.unique(rows["region"].astype(str)))
+    trackers = [t for t in _TRACKERS if t in present] + sorted(present - set(_TRACKERS))
+    out = []
+    for tracker in trackers:
+        for metric in metrics:
+            rule = _metric_rule(table, metric)
+            reduce, hib, unit = rule if rule is not None else ("mean", False, "")
+            sides = []
+            for pipe in (lk, hs):
+                r = rows[(rows["pipeline"] == pipe) & (rows["region"] == tracker) & (rows["metric"] == metric)
+                         & (rows["count"] > 0)]
+                sides.append(float(_REDUCE[reduce](r["sum"].sum(), r["count"].sum()))
+                             if len(r) and rule is not None else float("nan"))
+            u = (paired_units(table, lk, hs, metric=metric, region=tracker, motion="track", by=tuple(_SEQUENCE))
+                 if rule is not None and all(np.isfinite(sides)) else pd.DataFrame())
+            if u.empty:
+                nan = float("nan")
+                out.append(Comparison(lk=lk, hs=hs, metric=metric, unit=unit, region=tracker, motion="track",
+                                      n_units=0, n_lk_lower=0, lk_value=sides[0], hs_value=sides[1], diff=nan,
+                                      lo=nan, hi=nan, higher_is_better=hib))
+                continue
+            f = _REDUCE[reduce]
+            d, lo, hi = bootstrap_difference(u["sum_lk"], u["count_lk"], u["sum_hs"], u["count_hs"],
+                                             rng=np.random.default_rng(seed), reduce=reduce)
+            per_unit = f(u["sum_lk"], u["count_lk"]) - f(u["sum_hs"], u["count_hs"])
+            out.append(Comparison(lk=lk, hs=hs, metric=metric, unit=unit, region=tracker, motion="track",
+                                  n_units=len(u), n_lk_lower=int((per_unit < 0).sum()),
+                                  lk_value=float(f(u["sum_lk"].sum(), u["count_lk"].sum())),
+                                  hs_value=float(f(u["sum_hs"].sum(), u["count_hs"].sum())),
+                                  diff=d, lo=lo, hi=hi, higher_is_better=hib, n_lk_higher=int((per_unit > 0).sum())))
+    return out

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from harness import cell_artifacts as artifacts
+from harness.metrics import position_error_px
 from harness.results import aggregate
 from harness.run_folder import RunFolder, read_run
 from scenes.sequence import Sequence, open_sequence
@@ -34,6 +35,7 @@ __all__ = [
     "open_scene_sequence",
     "read_stabilisation",
     "read_tracks",
+    "point_errors_by_frame",
     "read_true_tracks",
     "picture_frames",
     "read_cell_flow",
@@ -210,16 +212,42 @@ def read_stabilisation(cell_dir: Path) -> pd.DataFrame | None:
 
 def read_tracks(cell_dir: Path) -> pd.DataFrame | None:
     """The cell's tracks.csv as ``frame, source, track_id, seed_vehicle_id, x, y, x_filt, y_filt,
-    x_true, y_true`` (px). A track is the pair ``(source, track_id)``; the truth columns are
-    filled for point tracks only (the vehicle the track was seeded on)."""
+    x_true, y_true, visible`` (px). A track is the pair ``(source, track_id)``; the truth columns are
+    filled for point tracks only (the vehicle the track was seeded on). ``visible``: whether that
+    vehicle is in view in the frame (1 / 0; NaN in cell folders written before it was recorded)."""
     df = artifacts.read_tracks(cell_dir)
     if df is None:
         return None
     out = df[["frame", "source", "track_id", "seed_vehicle_id"]].copy()
     for short, col in (("x", "x_px"), ("y", "y_px"), ("x_filt", "x_filt_px"), ("y_filt", "y_filt_px"),
-                       ("x_true", "true_x_px"), ("y_true", "true_y_px")):
+                       ("x_true", "true_x_px"), ("y_true", "true_y_px"), ("visible", "true_visible")):
         out[short] = df[col]
     return out
+
+
+def point_errors_by_frame(tracks: pd.DataFrame) -> pd.DataFrame:
+    """Per frame, the mean position error [px] of the point tracks over the rows the metrics score.
+
+    The selection is :func:`harness.metrics.track_rows`' for the point tracker: rows seeded on a
+    vehicle, with a finite filtered position, where that vehicle is visible (a vehicle that left
+    the view has a projected centre but no score). ``tracks`` as :func:`read_tracks` returns it;
+    ``visible`` NaN (an older cell folder) counts as visible wherever the true centre is known.
+
+    Returns
+    -------
+    DataFrame
+        ``frame`` (int, ascending), ``err_kalman`` (the mean of the frame's ``track_error``
+        rows) and ``err_raw`` (of ``track_raw_error``: rows with a finite raw position), float px.
+    """
+    t = tracks[(tracks["source"] == "point") & tracks["seed_vehicle_id"].notna()]
+    known = np.isfinite(t[["x_true", "y_true", "x_filt", "y_filt"]].to_numpy(float)).all(axis=1)
+    visible = t["visible"].fillna(1.0).to_numpy(float) > 0
+    t = t[known & visible]
+    e = pd.DataFrame({"frame": t["frame"].astype(int),
+                      "err_raw": position_error_px(t["x"], t["y"], t["x_true"], t["y_true"]),
+                      "err_kalman": position_error_px(t["x_filt"], t["y_filt"], t["x_true"], t["y_true"])})
+    # a mean over the finite values per column: a NaN raw position leaves that row out of err_raw only
+    return e.groupby("frame", as_index=False, sort=True)[["err_kalman", "err_raw"]].mean()
 
 
 def read_true_tracks(seq: Sequence | None) -> pd.DataFrame | None:

@@ -39,8 +39,8 @@ def _metric_table_md(t: MetricTable) -> str:
 def _gate_md(model: ReportModel) -> list[str]:
     gate = model.gate
     if gate is None:
-        return ["## Gate", "", "_No gate verdict was given (aerobench gate RUN --baseline B --json V, then "
-                "aerobench report RUN --gate V)._", ""]
+        return ["## Gate", "", "_No gate verdict was given (`aerobench gate RUN --baseline B --json V`, then "
+                "`aerobench report RUN --gate V`)._", ""]
     n = gate["counts"]
     word = "PASSED" if gate["passed"] else "FAILED"
     md = [f"## Gate: {word}", "", f"{n['checked']} checked, {n['passed']} passed, {n['failed']} failed, "
@@ -69,24 +69,47 @@ def _baseline_md(model: ReportModel) -> list[str]:
     return md
 
 
+def _na(v: float) -> str:
+    return format_value(v) if np.isfinite(v) else "n/a"
+
+
+def _diff_md(c) -> list[str]:
+    if c.n_units == 0 or not np.isfinite(c.diff):
+        return ["n/a", "n/a", "n/a"]
+    d = f"{c.diff:+.3f}"
+    return [f"**{d}** ({c.better} better)" if c.better else d, f"{c.lo:+.3f} to {c.hi:+.3f}",
+            f"{c.n_lk_better} / {c.n_units}"]
+
+
 def _lkhs_md(model: ReportModel) -> list[str]:
     md = ["## LK vs HS", ""]
     if not model.lkhs:
         return md + [f"_{_md(model.lkhs_note)}_", ""]
-    md += [LOCAL_VS_TOTAL, "",
-           f"Paired by frame pair (same scene, seed and frame): difference LK \u2212 HS of the pooled endpoint "
-           f"error with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} resamples, "
-           "seeded). Negative: LK has the lower error; an interval containing 0 is no clear difference.", ""]
+    md += [f"Flow: paired by frame pair (same scene, seed and frame): difference LK \u2212 HS of the pooled "
+           f"endpoint error with a {LEVEL:.0%} percentile-bootstrap interval over the frame pairs ({N_BOOT} "
+           "resamples, seeded). Negative: LK has the lower error. Trajectories: paired by sequence (scene, seed), "
+           "values pooled from the summed counts; n/a where a side has no such rows. An interval containing 0 is "
+           "no clear difference; a bold difference names the better side.", ""]
     for pair in model.lkhs:
         md += [f"### {_md(pair.lk)} vs {_md(pair.hs)}", ""]
-        md += [f"- {_md(c.sentence)}" for c in pair.comparisons] + [""]
         unit = pair.comparisons[0].unit if pair.comparisons else "px"
-        md += [f"| Region | Motion | LK [{unit}] | HS [{unit}] | LK \u2212 HS | {LEVEL:.0%} CI | LK lower / pairs |",
-               "|---|---|---|---|---|---|---|"]
-        for c in pair.comparisons:
-            md.append(f"| {c.region} | {c.motion} | {format_value(c.lk_value)} | {format_value(c.hs_value)} | "
-                      f"{c.diff:+.3f} | {c.lo:+.3f} to {c.hi:+.3f} | {c.n_lk_lower} / {c.n_units} |")
-        md.append("")
+        if pair.comparisons:
+            md += [f"| Region | Motion | LK [{unit}] | HS [{unit}] | LK \u2212 HS | {LEVEL:.0%} CI | LK lower / pairs |",
+                   "|---|---|---|---|---|---|---|"]
+            for c in pair.comparisons:
+                md.append("| " + " | ".join([c.region, c.motion, _na(c.lk_value), _na(c.hs_value), *_diff_md(c)])
+                          + " |")
+            md.append("")
+        if pair.tracking:
+            md += [f"| Metric | Tracker | LK | HS | LK \u2212 HS | {LEVEL:.0%} CI | LK better / sequences |",
+                   "|---|---|---|---|---|---|---|"]
+            for c in pair.tracking:
+                unit_t = f" [{c.unit}]" if c.unit and c.unit != "ratio" else ""
+                arrow = "\u2191" if c.higher_is_better else "\u2193"
+                md.append("| " + " | ".join([f"{c.metric}{unit_t} {arrow}", c.region, _na(c.lk_value),
+                                             _na(c.hs_value), *_diff_md(c)]) + " |")
+            md.append("")
+        md += [f"- {_md(c.sentence)}" for c in [*pair.comparisons, *pair.tracking]] + [""]
         per = pair.by_scene_seed
         if len(per):
             cols = [c for c in per.columns if c not in ("scene", "seed")]
@@ -96,6 +119,7 @@ def _lkhs_md(model: ReportModel) -> list[str]:
                    + " | ".join(f"{r[c]:+.3f}" if np.isfinite(r[c]) else "\u2013" for c in cols) + " |"
                    for r in per.to_dict("records")]
             md.append("")
+    md += [LOCAL_VS_TOTAL, ""]
     return md
 
 
@@ -116,7 +140,10 @@ def render_markdown(model: ReportModel) -> str:
     """The Markdown report of ``model``."""
     data = model.data
     md = [f"# {_md(model.title)}", ""]
-    md += _gate_md(model) + _baseline_md(model) + _lkhs_md(model)
+    if model.summary:
+        md += ["**" + " \u00b7 ".join(_md(x) for x in model.summary) + "**", ""]
+    quiet = model.gate is None and model.baseline is None  # nothing to judge: the hint goes to the end
+    md += ([] if quiet else _gate_md(model) + _baseline_md(model)) + _lkhs_md(model)
     md += ["## What was run", ""] + [f"- **{_md(k)}**: {_md(v)}" for k, v in model.provenance] + [""]
     md += ["## Headline", "", "Pooled over every scene, sweep value and seed; best value in bold when one pipeline "
            "alone holds it; \u2193 lower is better, \u2191 higher is better. Flow errors over all pixels (the "
@@ -148,5 +175,7 @@ def render_markdown(model: ReportModel) -> str:
         md += ["No cell failed.", ""]
     else:
         md += [f"- `{_md(r.cell_id)}` ({_md(r.pipeline)}): {_md(r.error)}" for r in data.failed.itertuples()] + [""]
+    if quiet:
+        md += _gate_md(model)
     md += ["Figures (difficulty curves, flow pictures, stabilisation, tracking): see report.html.", ""]
     return "\n".join(md)

@@ -18,10 +18,10 @@ import pandas as pd
 
 from reports import lkhs
 from reports.load import RunData, load_run, scene_base, scene_bases
-from reports.tables import (Column, MetricTable, baseline_diffs, gate_view, headline_columns, metric_table, per_scene_rows,
-                            region_table, sweep_curves)
+from reports.tables import (Column, MetricTable, baseline_diffs, format_value, gate_view, headline_columns, metric_table,
+                            per_scene_rows, region_table, sweep_curves)
 
-__all__ = ["LOCAL_VS_TOTAL", "LkHsPair", "ReportModel", "build_model"]
+__all__ = ["LOCAL_VS_TOTAL", "LKHS_FLOW", "LkHsPair", "ReportModel", "build_model", "summary_parts"]
 
 # said once, in the LK vs HS section; the reason local EPE exceeds total EPE follows from
 # harness.metrics: local scores (flow_total - flow_global) against (flow - flow_camera)
@@ -36,14 +36,21 @@ LOCAL_VS_TOTAL = (
     "minus the global model's own error vector (their lengths do not subtract).")
 
 
+# the regions and motions of the flow rows of LK vs HS; the first is the report's one-line verdict (all
+# pixels, total motion: the endpoint error of the headline table)
+LKHS_FLOW = (("all", "total"), ("background", "total"), ("vehicles", "total"), ("background", "local"),
+             ("vehicles", "local"))
+
+
 @dataclass
 class LkHsPair:
     """One LK / HS twin and its paired comparisons."""
 
     lk: str
     hs: str
-    comparisons: list[lkhs.Comparison]
+    comparisons: list[lkhs.Comparison]     # flow (epe_mean), per LKHS_FLOW entry with paired frames
     by_scene_seed: pd.DataFrame            # scene, seed, then LK - HS per "region / motion"
+    tracking: list[lkhs.Comparison] = field(default_factory=list)  # per tracker and metric, paired by sequence
 
 
 @dataclass
@@ -65,6 +72,7 @@ class ReportModel:
     all_metrics: MetricTable
     curves: dict[str, pd.DataFrame]
     notes: list[str] = field(default_factory=list)
+    summary: list[str] = field(default_factory=list)  # the one-line verdict, in parts (see summary_parts)
 
 
 def _provenance_rows(data: RunData) -> list[tuple[str, str]]:
@@ -106,13 +114,54 @@ def _lkhs(data: RunData) -> tuple[list[LkHsPair], str]:
                         "recorded): the LK and HS pipelines cannot be identified; re-run the suite.")
         return [], ("No pair of pipelines that differ only in the flow method (lucas_kanade vs horn_schunck) "
                     "was run.")
-    if "epe_mean" not in data.metrics:
-        return [], "The run has no epe_mean rows: nothing to compare."
-    # the comparisons read epe_mean rows only: select them before the cell filter, not after it
+    ok_ids = pd.unique(data.ok["cell_id"])  # distinct ids: isin of arrow strings loops over them
+    # the comparisons read epe_mean and track rows only: select them before the cell filter, not after it
+    track = data.table[data.table["motion"] == "track"]
+    track = track[track["cell_id"].isin(ok_ids)]
+    if "epe_mean" not in data.metrics and track.empty:
+        return [], "The run has no epe_mean or tracking rows: nothing to compare."
     epe = data.table[data.table["metric"] == "epe_mean"]
-    ok = epe[epe["cell_id"].isin(pd.unique(data.ok["cell_id"]))]  # distinct ids: isin of arrow strings loops over them
-    pairs = [LkHsPair(lk, hs, lkhs.compare_pair(ok, lk, hs), lkhs.by_scene_seed(ok, lk, hs)) for lk, hs in twins]
+    ok = epe[epe["cell_id"].isin(ok_ids)]
+    pairs = []
+    for lk, hs in twins:
+        flow = [c for region, motion in LKHS_FLOW
+                for c in lkhs.compare_pair(ok, lk, hs, regions=(region,), motions=(motion,))]
+        pairs.append(LkHsPair(lk, hs, flow, lkhs.by_scene_seed(ok, lk, hs),
+                              lkhs.compare_tracking(track, lk, hs) if len(track) else []))
     return pairs, ""
+
+
+def summary_parts(pairs: list[LkHsPair], headline: MetricTable, columns: list[Column], gate: dict | None,
+                  baseline: pd.DataFrame | None) -> list[str]:
+    """The report's one-line verdict, in parts: LK vs HS (the first twin, all pixels, total motion),
+    the best pipeline by the headline's first metric, the gate and the baseline comparison."""
+    parts = []
+    first = next((c for c in pairs[0].comparisons if (c.region, c.motion) == LKHS_FLOW[0]), None) if pairs else None
+    if first is None:
+        parts.append("LK vs HS: no LK / HS twin" if not pairs else "LK vs HS: no frame pair scored by both")
+    else:
+        ci = f"95 % CI {first.lo:+.3f} to {first.hi:+.3f}; {first.lk} vs {first.hs}, all pixels"
+        if first.better is None:
+            parts.append(f"LK vs HS: no clear difference ({first.diff:+.3f} px EPE, {ci})")
+        else:
+            parts.append(f"LK vs HS: {first.better} better by {abs(first.diff):.3f} px EPE ({ci})")
+    if columns and headline.pipelines:
+        c = columns[0]
+        best = [p for p in headline.pipelines if p in headline.best.get(c.metric, set())]  # one, or none: a tie
+        if best:
+            value = format_value(headline.values.get((best[0], c.metric), float("nan")))
+            unit = f" {c.unit}" if c.unit else ""
+            parts.append(f"best: {best[0]} ({c.metric} {value}{unit})")
+    if gate is None:
+        parts.append("gate: not run")
+    else:
+        n = gate["counts"]
+        parts.append("gate: passed" if gate["passed"] else f"gate: FAILED ({n['failed']} of {n['checked']} checks)")
+    if baseline is not None:
+        worse = int((baseline["change"] == "worse").sum()) if len(baseline) else 0
+        better = int((baseline["change"] == "better").sum()) if len(baseline) else 0
+        parts.append(f"baseline: {worse} worse, {better} better")
+    return parts
 
 
 def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | None = None,
@@ -148,10 +197,12 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
         if wide.shape[1] > 1:
             regions[c.metric] = wide
     pairs, lkhs_note = _lkhs(data)
+    gate = gate_view(gate_verdict) if gate_verdict is not None else None
+    headline = metric_table(data, data.ok, cols)
     return ReportModel(
         data=data, title=f"aerobench report: {data.folder.suite or Path(run_dir).name}",
-        provenance=_provenance_rows(data), gate=gate_view(gate_verdict) if gate_verdict is not None else None,
+        provenance=_provenance_rows(data), gate=gate,
         baseline=diffs, baseline_note=note, lkhs=pairs, lkhs_note=lkhs_note, columns=cols,
-        headline=metric_table(data, data.ok, cols), per_scene=per_scene, regions=regions,
+        headline=headline, per_scene=per_scene, regions=regions,
         all_metrics=metric_table(data, data.ok, headline_columns(data, include_others=True)),
-        curves=sweep_curves(data))
+        curves=sweep_curves(data), summary=summary_parts(pairs, headline, cols, gate, diffs))

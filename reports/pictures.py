@@ -1,13 +1,18 @@
 """Flow pictures for the report: frame, ground truth, each method's flow, endpoint-error maps.
 
-Images are PNG bytes (OpenCV's encoder: deterministic) embedded as base64
-data URIs, so the HTML stays one offline file.
+Pictures become files of the run folder (:func:`picture_file`): a picture wider than it is shown
+(:data:`DISPLAY_WIDTH_PX`) is downscaled to that width (area averaging) and stored as lossy WebP;
+one no wider is stored as it is, lossless PNG, and enlarged by the browser pixel by pixel. Both
+encoders (OpenCV's) are deterministic, and a file is named by its content, so the same pictures
+give the same files. :func:`png_data_uri` embeds a PNG where a file cannot be referenced.
 """
 
 from __future__ import annotations
 
 import base64
 import functools
+import hashlib
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -16,7 +21,8 @@ from matplotlib import colormaps
 from algorithms.flow import color_wheel_image, flow_to_color
 from harness.metrics import endpoint_error
 
-__all__ = ["NO_TRUTH_RGB", "png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
+__all__ = ["NO_TRUTH_RGB", "DISPLAY_WIDTH_PX", "WEBP_QUALITY", "PictureFile", "picture_file", "png_bytes",
+           "png_data_uri", "row_max_magnitude", "flow_row", "epe_map", "epe_colorbar", "wheel_legend",
            "display_scale", "upscale_nearest", "mask_image", "swatch"]
 
 _EPE_CMAP = "magma"
@@ -25,8 +31,54 @@ _EPE_N = colormaps[_EPE_CMAP].N
 NO_TRUTH_RGB = (0, 160, 160)
 
 
-def png_data_uri(rgb: np.ndarray) -> str:
-    """``data:image/png;base64,...`` of a uint8 RGB or gray image."""
+# the widest a gallery picture is shown (report.css: columns of at least 260 px in a 1180 px page hold
+# 4 columns of about 280 px; under 600 px, 2 columns): pictures are stored at most this wide
+DISPLAY_WIDTH_PX = 320
+# WebP quality of downscaled pictures: flow colours and error maps within a few levels of the PNG's,
+# a tenth of its bytes (640 x 480 -> 320 x 240 flow pictures: 5 kB against 47 kB at PNG level 9)
+WEBP_QUALITY = 90
+
+
+@dataclass(frozen=True)
+class PictureFile:
+    """An encoded picture: its file name (content hash and extension), bytes and stored size."""
+
+    name: str
+    data: bytes
+    width_px: int
+    height_px: int
+
+
+def _named(data: bytes, ext: str, width_px: int, height_px: int) -> PictureFile:
+    return PictureFile(f"{hashlib.sha1(data).hexdigest()[:16]}.{ext}", data, width_px, height_px)
+
+
+def picture_file(rgb: np.ndarray, *, max_width_px: int = DISPLAY_WIDTH_PX) -> PictureFile:
+    """``rgb`` (uint8 (H, W, 3) or (H, W)) as a file to show at most ``max_width_px`` wide.
+
+    Wider: area-averaged down to ``max_width_px`` (height in proportion, at least 1) and
+    encoded as WebP at :data:`WEBP_QUALITY`. Otherwise: lossless PNG of the pixels as they are.
+    """
+    a = np.ascontiguousarray(rgb)
+    if a.dtype != np.uint8 or a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
+        raise ValueError(f"image: expected uint8 (H, W, 3) or (H, W), got {a.dtype} {a.shape}")
+    if max_width_px < 1:
+        raise ValueError(f"max_width_px: expected a positive width, got {max_width_px}")
+    h, w = a.shape[:2]
+    if w <= max_width_px:
+        return _named(png_bytes(a), "png", w, h)
+    size = (max_width_px, max(1, round(h * max_width_px / w)))
+    small = cv2.resize(a, size, interpolation=cv2.INTER_AREA)
+    if small.ndim == 3:
+        small = cv2.cvtColor(small, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".webp", small, [cv2.IMWRITE_WEBP_QUALITY, WEBP_QUALITY])
+    if not ok:
+        raise ValueError("image: WebP encoding failed")
+    return _named(buf.tobytes(), "webp", *size)
+
+
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """PNG bytes of a uint8 RGB or gray image (lossless)."""
     a = np.ascontiguousarray(rgb)
     if a.dtype != np.uint8:
         raise ValueError(f"image: expected uint8, got {a.dtype}")
@@ -38,7 +90,12 @@ def png_data_uri(rgb: np.ndarray) -> str:
                                        cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
     if not ok:
         raise ValueError("image: PNG encoding failed")
-    return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+    return buf.tobytes()
+
+
+def png_data_uri(rgb: np.ndarray) -> str:
+    """``data:image/png;base64,...`` of a uint8 RGB or gray image."""
+    return "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
 
 
 def display_scale(width_px: int, *, min_width_px: int = 320) -> int:

@@ -67,6 +67,24 @@ def fig_to_svg(fig) -> str:
     return svg.strip()
 
 
+def svg_document(svg: str) -> tuple[bytes, float, float]:
+    """An inline SVG of :func:`fig_to_svg` as a standalone ``.svg`` file: ``(bytes, width, height)``,
+    the size in CSS px (the figure's points x 4/3).
+
+    The namespaces an SVG file needs are put back, and the size CSS gave it becomes its own
+    ``width`` and ``height``. Everything it shows must be inside it (an image in an SVG shown by
+    ``<img>`` cannot load another file): the trajectories figure's frame is a data URI.
+    """
+    m = re.match(r'<svg style="width:100%;height:auto;max-width:[^"]*" viewBox="0 0 ([0-9.]+) ([0-9.]+)"', svg)
+    if m is None:
+        raise ValueError("svg: expected the <svg> of fig_to_svg (style width 100% and a viewBox)")
+    w_pt, h_pt = float(m.group(1)), float(m.group(2))
+    head = (f'<?xml version="1.0" encoding="utf-8"?>\n<svg xmlns="http://www.w3.org/2000/svg" '
+            f'xmlns:xlink="http://www.w3.org/1999/xlink" width="{w_pt:g}pt" height="{h_pt:g}pt" '
+            f'viewBox="0 0 {m.group(1)} {m.group(2)}"')
+    return (head + svg[m.end():] + "\n").encode("utf-8"), w_pt * 4.0 / 3.0, h_pt * 4.0 / 3.0
+
+
 def _figure(nrows: int, ncols: int, *, width_in: float, height_in: float):
     with matplotlib.rc_context(_RC):
         fig, axes = plt.subplots(nrows, ncols, figsize=(width_in, height_in), squeeze=False,

@@ -30,7 +30,8 @@ from pathlib import Path
 import pandas as pd
 
 from harness.run_folder import read_run
-from reports.html import SCENE_SECTIONS, cell_index, render_html, render_html_bytes, scene_block, scene_blocks
+from reports.html import (FILES_DIR, SCENE_SECTIONS, SceneBlock, block_files, cell_index, render_html, render_html_bytes,
+                          scene_block, scene_blocks)
 from reports.load import RunData, load_cells, load_run, scene_base
 from reports.markdown import render_markdown
 from reports.model import ReportModel, build_model
@@ -45,7 +46,7 @@ def _warm_up() -> None:
     import reports.html  # noqa: F401
 
 
-def _draw_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> str:
+def _draw_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> SceneBlock:
     """:func:`scene_block` in a figure process (a module-level function, so that spawn can find it)."""
     return scene_block(data, cells, section, base)
 
@@ -118,7 +119,7 @@ def start_figures(run_dir: str | os.PathLike, cells: pd.DataFrame, pool: Process
 
 def _draw_blocks(data: RunData, pool: ProcessPoolExecutor | None, progress: bool,
                  numbers: Callable[[], object], early: Figures | None = None
-                 ) -> tuple[object, dict[tuple[str, str], str]]:
+                 ) -> tuple[object, dict[tuple[str, str], SceneBlock]]:
     """``numbers()`` here while ``pool`` draws the scene blocks: (its result, the blocks).
 
     Without a pool, the numbers and then each block in this process. ``early``: blocks handed
@@ -180,7 +181,8 @@ def build_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
                  rules: str | os.PathLike | None = None, workers: int | None = 1,
                  progress: bool = False, table: pd.DataFrame | None = None,
                  figures: Figures | None = None) -> tuple[str, str]:
-    """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`)."""
+    """The HTML and Markdown text of the report of ``run_dir`` (see :func:`write_report`). The pictures the
+    HTML references (``report_files/``) are not written: :func:`write_report` writes them."""
     model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
                                       workers=workers, progress=progress, table=table, figures=figures)
     return render_html(model, blocks), render_markdown(model)
@@ -188,7 +190,7 @@ def build_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
 
 def _model_and_blocks(run_dir: str | os.PathLike, *, baseline, gate_verdict, rules, workers: int | None,
                       progress: bool, table: pd.DataFrame | None, figures: Figures | None
-                      ) -> tuple[ReportModel, dict[tuple[str, str], str]]:
+                      ) -> tuple[ReportModel, dict[tuple[str, str], SceneBlock]]:
     """The numbers of the report and its scene blocks (see :func:`write_report`)."""
     # the processes start while the table is read; blocks handed out early come with their own
     with nullcontext(figures.pool) if figures is not None else figure_pool(run_dir, workers) as pool:
@@ -202,7 +204,9 @@ def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
                  out_dir: str | os.PathLike | None = None, workers: int | None = 1,
                  progress: bool = False, table: pd.DataFrame | None = None,
                  figures: Figures | None = None) -> dict[str, Path]:
-    """Write ``report.html`` and ``report.md`` for the run folder ``run_dir``.
+    """Write ``report.html`` and ``report.md`` for the run folder ``run_dir``, and the pictures of
+    report.html in ``report_files/`` beside it (downscaled to their shown size, named by their content;
+    files of an earlier report that this one does not reference are removed).
 
     Parameters
     ----------
@@ -231,12 +235,39 @@ def write_report(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | No
     Returns
     -------
     dict
-        ``{"html": Path, "md": Path}``.
+        ``{"html": Path, "md": Path}`` (the pictures' folder is ``html.parent / "report_files"``).
     """
     model, blocks = _model_and_blocks(run_dir, baseline=baseline, gate_verdict=gate_verdict, rules=rules,
                                       workers=workers, progress=progress, table=table, figures=figures)
     out = Path(out_dir) if out_dir is not None else Path(run_dir)
     paths = {"html": out / "report.html", "md": out / "report.md"}
+    files = block_files(blocks)
+    _write_files(out / FILES_DIR, files)  # before the page that references them
     atomic_write_bytes(paths["html"], render_html_bytes(model, blocks))  # the text of build_report, encoded
     atomic_write_bytes(paths["md"], render_markdown(model).encode("utf-8"))
+    _remove_stale(out / FILES_DIR, files)
     return paths
+
+
+def _write_files(folder: Path, files: dict[str, bytes]) -> None:
+    """The report's pictures into ``folder``; a file there already has the same bytes (named by them)."""
+    if files:
+        folder.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        path = folder / name
+        if not (path.is_file() and path.stat().st_size == len(data)):
+            atomic_write_bytes(path, data)
+
+
+def _remove_stale(folder: Path, files: dict[str, bytes]) -> None:
+    """Files of an earlier report of this folder that the new one does not reference."""
+    if not folder.is_dir():
+        return
+    for path in sorted(folder.iterdir()):
+        if path.is_file() and path.name not in files:
+            path.unlink()
+    if not files:
+        try:
+            folder.rmdir()
+        except OSError:  # something else was put there: left alone
+            pass

@@ -216,3 +216,33 @@ def build_run(root: Path) -> Path:
 @pytest.fixture(scope="session")
 def run_dir(tmp_path_factory) -> Path:
     return build_run(tmp_path_factory.mktemp("reports_fixture"))
+
+
+# a real end-to-end run: `tiny` seed 1 (a seed vehicle leaves the view after frame 0), the thesis twins
+# and the same twins with the multi-target tracker beside the point tracker
+TINY_SUITE = {
+    "name": "tiny-tracking", "description": "tiny, thesis LK / HS with and without the multi-target tracker",
+    "scenes": [{"preset": "tiny"}], "seeds": [1], "picture_pairs": [0],
+    "pipelines": ["thesis-lk", "thesis-hs",
+                  {"name": "lk-multi", "base": "thesis-lk",
+                   "spec": {"tracking": {"point": {"correlation": {}}, "multi": {}}}},
+                  {"name": "hs-multi", "base": "thesis-hs",
+                   "spec": {"tracking": {"point": {"correlation": {}}, "multi": {}}}}],
+}
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory) -> Path:
+    """The run folder of :data:`TINY_SUITE` (rendered into a cache of its own; about 15 s)."""
+    import copy
+    import os
+
+    from harness.runner import run_suite
+    from harness.suites import parse_suite
+
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    root = tmp_path_factory.mktemp("tiny_run")
+    result = run_suite(parse_suite(copy.deepcopy(TINY_SUITE)), root / "run", workers=1, cache_dir=root / "cache",
+                       progress=False)
+    assert result.ok, result.failed_cells
+    return root / "run"

@@ -99,3 +99,69 @@ def test_the_difference_per_scene_and_seed_pools_that_scene_and_seed_only():
     want = a["sum"].sum() / a["count"].sum() - b["sum"].sum() / b["count"].sum()
     got = per[(per["scene"] == "scene1") & (per["seed"] == 2)]["vehicles / total"].item()
     assert got == pytest.approx(want)
+
+
+def _mot_table(*, hs_has_multi: bool = True, seed: int = 11) -> pd.DataFrame:
+    """MOTA rows per sequence and tracker: LK's multi-target tracker makes about 10 % errors, HS's 30 %."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for scene in range(N_SCENES):
+        for s in range(N_SEEDS):
+            objects = 80 + 40 * scene + 7 * s  # sequences differ in size: pooling is not averaging
+            for pipe, rate in (("mine-a", 0.1), ("mine-b", 0.3)):
+                if pipe == "mine-b" and not hs_has_multi:
+                    continue
+                errors = round(objects * (rate + 0.05 * rng.random()))
+                rows.append(dict(cell_id=f"{scene}-{s}-{pipe}", scene=f"scene{scene}", seed=s, pipeline=pipe,
+                                 frame=None, metric="mota", region="multi", motion="track", kind="accuracy",
+                                 value=1 - errors / objects, sum=float(errors), count=float(objects), unit="ratio",
+                                 higher_is_better=True))
+    return rows_to_frame(rows)
+
+
+def test_tracking_rows_pair_whole_sequences_and_pool_mota_from_summed_counts():
+    from reports.lkhs import compare_tracking
+
+    t = _mot_table()
+    got = {(c.region, c.metric): c for c in compare_tracking(t, "mine-a", "mine-b")}
+    assert set(got) == {("multi", m) for m in ("mota", "idf1", "hota", "track_error")}
+    c = got[("multi", "mota")]
+    a, b = t[t["pipeline"] == "mine-a"], t[t["pipeline"] == "mine-b"]
+    pooled_a, pooled_b = 1 - a["sum"].sum() / a["count"].sum(), 1 - b["sum"].sum() / b["count"].sum()
+    assert c.lk_value == pytest.approx(pooled_a) and c.hs_value == pytest.approx(pooled_b)
+    assert abs(pooled_a - a["value"].mean()) > 1e-4, "the fixture's sequences differ in size"
+    assert c.n_units == N_SCENES * N_SEEDS
+    assert c.diff == pytest.approx(pooled_a - pooled_b) and 0 < c.lo <= c.diff <= c.hi
+    assert c.higher_is_better and c.better == "LK" and c.n_lk_better == c.n_units
+    assert re.match(r"mota, multi tracker: LK \(mine-a\) is better, its mota 0\.2\d\d higher than HS \(mine-b\) "
+                    r"\(95 % CI \+0\.\d{3} to \+0\.\d{3}; LK better on 6 of 6 sequences\)\.", c.sentence), c.sentence
+    # seeded: the same rows give the same interval
+    again = {(x.region, x.metric): x for x in compare_tracking(t, "mine-a", "mine-b")}[("multi", "mota")]
+    assert (again.lo, again.hi) == (c.lo, c.hi)
+    # metrics the rows lack on both sides: no unit, no number, never a zero
+    for m in ("idf1", "hota", "track_error"):
+        assert got[("multi", m)].n_units == 0 and np.isnan(got[("multi", m)].lk_value)
+        assert got[("multi", m)].sentence == f"{m}, multi tracker: n/a (mine-a and mine-b without it)."
+
+
+def test_a_tracker_one_side_lacks_is_not_applicable_not_zero():
+    from reports.lkhs import compare_tracking
+
+    (c, *_) = compare_tracking(_mot_table(hs_has_multi=False), "mine-a", "mine-b", metrics=("mota",))
+    assert (c.region, c.metric, c.n_units, c.better) == ("multi", "mota", 0, None)
+    assert np.isfinite(c.lk_value) and np.isnan(c.hs_value) and np.isnan(c.diff)
+    assert c.sentence == "mota, multi tracker: n/a (mine-b without it)."
+
+
+def test_a_reduction_rule_turns_each_sides_totals_into_its_value():
+    rng = np.random.default_rng(0)
+    s_a, c_a, s_b, c_b = np.array([1.0, 3.0]), np.array([10.0, 10.0]), np.array([2.0, 2.0]), np.array([10.0, 10.0])
+    d, _, _ = bootstrap_difference(s_a, c_a, s_b, c_b, rng=rng, reduce="complement")
+    assert d == pytest.approx((1 - 4 / 20) - (1 - 4 / 20))
+    d, _, _ = bootstrap_difference(s_a, c_a, s_b, c_b, rng=rng, reduce="rms")
+    assert d == pytest.approx(np.sqrt(4 / 20) - np.sqrt(4 / 20))
+    d, _, _ = bootstrap_difference(np.array([5.0]), np.array([10.0]), np.array([2.0]), np.array([10.0]), rng=rng,
+                                   reduce="rate")
+    assert d == pytest.approx(30.0)
+    with pytest.raises(ValueError, match=r"reduce: expected one of mean, complement, rate, rms, got 'median'"):
+        bootstrap_difference(s_a, c_a, s_b, c_b, rng=rng, reduce="median")

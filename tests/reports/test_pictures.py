@@ -2,44 +2,52 @@
 
 from __future__ import annotations
 
-import base64
 import re
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
 from reports import write_report
-from reports.pictures import display_scale, upscale_nearest
+from reports.pictures import DISPLAY_WIDTH_PX, WEBP_QUALITY, display_scale, picture_file, upscale_nearest
 from tests.reports.conftest import H, PICTURE_FRAME, W
 
 
-def _picture(html_text: str, alt: str) -> np.ndarray:
-    """The first <img> with this alt text, decoded to RGB."""
-    m = re.search(rf'<img class="[^"]*" src="data:image/png;base64,([^"]+)" alt="{re.escape(alt)}">', html_text)
+def _picture(html_path: Path, alt: str) -> np.ndarray:
+    """The file of the first <img> with this alt text, decoded to RGB; checks the size it is shown at."""
+    m = re.search(rf'<img class="([^"]*)" src="(report_files/[0-9a-f]+\.png)" width="(\d+)" height="(\d+)" '
+                  rf'loading="lazy" decoding="async" alt="{re.escape(alt)}">', html_path.read_text())
     assert m, f"no picture {alt!r}"
-    buf = np.frombuffer(base64.b64decode(m.group(1)), np.uint8)
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    rgb = cv2.cvtColor(cv2.imread(str(html_path.parent / m.group(2)), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    k = display_scale(rgb.shape[1], min_width_px=320)
+    assert (int(m.group(3)), int(m.group(4))) == (rgb.shape[1] * k, rgb.shape[0] * k), "shown enlarged k x"
+    assert ("pix" in m.group(1).split()) == (k > 1), "enlarged pixel by pixel, never interpolated"
+    return rgb
 
 
 @pytest.fixture(scope="module")
-def html_text(run_dir, tmp_path_factory) -> str:
-    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("pictures"))["html"].read_text()
+def report_html(run_dir, tmp_path_factory) -> Path:
+    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("pictures"))["html"]
 
 
-def test_true_local_motion_is_flow_minus_camera_flow(html_text):
-    k = display_scale(W, min_width_px=320)
-    local = _picture(html_text, "true local flow")
-    assert local.shape == (H * k, W * k, 3), "enlarged by an integer factor"
+@pytest.fixture(scope="module")
+def html_text(report_html) -> str:
+    return report_html.read_text()
+
+
+def test_true_local_motion_is_flow_minus_camera_flow(report_html):
+    local = _picture(report_html, "true local flow")
+    assert local.shape == (H, W, 3), "a small picture is stored as it is, lossless (the browser enlarges it)"
     # the fixture's static world moves with the camera only: zero local flow, white in the colour coding
-    assert (local[:4 * k, :4 * k] >= 250).all()
+    assert (local[:4, :4] >= 250).all()
     # the vehicle (rows 8..13, cols 10..17) moves on its own: saturated colour
-    vehicle = local[10 * k, 12 * k].astype(int)
+    vehicle = local[10, 12].astype(int)
     assert vehicle.max() - vehicle.min() > 100
     # the total-motion truth is dominated by the camera: no white anywhere in the valid part
-    total = _picture(html_text, "true total flow")
-    assert (total[:, : (W - 3) * k].min(axis=2) < 200).all()
+    total = _picture(report_html, "true total flow")
+    assert (total[:, : W - 3].min(axis=2) < 200).all()
 
 
 def test_local_row_per_method_with_error_maps(html_text):
@@ -87,3 +95,27 @@ def test_error_maps_tell_no_ground_truth_from_zero_error():
 
 def test_the_error_row_names_both_colours(html_text):
     assert "black = zero error" in html_text and "teal = no ground truth" in html_text
+
+
+def test_a_picture_wider_than_shown_is_downscaled_to_the_shown_width():
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[0:480, 0:640]
+    smooth = np.stack([xx * 255 // 639, yy * 255 // 479, np.full_like(xx, 90)], axis=-1).astype(np.uint8)
+    pic = picture_file(smooth)
+    assert (pic.width_px, pic.height_px) == (DISPLAY_WIDTH_PX, 240) and pic.name.endswith(".webp")
+    back = cv2.cvtColor(cv2.imdecode(np.frombuffer(pic.data, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    assert back.shape == (240, 320, 3)
+    # area averaging then WebP at quality WEBP_QUALITY: a smooth picture within a few levels of the original's
+    expected = cv2.resize(smooth, (320, 240), interpolation=cv2.INTER_AREA).astype(int)
+    assert np.abs(back.astype(int) - expected).mean() < 2.0, WEBP_QUALITY
+    assert len(pic.data) < 0.05 * smooth.nbytes
+    # the same picture, the same file; another picture, another name
+    assert picture_file(smooth) == pic
+    assert picture_file(255 - smooth).name != pic.name
+    small = (rng.random((120, 160, 3)) * 255).astype(np.uint8)
+    kept = picture_file(small)
+    assert kept.name.endswith(".png") and (kept.width_px, kept.height_px) == (160, 120)
+    assert (cv2.cvtColor(cv2.imdecode(np.frombuffer(kept.data, np.uint8), cv2.IMREAD_COLOR),
+                         cv2.COLOR_BGR2RGB) == small).all(), "no wider than shown: lossless"
+    with pytest.raises(ValueError, match=r"expected uint8 \(H, W, 3\) or \(H, W\), got float64"):
+        picture_file(np.zeros((4, 4, 3)))

@@ -105,20 +105,40 @@ def test_failed_cell_listed_and_escaped(html_text, report):
     assert "rural-noise_sigma=10-s0-hs_thesis" in report["md"].read_text()
 
 
-def test_no_network_resources(html_text):
+def test_no_network_resources(report, html_text):
     assert "http://" not in html_text and "https://" not in html_text
     assert "@import" not in html_text
     assert re.findall(r"url\((?!#)", html_text) == []  # only in-document references (SVG clip paths)
-    for src in re.findall(r'\bsrc="([^"]*)"', html_text):
-        assert src.startswith("data:image/png;base64,"), src[:40]
-    for href in re.findall(r'\bhref="([^"]*)"', html_text):  # section links, images inside SVG
+    srcs = re.findall(r'\bsrc="([^"]*)"', html_text)
+    folder = report["html"].parent / "report_files"
+    for src in srcs:  # pictures: files of the report's folder, by relative path, loaded when scrolled near
+        assert re.fullmatch(r"report_files/[0-9a-f]{16}\.(png|webp|svg)", src), src[:40]
+        assert (report["html"].parent / src).is_file(), src
+    assert html_text.count('loading="lazy"') == len(re.findall(r"<img\b", html_text)) == len(srcs)
+    assert sorted(p.name for p in folder.iterdir()) == sorted({s.removeprefix("report_files/") for s in srcs}), \
+        "every file is referenced, every reference has its file"
+    for href in re.findall(r'\bhref="([^"]*)"', html_text):  # section links, images inside inline SVG
         assert href.startswith(("#", "data:image/png;base64,")), href[:40]
+    for svg in folder.glob("*.svg"):  # a figure shown by <img> cannot load another file: all inside it
+        text = svg.read_text()
+        assert re.findall(r'xlink:href="(?!#|data:image/png;base64,)', text) == [], svg.name
+        assert "@import" not in text and re.findall(r"url\((?!#)", text) == []
+
+
+def _files(report: dict[str, Path]) -> dict[str, bytes]:
+    """The report's picture files by name."""
+    return {p.name: p.read_bytes() for p in sorted((report["html"].parent / "report_files").iterdir())}
 
 
 def test_two_writes_are_byte_identical(run_dir, report, tmp_path):
+    stale = tmp_path / "report_files" / "0123456789abcdef.png"  # a picture of an earlier report of the folder
+    stale.parent.mkdir()
+    stale.write_bytes(b"old")
     again = write_report(run_dir, out_dir=tmp_path)
+    assert not stale.exists(), "a file the new report does not reference is removed"
     assert again["html"].read_bytes() == report["html"].read_bytes()
     assert again["md"].read_bytes() == report["md"].read_bytes()
+    assert _files(again) == _files(report)
 
 
 def test_figures_drawn_by_worker_processes_give_the_same_bytes(run_dir, report, html_text, tmp_path):
@@ -126,6 +146,7 @@ def test_figures_drawn_by_worker_processes_give_the_same_bytes(run_dir, report, 
     drawn = write_report(run_dir, out_dir=tmp_path, workers=2)
     assert drawn["html"].read_bytes() == report["html"].read_bytes()
     assert drawn["md"].read_bytes() == report["md"].read_bytes()
+    assert _files(drawn) == _files(report) and len(_files(report)) > 10  # the pictures too
     for sid in ("pictures", "stabilisation", "tracking"):  # both scenes in each, in the run's order
         body = section(html_text, sid)
         assert body.index("<h3>urban") < body.index("<h3>rural")
@@ -310,7 +331,7 @@ def test_the_page_as_bytes_is_the_page_encoded_even_when_a_table_spans_two_block
     assert "\u2193" in page and 'data-cards="1"' in page  # not ASCII; tables marked for the narrow layout
     # a table opened in one block and closed in the next is marked as a whole, as on the joined page
     first, second = list(blocks)[:2]
-    split = dict(blocks)
+    split = {key: b.html for key, b in blocks.items()}  # blocks as plain HTML are rendered as well
     split[first] += '<table><thead><tr><th>speed</th></tr></thead><tbody><tr><td>'
     split[second] = "7</td></tr></tbody></table>" + split[second]
     page = render_html(model, split)

@@ -1,0 +1,167 @@
+"""How long a browser takes to show the first screen of report.html: headless Chromium, first paint.
+
+Each measurement starts a fresh headless Chromium (``--remote-debugging-pipe``: the DevTools
+protocol over two pipes, no network port, standard library only), opens a blank tab, turns on
+the page's lifecycle events, sends ``Page.navigate`` to ``file://REPORT`` and waits for the
+``firstContentfulPaint`` lifecycle event (and then ``load``). Reported per file: the wall time
+from the navigate command to that event as this process sees it, the page's own
+``first-contentful-paint`` entry (Performance API, ms after navigation start) and the time to
+``load``; medians over ``--repeats``, the files measured alternately so that the machine's load
+falls on each alike. Also the bytes of the HTML and of the files beside it that it references
+(``report_files/``).
+
+    python benchmarks/report_paint.py RUN/report.html OTHER/report.html [--repeats 5] [--width 1280]
+
+Measured (a run of 2 presets, nominal and jitter at 20 frames, 1 seed, the 7 standard pipelines;
+2 cores shared with other jobs; 5 runs each, alternated), before (pictures inline as base64 PNG)
+and after (downscaled pictures as files of ``report_files/``, ``loading="lazy"``): see the
+module's git log message and README's benchmark table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+          "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions",
+          "--remote-debugging-pipe"]
+
+
+class _Pipe:
+    """The DevTools protocol over Chromium's pipes: NUL-terminated JSON messages."""
+
+    def __init__(self, proc: subprocess.Popen, to_browser: int, from_browser: int):
+        self.proc, self.w, self.r = proc, to_browser, from_browser
+        self.buf = b""
+        self.next_id = 0
+        self.events: list[tuple[float, dict]] = []  # (perf_counter when read, message)
+
+    def send(self, method: str, params: dict | None = None, session: str | None = None) -> int:
+        self.next_id += 1
+        msg = {"id": self.next_id, "method": method, "params": params or {}}
+        if session:
+            msg["sessionId"] = session
+        os.write(self.w, json.dumps(msg).encode() + b"\0")
+        return self.next_id
+
+    def _read(self, deadline: float) -> dict:
+        while b"\0" not in self.buf:
+            if time.perf_counter() > deadline:
+                raise TimeoutError("no answer from Chromium")
+            chunk = os.read(self.r, 1 << 20)
+            if not chunk:
+                raise RuntimeError("Chromium closed its pipe")
+            self.buf += chunk
+        raw, self.buf = self.buf.split(b"\0", 1)
+        return json.loads(raw)
+
+    def call(self, method: str, params: dict | None = None, session: str | None = None,
+             timeout_s: float = 120.0) -> dict:
+        i = self.send(method, params, session)
+        deadline = time.perf_counter() + timeout_s
+        while True:
+            m = self._read(deadline)
+            if m.get("id") == i:
+                if "error" in m:
+                    raise RuntimeError(f"{method}: {m['error']}")
+                return m.get("result", {})
+            self.events.append((time.perf_counter(), m))
+
+    def wait_event(self, pred, timeout_s: float = 300.0) -> tuple[float, dict]:
+        for k, (t, m) in enumerate(self.events):
+            if pred(m):
+                return self.events.pop(k)
+        deadline = time.perf_counter() + timeout_s
+        while True:
+            m = self._read(deadline)
+            t = time.perf_counter()
+            if pred(m):
+                return t, m
+            self.events.append((t, m))
+
+
+def _lifecycle(name: str):
+    return lambda m: m.get("method") == "Page.lifecycleEvent" and m["params"].get("name") == name
+
+
+def measure(html: Path, *, width: int, height: int, chromium: str) -> dict[str, float]:
+    """One fresh browser: seconds from navigate to first contentful paint (as seen here and as the
+    page's Performance API has it) and to load."""
+    to_r, to_w = os.pipe()      # we write, Chromium reads on its fd 3
+    from_r, from_w = os.pipe()  # Chromium writes on its fd 4, we read
+    profile = tempfile.mkdtemp(prefix="report-paint-")
+    # the child's ends onto its fds 3 and 4 (dup2 leaves them inheritable; every other pipe end is
+    # close-on-exec, so close_fds=False passes exactly these two)
+    def child_fds() -> None:
+        r, w = os.dup(to_r), os.dup(from_w)  # either end may be 3 or 4 itself: moved out of the way first
+        os.dup2(r, 3)
+        os.dup2(w, 4)
+
+    proc = subprocess.Popen([chromium, *_FLAGS, f"--user-data-dir={profile}", f"--window-size={width},{height}",
+                             "about:blank"], preexec_fn=child_fds, close_fds=False,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(to_r)
+    os.close(from_w)
+    pipe = _Pipe(proc, to_w, from_r)
+    try:
+        target = pipe.call("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = pipe.call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        pipe.call("Page.enable", session=session)
+        pipe.call("Page.setLifecycleEventsEnabled", {"enabled": True}, session=session)
+        pipe.events.clear()
+        t0 = time.perf_counter()
+        pipe.call("Page.navigate", {"url": html.resolve().as_uri()}, session=session, timeout_s=300.0)
+        t_fcp, _ = pipe.wait_event(_lifecycle("firstContentfulPaint"))
+        t_load, _ = pipe.wait_event(_lifecycle("load"))
+        fcp_ms = pipe.call("Runtime.evaluate", {
+            "expression": "(performance.getEntriesByName('first-contentful-paint')[0] || {startTime: NaN}).startTime",
+            "returnByValue": True}, session=session)["result"].get("value")
+        return {"fcp_s": t_fcp - t0, "fcp_page_s": float(fcp_ms) / 1000.0, "load_s": t_load - t0}
+    finally:
+        try:
+            pipe.send("Browser.close")
+            proc.wait(timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            proc.kill()
+            proc.wait()
+        os.close(to_w)
+        os.close(from_r)
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def _bytes(html: Path) -> tuple[int, int]:
+    side = html.parent / "report_files"
+    return html.stat().st_size, sum(p.stat().st_size for p in side.rglob("*") if p.is_file()) if side.is_dir() else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("html", nargs="+", type=Path, help="report.html files, measured alternately")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--height", type=int, default=900)
+    ap.add_argument("--chromium", default=shutil.which("chromium") or "chromium")
+    args = ap.parse_args(argv)
+    runs: dict[Path, list[dict[str, float]]] = {h: [] for h in args.html}
+    for _ in range(args.repeats):
+        for h in args.html:
+            runs[h].append(measure(h, width=args.width, height=args.height, chromium=args.chromium))
+    print(f"{'file':60s} {'HTML MB':>8s} {'files MB':>8s} {'FCP s':>7s} {'FCP page s':>10s} {'load s':>7s}")
+    for h, rs in runs.items():
+        html_b, side_b = _bytes(h)
+        med = {k: statistics.median(r[k] for r in rs) for k in rs[0]}
+        print(f"{str(h)[-60:]:60s} {html_b / 1e6:8.2f} {side_b / 1e6:8.2f} {med['fcp_s']:7.2f} "
+              f"{med['fcp_page_s']:10.2f} {med['load_s']:7.2f}   (medians of {len(rs)})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
