@@ -27,11 +27,12 @@ import numpy as np
 import pandas as pd
 
 from harness.metrics import endpoint_error, position_error_px
-from reports import pictures, plots
+from reports import pictures, plots, real_footage
 from reports.lkhs import LEVEL, N_BOOT
 from reports.load import (RunData, open_scene_sequence, picture_frames, point_errors_by_frame, read_cell_flow,
                           read_stabilisation, read_tracks, read_true_tracks, scene_base)
 from reports.model import LOCAL_VS_TOTAL, ReportModel
+from reports.synthetic_vs_real import verdict as svr_verdict
 from reports.tables import Column, MetricTable, format_value
 
 __all__ = ["FILES_DIR", "SceneBlock", "SCENE_SECTIONS", "block_files", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
@@ -52,6 +53,8 @@ def stylesheet() -> str:
 _SECTIONS = [
     ("verdict", "Gate and baseline"),
     ("lk-vs-hs", "LK vs HS"),
+    ("real-footage", "Real footage"),
+    ("synthetic-vs-real", "Synthetic vs real"),
     ("provenance", "What was run"),
     ("headline", "Headline"),
     ("per-scene", "Per scene"),
@@ -633,6 +636,50 @@ def _scene_tracking(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
     return "".join(out)
 
 
+_REAL_PANEL_WIDTH_PX = 640  # a real frame is shown this wide: vehicles of ~20 px stay readable
+
+
+def _hex_rgb(color: str) -> tuple[int, int, int]:
+    c = color.lstrip("#")
+    return int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16)
+
+
+def _scene_real_footage(data: RunData, cells: pd.DataFrame, base: str, colors: dict[str, str]) -> str:
+    """Each real scene of ``base``: its middle frame with the truth's boxes and each pipeline's tracks drawn on it.
+
+    Empty for a synthetic scene (the section lists real footage only).
+    """
+    out = []
+    for scene in [s for s in data.folder.real_scenes if scene_base(s) == base]:
+        g = cells[cells["scene"] == scene]
+        if g.empty:
+            continue
+        seq = open_scene_sequence(data, scene=scene, seed=g["seed"].iloc[0])
+        if seq is None:
+            out.append(_missing(f"{scene}: the sequence folder is gone: no picture."))
+            continue
+        f = len(seq) // 2
+        frame, truth = seq.frame(f), real_footage.truth_boxes(seq, f)
+        tiles = []
+        for pipe in data.pipelines:
+            r = g[g["pipeline"] == pipe]
+            if r.empty:
+                continue
+            tracks = real_footage.cell_tracks_at(data.run_dir / "cells" / r["cell_id"].iloc[0], f)
+            rgb = real_footage.draw_boxes_and_tracks(frame, truth, tracks, color_rgb=_hex_rgb(colors[pipe]))
+            pic = pictures.picture_file(rgb, max_width_px=_REAL_PANEL_WIDTH_PX)
+            n_boxed = int(np.isfinite(tracks[["x0", "y0", "x1", "y1"]].to_numpy(float)).all(axis=1).sum())
+            tiles.append(f"<figure>{_img(pic, alt=f'{pipe} tracks on {scene} frame {f}')}<figcaption>"
+                         f"{_e(pipe)}: {n_boxed} boxed tracks, {len(tracks) - n_boxed} points</figcaption></figure>")
+        what = ("ground-truth boxes with identities (tracks.csv)" if seq.tracks is not None else
+                "ground-truth boxes without identities (YOLO labels)" if seq.boxes is not None else
+                "no ground-truth boxes")
+        out.append(f'<h4>{_e(scene)}, frame {f}</h4><div class="gallery real">{"".join(tiles)}</div>'
+                   f'<p class="note">White: {what}. In the pipeline\'s colour: its multi-target tracks on this '
+                   "frame (boxes, with their ids) and its point tracks (crosses).</p>")
+    return "".join(out)
+
+
 def _failed_html(data: RunData) -> str:
     if data.failed.empty:
         return "<p>No cell failed.</p>"
@@ -671,8 +718,9 @@ def _regions_html(model: ReportModel) -> str:
 # Each (section, scene) block depends only on the run folder, so blocks can be drawn apart, in
 # any order, by other processes (reports.report), and joined here in the scenes' order.
 _SCENE_SECTIONS = {"tracking": _scene_tracking, "pictures": _scene_pictures,
-                   "stabilisation": _scene_stabilisation}  # the costliest first
-_NO_SCENE_BLOCK = {"pictures": "No pictures.", "stabilisation": "No stabilisation data.", "tracking": "No tracks."}
+                   "stabilisation": _scene_stabilisation, "real-footage": _scene_real_footage}  # the costliest first
+_NO_SCENE_BLOCK = {"pictures": "No pictures.", "stabilisation": "No stabilisation data.", "tracking": "No tracks.",
+                   "real-footage": "No real footage."}
 SCENE_SECTIONS = tuple(_SCENE_SECTIONS)
 
 
@@ -780,9 +828,12 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | s
     for section in SCENE_SECTIONS:
         sec[section] = by_section[section] if len(cells) else [_missing("No completed cells.")]
     sec["failed"] = [_failed_html(data)]
-    order = _SECTIONS
+    sec["real-footage"] = [_real_footage_html(model, blocks)]
+    sec["synthetic-vs-real"] = [_synthetic_vs_real_html(model)]
+    order = _SECTIONS if model.real_scenes else [x for x in _SECTIONS
+                                                 if x[0] not in ("real-footage", "synthetic-vs-real")]
     if model.gate is None and model.baseline is None:  # nothing to show at the top: a hint at the end
-        order = [x for x in _SECTIONS if x[0] not in ("verdict", "failed")] + [
+        order = [x for x in order if x[0] not in ("verdict", "failed")] + [
             ("failed", "Failed cells"), ("verdict", "Gate and baseline")]
     nav = "".join(f'<li><a href="#{k}">{_e(v)}</a></li>' for k, v in order)
     body = []
@@ -798,6 +849,66 @@ def _page_parts(model: ReportModel, blocks: dict[tuple[str, str], SceneBlock | s
             f"<title>{_e(model.title)}</title><style>{stylesheet()}</style></head><body><main>"
             f"<h1>{_e(model.title)}</h1>{_summary_html(model)}<nav><ul>{nav}</ul></nav>", *carded,
             "</main></body></html>\n"]
+
+
+def _real_footage_html(model: ReportModel, blocks) -> str:
+    """Per real scene: its metric table (n/a where its truth is absent), then its frame with boxes and tracks."""
+    cells = cell_index(model.data)
+    out = ['<p class="note">Real sequences run through the same pipelines. A metric needs its ground truth: '
+           "tracking metrics need boxes with identities (MOTChallenge-like files), detection precision and "
+           "recall need boxes, flow errors need flow truth; where it is absent the table says n/a, never 0. "
+           "The photometric residual and the stabilisation metrics need no truth.</p>"]
+    for scene in model.real_scenes:
+        base = scene_base(scene)
+        block = None if blocks is None else blocks.get(("real-footage", base))
+        if block is None:
+            block = scene_block(model.data, cells, "real-footage", base)
+        out.append(f"<h3>{_e(scene)}</h3>" + _metric_table_html(model.real_tables[scene]) + _block_html(block))
+    return "".join(out)
+
+
+def _fmt_ci(ci) -> str:
+    return "n/a" if not all(map(math.isfinite, ci)) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
+
+
+def _synthetic_vs_real_html(model: ReportModel) -> str:
+    """The verdict, the rank agreement per metric with its interval, and the gap table."""
+    svr = model.synthetic_vs_real
+    if svr is None:
+        return _missing("The run has no real sequence.")
+    if not svr.views:
+        return _missing(svr.note)
+    out = [f'<p class="verdict-line"><strong>{_e(svr_verdict(svr))}</strong></p>',
+           f'<p class="note">Synthetic: {_e(", ".join(svr.synthetic_scenes))}. Real: '
+           f'{_e(", ".join(svr.real_scenes))}. Each side ranks the pipelines by the metric pooled over its '
+           f"scenes (1 = best); Spearman's rho and Kendall's tau-b compare the two rankings, with "
+           f"{LEVEL:.0%} bootstrap intervals over each side's frame pairs (or sequences, for per-sequence "
+           "metrics). An interval above 0: the synthetic ranking predicts the real one.</p>"]
+    head = "".join(f'<th scope="col">{_e(p)}</th>' for p in svr.views[0].pipelines)
+    rows = []
+    for v in svr.views:
+        ranks = "".join(f'<td class="num">{int(a)} / {int(b)}</td>' if a == a and b == b else "<td>n/a</td>"
+                        for a, b in zip(v.rank_synthetic, v.rank_real))
+        rows.append(f'<tr><th scope="row">{_e(v.label)}</th><td class="num">{v.spearman:+.2f} '
+                    f'<small>{_e(_fmt_ci(v.spearman_ci))}</small></td><td class="num">{v.kendall:+.2f} '
+                    f'<small>{_e(_fmt_ci(v.kendall_ci))}</small></td>{ranks}</tr>')
+    out.append('<div class="scroll"><table class="metrics"><caption class="note">Rank on synthetic / rank on '
+               "real per pipeline</caption><thead><tr><th scope=\"col\">Metric</th><th scope=\"col\">Spearman"
+               "</th><th scope=\"col\">Kendall</th>" + head + "</tr></thead><tbody>" + "".join(rows)
+               + "</tbody></table></div>")
+    gap_rows = []
+    for v in svr.views:
+        g = v.gap()
+        cells = "".join(
+            f'<td class="num{" worse" if w else ""}">{format_value(a)} \u2192 {format_value(b)}</td>'
+            for a, b, w in zip(g["synthetic"], g["real"], g["real_worse"]))
+        gap_rows.append(f'<tr><th scope="row">{_e(v.label)} <small>{_e(v.unit)}, '
+                        f'{"higher" if v.higher_is_better else "lower"} is better</small></th>{cells}</tr>')
+    out.append('<div class="scroll"><table class="metrics"><caption class="note">The gap: each metric on the '
+               "synthetic scenes \u2192 on the real footage (marked where real is worse)</caption><thead><tr>"
+               '<th scope="col">Metric</th>' + head + "</tr></thead><tbody>" + "".join(gap_rows)
+               + "</tbody></table></div>")
+    return "".join(out)
 
 
 def _summary_html(model: ReportModel) -> str:

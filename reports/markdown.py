@@ -12,6 +12,7 @@ import numpy as np
 
 from reports.lkhs import LEVEL, N_BOOT
 from reports.model import LOCAL_VS_TOTAL, ReportModel
+from reports.synthetic_vs_real import verdict as svr_verdict
 from reports.tables import MetricTable, format_value
 
 __all__ = ["render_markdown"]
@@ -136,6 +137,42 @@ def _regions_md(model: ReportModel) -> list[str]:
     return md if len(md) > 2 else md + ["_The table has no region or motion breakdown._", ""]
 
 
+def _ci(ci) -> str:
+    return "n/a" if not all(map(math.isfinite, ci)) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
+
+
+def _real_md(model: ReportModel) -> list[str]:
+    """Real footage (each real scene's metrics) and Synthetic vs real (rank agreement, gaps, verdict)."""
+    if not model.real_scenes:
+        return []
+    md = ["## Real footage", "", "n/a: the metric's ground truth is absent for that sequence (never scored as 0). "
+          "Frames with the boxes and tracks: see report.html.", ""]
+    for scene in model.real_scenes:
+        md += [f"### {_md(scene)}", "", _metric_table_md(model.real_tables[scene])]
+    md += ["## Synthetic vs real", ""]
+    svr = model.synthetic_vs_real
+    if svr is None or not svr.views:
+        return md + [f"_{_md(svr.note if svr is not None else 'Nothing to compare.')}_", ""]
+    md += [f"**{_md(svr_verdict(svr))}**", "",
+           f"Synthetic: {_md(', '.join(svr.synthetic_scenes))}. Real: {_md(', '.join(svr.real_scenes))}. "
+           "Rank 1 = best; intervals are 95 % bootstrap intervals over each side's units.", ""]
+    pipes = svr.views[0].pipelines
+    md += ["| Metric | Spearman | Kendall | " + " | ".join(_md(p) for p in pipes) + " |",
+           "|" + "---|" * (3 + len(pipes))]
+    for v in svr.views:
+        ranks = " | ".join(f"{int(a)} / {int(b)}" for a, b in zip(v.rank_synthetic, v.rank_real))
+        md.append(f"| {_md(v.label)} | {v.spearman:+.2f} {_ci(v.spearman_ci)} | {v.kendall:+.2f} "
+                  f"{_ci(v.kendall_ci)} | {ranks} |")
+    md += ["", "The gap, synthetic \u2192 real (* where real is worse):", "",
+           "| Metric | " + " | ".join(_md(p) for p in pipes) + " |", "|" + "---|" * (1 + len(pipes))]
+    for v in svr.views:
+        g = v.gap()
+        md.append(f"| {_md(v.label)} | " + " | ".join(
+            f"{format_value(a)} \u2192 {format_value(b)}{' *' if w else ''}"
+            for a, b, w in zip(g["synthetic"], g["real"], g["real_worse"])) + " |")
+    return md + [""]
+
+
 def render_markdown(model: ReportModel) -> str:
     """The Markdown report of ``model``."""
     data = model.data
@@ -143,7 +180,7 @@ def render_markdown(model: ReportModel) -> str:
     if model.summary:
         md += ["**" + " \u00b7 ".join(_md(x) for x in model.summary) + "**", ""]
     quiet = model.gate is None and model.baseline is None  # nothing to judge: the hint goes to the end
-    md += ([] if quiet else _gate_md(model) + _baseline_md(model)) + _lkhs_md(model)
+    md += ([] if quiet else _gate_md(model) + _baseline_md(model)) + _lkhs_md(model) + _real_md(model)
     md += ["## What was run", ""] + [f"- **{_md(k)}**: {_md(v)}" for k, v in model.provenance] + [""]
     md += ["## Headline", "", "Pooled over every scene, sweep value and seed; best value in bold when one pipeline "
            "alone holds it; \u2193 lower is better, \u2191 higher is better. Flow errors over all pixels (the "

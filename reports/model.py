@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from reports import lkhs
+from reports import lkhs, real_footage, synthetic_vs_real
 from reports.load import RunData, load_run, scene_base, scene_bases
 from reports.tables import (Column, MetricTable, baseline_diffs, format_value, gate_view, headline_columns, metric_table,
                             per_scene_rows, region_table, sweep_curves)
@@ -73,6 +73,9 @@ class ReportModel:
     curves: dict[str, pd.DataFrame]
     notes: list[str] = field(default_factory=list)
     summary: list[str] = field(default_factory=list)  # the one-line verdict, in parts (see summary_parts)
+    real_scenes: list[str] = field(default_factory=list)   # scene labels that are real footage
+    real_tables: dict[str, MetricTable] = field(default_factory=dict)  # per real scene: its metrics
+    synthetic_vs_real: synthetic_vs_real.SyntheticVsReal | None = None  # None without a real scene
 
 
 def _provenance_rows(data: RunData) -> list[tuple[str, str]]:
@@ -199,10 +202,13 @@ def build_model(run_dir: str | os.PathLike, *, baseline: str | os.PathLike | Non
     pairs, lkhs_note = _lkhs(data)
     gate = gate_view(gate_verdict) if gate_verdict is not None else None
     headline = metric_table(data, data.ok, cols)
+    real = real_footage.real_scenes(data)
     return ReportModel(
         data=data, title=f"aerobench report: {data.folder.suite or Path(run_dir).name}",
         provenance=_provenance_rows(data), gate=gate,
         baseline=diffs, baseline_note=note, lkhs=pairs, lkhs_note=lkhs_note, columns=cols,
         headline=headline, per_scene=per_scene, regions=regions,
         all_metrics=metric_table(data, data.ok, headline_columns(data, include_others=True)),
-        curves=sweep_curves(data), summary=summary_parts(pairs, headline, cols, gate, diffs))
+        curves=sweep_curves(data), summary=summary_parts(pairs, headline, cols, gate, diffs),
+        real_scenes=real, real_tables={s: real_footage.real_metric_table(data, s) for s in real},
+        synthetic_vs_real=synthetic_vs_real.compare(data.ok, real, pipelines=data.pipelines) if real else None)

@@ -14,7 +14,7 @@ picture_frame(data, scene) -> int | None                 the frame the pictures 
 truth_boxes(seq, frame) -> DataFrame                     ground-truth boxes of one frame (x0, y0, x1, y1)
 cell_tracks_at(cell_dir, frame) -> DataFrame             a cell's estimated tracks on one frame, boxes where kept
 draw_boxes_and_tracks(rgb, truth, tracks, *, color_rgb) -> rgb
-real_metric_table(data, scene) -> DataFrame              pipelines x metrics (pooled), NaN where absent
+real_metric_table(data, scene) -> MetricTable            pipelines x metrics (pooled), n/a where absent
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from harness import cell_artifacts as artifacts
-from reports.load import RunData, open_scene_sequence, pooled, primary_rows
+from reports.load import RunData, open_scene_sequence
+from reports.tables import Column, MetricTable, metric_table
 
 __all__ = ["TRUTH_RGB", "real_scenes", "picture_frame", "truth_boxes", "cell_tracks_at", "draw_boxes_and_tracks",
            "real_metric_table", "REAL_METRIC_ORDER"]
@@ -114,24 +115,22 @@ def draw_boxes_and_tracks(rgb: np.ndarray, truth: pd.DataFrame, tracks: pd.DataF
     return out
 
 
-def real_metric_table(data: RunData, scene: str) -> pd.DataFrame:
-    """Pipelines (index, in report order) x metrics of ``scene``, pooled from sums and counts.
+def real_metric_table(data: RunData, scene: str) -> MetricTable:
+    """Pipelines x metrics of ``scene``, pooled from sums and counts, with the best marked per column.
 
-    Each metric in its headline view (:func:`reports.load.primary_rows`); track metrics of the
-    multi-target tracker where it ran (the point tracker's otherwise). Metrics known to matter on
-    real footage first (:data:`REAL_METRIC_ORDER`), then the rest the scene has; NaN where a
-    pipeline has no row (the report prints "n/a").
+    Each metric in its headline view (:func:`reports.load.primary_rows`); a track metric that the
+    multi-target tracker has is shown for it alone (not pooled with the point tracker's). Metrics
+    that matter on real footage first (:data:`REAL_METRIC_ORDER`), then the rest the scene has,
+    timings but the total left out; a pipeline without a row shows "n/a" (no truth, no value).
     """
     rows = data.ok[data.ok["scene"] == scene]
-    if rows.empty:
-        return pd.DataFrame(index=pd.Index(data.pipelines, name="pipeline"))
-    multi = rows["region"] == "multi"
-    tracked = rows[multi]["metric"].unique()
-    # a metric the multi-target tracker has is shown for it alone (not pooled with the point tracker's)
+    tracked = set(pd.unique(rows.loc[rows["region"] == "multi", "metric"]))
     rows = rows[~(rows["metric"].isin(tracked) & (rows["region"] == "point"))]
-    agg = pooled(primary_rows(rows), ["pipeline"])
-    wide = agg.pivot_table(index="pipeline", columns="metric", values="value", aggfunc="first")
-    present = list(wide.columns)
+    first = rows.drop_duplicates("metric")
+    present = first["metric"].astype(str).tolist()
     order = [m for m in REAL_METRIC_ORDER if m in present] + [m for m in present if m not in REAL_METRIC_ORDER
                                                             and not m.startswith("time_")]
-    return wide.reindex(index=[p for p in data.pipelines], columns=order)
+    info = first.set_index("metric")
+    cols = [Column(m, m, str(info.at[m, "unit"]), bool(info.at[m, "higher_is_better"])) for m in order]
+    all_rows = data.table.loc[data.table["scene"] == scene, ["pipeline", "cell_id"]]
+    return metric_table(data, rows, cols, all_rows=all_rows)

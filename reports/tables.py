@@ -50,9 +50,10 @@ class Column:
 
 
 def format_value(v: float) -> str:
-    """How every number of the report is printed: 4 decimals below 1, 3 below 100, else 1."""
+    """How every number of the report is printed: 4 decimals below 1, 3 below 100, else 1; "n/a"
+    where there is no value (a metric whose ground truth is absent has no rows: never a 0)."""
     if v is None or not np.isfinite(v):
-        return "\u2013"
+        return "n/a"
     a = abs(v)
     if a >= 100:
         return f"{v:.1f}"

@@ -13,8 +13,8 @@ from tests.reports.conftest import FAILED, PIPELINES, QUALITY
 
 
 @pytest.mark.parametrize("v, text", [(0.12345, "0.1235"), (-0.5, "-0.5000"), (1.23456, "1.235"),
-                                     (99.9994, "99.999"), (123.456, "123.5"), (math.nan, "\u2013"),
-                                     (None, "\u2013")])
+                                     (99.9994, "99.999"), (123.456, "123.5"), (math.nan, "n/a"),
+                                     (None, "n/a")])
 def test_format_value_keeps_about_four_significant_digits(v, text):
     assert format_value(v) == text
 
