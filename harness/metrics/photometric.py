@@ -132,12 +132,17 @@ def psnr_shifted(gray0: np.ndarray, gray1: np.ndarray, delta_px) -> float:
     """PSNR (dB, peak 255) of ``gray0`` against ``gray1`` sampled at ``x - delta_px`` (bilinear), over the
     pixels where that point lies inside ``gray1``; inf for identical pixels, NaN when none overlap."""
     g0 = np.asarray(gray0, np.float32)
+    h, w = g0.shape
     dx, dy = (float(v) for v in delta_px)
-    shift = np.broadcast_to(np.array([-dx, -dy], np.float32), g0.shape + (2,))
-    warped, inside = _sample(gray1, shift)
-    if not inside.any():
+    # out(x) = gray1(x - delta): one affine warp (a translation), the covered pixels a rectangle
+    warped = cv2.warpAffine(np.ascontiguousarray(gray1, np.float32), np.array([[1, 0, -dx], [0, 1, -dy]]), (w, h),
+                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    # the covered pixels x with 0 <= x - delta <= size - 1: a rectangle of rows y0:y1, columns x0:x1
+    x0, x1 = max(0, math.ceil(dx)), min(w, math.floor(w - 1 + dx) + 1)
+    y0, y1 = max(0, math.ceil(dy)), min(h, math.floor(h - 1 + dy) + 1)
+    if x1 <= x0 or y1 <= y0:
         return math.nan
-    d = warped[inside].astype(np.float64) - g0[inside]
+    d = (warped[y0:y1, x0:x1].astype(np.float64) - g0[y0:y1, x0:x1]).ravel()
     mse = float(d @ d) / d.size
     return math.inf if mse == 0 else 10.0 * math.log10(255.0 ** 2 / mse)
 
