@@ -9,7 +9,7 @@ from harness.metrics.stabilisation import jitter_rows, shift_rows, stabilisation
 from harness.metrics.trajectories import track_rows
 
 
-def score_sequence(seq_estimate, camera_df: pd.DataFrame, tracks_df: pd.DataFrame | None, *,
+def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.DataFrame | None, *,
                    gate_px: float = 20.0) -> list[dict]:
     """Rows of a whole sequence: global shift errors, residual jitter, trajectories.
 
@@ -17,16 +17,17 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame, tracks_df: pd.DataFram
     ----------
     seq_estimate : SequenceEstimate
         Uses ``shifts_px`` (N-1, 2), ``jitter_px`` (N, 2) and ``tracks`` (DataFrame or None).
-    camera_df, tracks_df : DataFrame
-        camera.csv and tracks.csv of the sequence.
+    camera_df, tracks_df : DataFrame or None
+        camera.csv and tracks.csv of the sequence; None where the sequence has no such truth
+        (real footage): the metrics that need it give no rows.
     """
     rows = []
-    if getattr(seq_estimate, "shifts_px", None) is not None:
+    if camera_df is not None and getattr(seq_estimate, "shifts_px", None) is not None:
         rows += shift_rows(seq_estimate.shifts_px, camera_df)
-    if getattr(seq_estimate, "jitter_px", None) is not None:
+    if camera_df is not None and getattr(seq_estimate, "jitter_px", None) is not None:
         rows += jitter_rows(seq_estimate.jitter_px, camera_df)
     shape = getattr(seq_estimate, "frame_shape_px", None)
-    if getattr(seq_estimate, "correction_px", None) is not None and shape is not None:
+    if camera_df is not None and getattr(seq_estimate, "correction_px", None) is not None and shape is not None:
         rows += stabilisation_rows(seq_estimate.correction_px, camera_df, shape)
     tracks = getattr(seq_estimate, "tracks", None)
     if tracks is not None and tracks_df is not None and len(tracks):
