@@ -33,10 +33,11 @@ write_mot_tracks(cell_dir, tracks) -> [Path], write_mot(path, table), read_mot(p
 MOTChallenge export: one line per frame x track, ``frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z``
 (frames 1-based; ``bb_left = x0 + 1``: MOTChallenge's first pixel is 1, ours is 0, both at the pixel's
 centre; ``x, y, z`` = -1, no world coordinates). A track with a box (``bbox_*_px``, e.g. the multi-target
-tracker's) is written with it; a point track (the thesis point tracker, no box) gets a fixed
-:data:`MOT_POINT_BOX_PX` x :data:`MOT_POINT_BOX_PX` px box centred on its filtered position, a carrier
-only: :func:`read_mot_tracks` gives the ``point`` tracker's rows back as points (the box centre, no box),
-so that our metrics score them as points; an IoU-based scorer would not match such a box to a vehicle.
+tracker's) is written with it; a point track (the thesis point tracker, or any tracker without a box)
+gets a fixed :data:`MOT_POINT_BOX_PX` x :data:`MOT_POINT_BOX_PX` px box centred on its filtered
+position, a carrier only: :func:`read_mot_tracks` gives a box of exactly that size back as a point (the
+box centre, no box), so that our metrics score it as a point; an IoU-based scorer would not match such
+a box to a vehicle.
 """
 
 from __future__ import annotations
@@ -205,8 +206,11 @@ def write_stabilisation(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Pat
 
 
 def write_tracks(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Path:
-    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`)."""
+    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`; box columns absent: NaN)."""
     path = Path(cell_dir) / TRACKS_FILE
+    missing_box = [c for c in _BOX if c not in table.columns]
+    if missing_box:
+        table = table.assign(**{c: np.nan for c in missing_box})
     _write_table(path, table, TRACK_COLUMNS)
     return path
 
@@ -419,8 +423,8 @@ def read_mot_tracks(cell_dir: str | os.PathLike) -> pd.DataFrame | None:
     """Every ``mot_<tracker>.txt`` of a cell as estimated tracks for the metrics; None when there is none.
 
     Columns ``frame, track_id, source, x_filt_px, y_filt_px`` (the box centre) and
-    ``bbox_x0_px .. bbox_y1_px``; the ``point`` tracker's carrier boxes are dropped (NaN): it
-    is scored as points, as in the run.
+    ``bbox_x0_px .. bbox_y1_px``; a carrier box (:data:`MOT_POINT_BOX_PX` square) is dropped
+    (NaN): a point track is scored as a point, as in the run.
     """
     out = []
     for path in sorted(Path(cell_dir).glob("mot_*.txt")):
@@ -428,8 +432,9 @@ def read_mot_tracks(cell_dir: str | os.PathLike) -> pd.DataFrame | None:
         df = read_mot(path).rename(columns={"id": "track_id"})
         df["x_filt_px"] = (df["bbox_x0_px"] + df["bbox_x1_px"]) / 2
         df["y_filt_px"] = (df["bbox_y0_px"] + df["bbox_y1_px"]) / 2
-        if source == "point":
-            df[list(_BOX)] = np.nan
+        carrier = (np.isclose(df["bbox_x1_px"] - df["bbox_x0_px"], MOT_POINT_BOX_PX, rtol=0, atol=1e-9)
+                   & np.isclose(df["bbox_y1_px"] - df["bbox_y0_px"], MOT_POINT_BOX_PX, rtol=0, atol=1e-9))
+        df.loc[carrier, list(_BOX)] = np.nan
         df["source"] = source
         out.append(df[["frame", "track_id", "source", "x_filt_px", "y_filt_px", *_BOX]])
     return pd.concat(out, ignore_index=True) if out else None

@@ -14,6 +14,9 @@ module             what
 ``mot``            CLEAR-MOT and identity counts (MOTA, MOTP, IDF1), HOTA
 ``sequence``       score_sequence: every sequence-level row
 ``aggregate``      reduce_totals, aggregate
+``matching``       when an estimate corresponds to a vehicle: IoU, point in box, distance gate
+``detection``      per-frame detection precision and recall against moving vehicles' boxes
+``photometric``    truth-free: photometric residual of the total flow, stabilisation ITF
 =================  ==========================================================
 
 Every metric is a :class:`MetricDef` in the plain-dict registry :data:`METRICS`
@@ -36,6 +39,8 @@ rate        100 * sum / count  (percent)                items over the limit, it
 total       sum                                         sum of x, number of items
 complement  1 - sum / count  (MOTA)                      errors, number of items
 quantile    from the summed EPE histogram (``hist``)    NaN, number of pixels
+alpha_mean  mean over alphas of summed per-alpha        NaN, visible vehicle-frames
+            ratios (``hist``; HOTA, DetA, AssA, LocA)
 ==========  ==========================================  ===========================
 
 Quantiles (``epe_median``, ``epe_p95``) cannot be summed: their rows carry the
@@ -107,6 +112,10 @@ from harness.metrics.mot import (  # noqa: F401
     HOTA_ALPHAS, HOTACounts, MOTCounts, alpha_mean_value, hota_counts, hota_rows, mot_counts, mot_rows,
 )
 from harness.metrics.matching import BOX_COLUMNS, IOU_MIN, box_iou, box_offset, correspondence  # noqa: F401
+from harness.metrics.detection import MOVING_MIN_MPS, detection_counts, detection_rows, moving_vehicles  # noqa: F401
+from harness.metrics.photometric import (  # noqa: F401
+    PreparedPhotometric, itf_rows, photometric_rows, prepare_photometric, psnr_shifted,
+)
 from harness.metrics.sequence import score_sequence  # noqa: F401
 from harness.metrics.aggregate import aggregate, reduce_totals  # noqa: F401
 
@@ -122,6 +131,8 @@ __all__ = [
     "HOTA_ALPHAS", "HOTACounts", "hota_counts", "hota_rows", "alpha_mean_value",
     "encode_alpha_totals", "decode_alpha_totals",
     "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
+    "detection_rows", "detection_counts", "moving_vehicles",
+    "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",
     "score_sequence",
     "aggregate", "reduce_totals",
 ]

@@ -27,9 +27,10 @@ register_metric("motp", "px", higher_is_better=False, weighting=_MOT + "; per ma
                 "whichever rule matched them")
 register_metric("idf1", "ratio", higher_is_better=True, weighting=_MOT + "; 2 IDTP / (objects + predictions)",
                 description="identity F1: share of vehicle-frames and track-frames on the best one-to-one "
-                "vehicle-track assignment (Ristani 2016)")
+                "vehicle-track assignment (Ristani 2016); a pair counts where it matches by mota's rule (IoU, "
+                "point in box, or the gate)")
 register_metric("mot_misses", "count", higher_is_better=False, weighting=_MOT, reduce="total",
-                description="CLEAR-MOT misses (FN): visible vehicle-frames without a track within the gate")
+                description="CLEAR-MOT misses (FN): visible vehicle-frames no track matches (mota's rule)")
 register_metric("mot_false_positives", "count", higher_is_better=False, weighting=_MOT, reduce="total",
                 description="CLEAR-MOT false positives (FP): track-frames matched to no vehicle")
 

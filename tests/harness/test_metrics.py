@@ -247,6 +247,20 @@ def test_encoded_histogram_stores_its_first_to_last_non_empty_bin(bins):
 
 
 
+
+def test_a_row_written_before_tails_were_kept_leaves_a_pooled_quantile_above_100_px_at_the_floor():
+    # a format-1 histogram (overflow count, no samples) pooled with a format-2 one: the tail is incomplete
+    epe = np.full(10, 150.0)
+    old = {"metric": "epe_p95", "value": 150.0, "sum": float("nan"), "count": 10.0, "hist": M.encode_hist(
+        M.epe_histogram(epe))}
+    new = {**old, "hist": M.encode_hist(M.epe_histogram(epe), tail=M.overflow_tail(epe))}
+    assert old["hist"][0] == 1 and new["hist"][0] == 2
+    agg = M.aggregate(rows_to_frame([old, new]), by=[]).set_index("metric")
+    assert agg.loc["epe_p95", "value"] == M.HIST_MAX_PX
+    assert M.aggregate(rows_to_frame([new, new]), by=[]).set_index("metric").loc["epe_p95", "value"] == \
+        pytest.approx(150.005)
+
+
 def test_a_histogram_with_a_tail_round_trips_and_a_tail_that_is_not_the_overflow_is_refused():
     epe = np.array([0.5, 100.0, 100.004, 250.0, 250.001, 3e20])
     h, tail = M.epe_histogram(epe), M.overflow_tail(epe)
