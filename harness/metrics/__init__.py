@@ -1,4 +1,5 @@
-"""Metric definitions and scoring against ground truth: pure numpy / pandas, no I/O.
+"""Metric definitions and scoring, against ground truth or (photometric, ITF) without: numpy / pandas /
+OpenCV on arrays, no I/O.
 
 A package split by domain, each formula in one module; this module re-exports every
 public name (``from harness.metrics import X`` works for all of them):
@@ -79,7 +80,11 @@ shift_rows, jitter_rows, detrend                       global motion and stabili
 stabilisation_scores, stabilisation_rows               cropping ratio, distortion, stability (Liu 2013)
 position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID switches
 MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
-HOTACounts, hota_counts                                HOTA (Luiten 2021) per alpha, from summed counts
+HOTACounts, hota_counts, hota_rows, alpha_mean_value  HOTA, DetA, AssA, LocA (Luiten 2021) from per-alpha counts
+correspondence, box_iou, box_offset                    when a track or detection matches a vehicle (box-aware)
+detection_rows, detection_counts, moving_vehicles      detection precision and recall per pair
+prepare_photometric, photometric_rows                  photometric residual of the total flow (no truth)
+psnr_shifted, itf_rows                                 stabilisation ITF (no truth)
 score_sequence                                         SequenceEstimate + camera.csv + tracks.csv -> rows
 aggregate                                              rows DataFrame -> aggregates from totals
 """

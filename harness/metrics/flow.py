@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from algorithms.flow import check_flow, endpoint_error  # noqa: F401  (endpoint_error: re-exported)
-from harness.metrics.histogram import HIST_BIN_PX, HIST_NBINS, NO_TAIL, encode_hist, epe_histogram, overflow_tail
+from algorithms.flow import check_flow
+from harness.metrics.histogram import HIST_BIN_PX, HIST_NBINS, encode_hist, epe_histogram, overflow_tail
 from harness.metrics.registry import _row, register_metric, timing_rows
 
 REGIONS = ("all", "background", "vehicles", "interior")
@@ -51,8 +51,7 @@ register_metric("coverage", "%", higher_is_better=True, weighting="per ground-tr
 
 # --------------------------------------------------------------------------- per-pixel errors
 
-# endpoint_error (per-pixel EPE) lives in algorithms.flow, its one home; imported above and
-# re-exported by harness.metrics for the metric code's readers.
+# endpoint_error (per-pixel EPE) lives in algorithms.flow, its one home, re-exported by harness.metrics.
 
 
 def angular_error_deg(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:

@@ -3,8 +3,6 @@ cell, and each tracker's MOTChallenge export, which scores as the run's own rows
 
 from __future__ import annotations
 
-import numpy as np
-import pandas as pd
 import pytest
 
 import harness.metrics as M
