@@ -6,8 +6,9 @@ the page's lifecycle events, sends ``Page.navigate`` to ``file://REPORT`` and wa
 ``firstContentfulPaint`` lifecycle event (and then ``load``). Reported per file: the wall time
 from the navigate command to that event as this process sees it, the page's own
 ``first-contentful-paint`` entry (Performance API, ms after navigation start) and the time to
-``load``; medians over ``--repeats``, the files measured alternately so that the machine's load
-falls on each alike. Also the bytes of the HTML and of the files beside it that it references
+``load``; then, in another fresh browser, the wall time of ``chromium --headless --screenshot``
+of the page's first screen (``shot s``: browser start, load, paint). Medians over ``--repeats``,
+the files measured alternately so that the machine's load falls on each alike. Also the bytes of the HTML and of the files beside it that it references
 (``report_files/``).
 
     python benchmarks/report_paint.py RUN/report.html OTHER/report.html [--repeats 5] [--width 1280]
@@ -124,7 +125,9 @@ def measure(html: Path, *, width: int, height: int, chromium: str) -> dict[str, 
         fcp_ms = pipe.call("Runtime.evaluate", {
             "expression": "(performance.getEntriesByName('first-contentful-paint')[0] || {startTime: NaN}).startTime",
             "returnByValue": True}, session=session)["result"].get("value")
-        return {"fcp_s": t_fcp - t0, "fcp_page_s": float(fcp_ms) / 1000.0, "load_s": t_load - t0}
+        # NaN when the page has no such entry (JSON null)
+        fcp_page_s = float(fcp_ms) / 1000.0 if isinstance(fcp_ms, (int, float)) else float("nan")
+        return {"fcp_s": t_fcp - t0, "fcp_page_s": fcp_page_s, "load_s": t_load - t0}
     finally:
         try:
             pipe.send("Browser.close")
@@ -134,6 +137,20 @@ def measure(html: Path, *, width: int, height: int, chromium: str) -> dict[str, 
             proc.wait()
         os.close(to_w)
         os.close(from_r)
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def screenshot_s(html: Path, *, width: int, height: int, chromium: str) -> float:
+    """Wall seconds of ``chromium --headless --screenshot`` of the page (what a person running that command
+    waits for: browser start, the page's load, its first screen painted into a PNG)."""
+    profile = tempfile.mkdtemp(prefix="report-paint-")
+    try:
+        t0 = time.perf_counter()
+        subprocess.run([chromium, *_FLAGS[:-1], f"--user-data-dir={profile}", f"--window-size={width},{height}",
+                        f"--screenshot={profile}/shot.png", html.resolve().as_uri()], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=600)
+        return time.perf_counter() - t0
+    finally:
         shutil.rmtree(profile, ignore_errors=True)
 
 
@@ -153,13 +170,16 @@ def main(argv: list[str] | None = None) -> int:
     runs: dict[Path, list[dict[str, float]]] = {h: [] for h in args.html}
     for _ in range(args.repeats):
         for h in args.html:
-            runs[h].append(measure(h, width=args.width, height=args.height, chromium=args.chromium))
-    print(f"{'file':60s} {'HTML MB':>8s} {'files MB':>8s} {'FCP s':>7s} {'FCP page s':>10s} {'load s':>7s}")
+            r = measure(h, width=args.width, height=args.height, chromium=args.chromium)
+            r["shot_s"] = screenshot_s(h, width=args.width, height=args.height, chromium=args.chromium)
+            runs[h].append(r)
+    print(f"{'file':44s} {'HTML MB':>8s} {'files MB':>8s} {'FCP s':>7s} {'FCP page s':>10s} {'load s':>7s} "
+          f"{'shot s':>7s}")
     for h, rs in runs.items():
         html_b, side_b = _bytes(h)
-        med = {k: statistics.median(r[k] for r in rs) for k in rs[0]}
-        print(f"{str(h)[-60:]:60s} {html_b / 1e6:8.2f} {side_b / 1e6:8.2f} {med['fcp_s']:7.2f} "
-              f"{med['fcp_page_s']:10.2f} {med['load_s']:7.2f}   (medians of {len(rs)})")
+        med = {k: statistics.median([r[k] for r in rs if r[k] == r[k]] or [float("nan")]) for k in rs[0]}
+        print(f"{str(h)[-44:]:44s} {html_b / 1e6:8.2f} {side_b / 1e6:8.2f} {med['fcp_s']:7.2f} "
+              f"{med['fcp_page_s']:10.2f} {med['load_s']:7.2f} {med['shot_s']:7.2f}   (medians of {len(rs)})")
     return 0
 
 
