@@ -8,15 +8,31 @@ from the navigate command to that event as this process sees it, the page's own
 ``first-contentful-paint`` entry (Performance API, ms after navigation start) and the time to
 ``load``; then, in another fresh browser, the wall time of ``chromium --headless --screenshot``
 of the page's first screen (``shot s``: browser start, load, paint). Medians over ``--repeats``,
-the files measured alternately so that the machine's load falls on each alike. Also the bytes of the HTML and of the files beside it that it references
-(``report_files/``).
+the files measured alternately so that the machine's load falls on each alike. Also the bytes of
+the HTML and of the files beside it that it references (``report_files/``).
 
     python benchmarks/report_paint.py RUN/report.html OTHER/report.html [--repeats 5] [--width 1280]
 
-Measured (a run of 2 presets, nominal and jitter at 20 frames, 1 seed, the 7 standard pipelines;
-2 cores shared with other jobs; 5 runs each, alternated), before (pictures inline as base64 PNG)
-and after (downscaled pictures as files of ``report_files/``, ``loading="lazy"``): see the
-module's git log message and README's benchmark table.
+Measured on 2026-11-25, 2 cores shared with other jobs (load average 14-18), medians of 3, the
+files alternated. ``before``: the report as main wrote it (c8373f4: pictures inline as base64 PNG,
+the trajectories figure inline SVG); ``after``: this tree (pictures in ``report_files/``, lazy).
+``mini``: 2 presets (nominal, jitter) x 1 seed x the 7 standard pipelines, 20 frames. ``x9``: the
+scene blocks (pictures, stabilisation, tracking) of a real 60-frame nominal run with the 7
+pipelines, repeated 9 times in one page: the size of the ``standard`` report (its 9 scenes; 140.6
+MB against the 143.6 MB of issue 23), built from real blocks because ``standard`` cannot run here.
+
+    file            HTML MB  files MB  FCP s  FCP page s  load s  shot s
+    mini   before     27.49      0.00   0.74        0.62    3.28    7.31
+    mini   after       0.34      1.82   0.79        0.51    0.61    5.52
+    x9     before    140.60      0.00   0.54        0.37   48.82   47.65
+    x9     after       1.67      1.28   1.61        0.90    2.23    6.58
+
+Chromium paints the top of a page before it has parsed the rest, so the first contentful paint is
+early either way; the wait a person sees is ``load`` (the screenshot command waits for it, and
+``shot s`` adds the browser's start, about 5 s on this loaded machine). Per 60-frame scene block
+the page held 15.4 MB (pictures 13.5, trajectories 2.0); now 0.16 MB in the page and 1.28 MB of
+files (64 WebP pictures 0.35 MB, the trajectories SVG 0.92 MB; the x9 page repeats one block, so
+its files are one block's), so ``standard`` comes to about 2 MB of HTML and 11 MB of files.
 """
 
 from __future__ import annotations
