@@ -6,16 +6,33 @@ the page's lifecycle events, sends ``Page.navigate`` to ``file://REPORT`` and wa
 ``firstContentfulPaint`` lifecycle event (and then ``load``). Reported per file: the wall time
 from the navigate command to that event as this process sees it, the page's own
 ``first-contentful-paint`` entry (Performance API, ms after navigation start) and the time to
-``load``; medians over ``--repeats``, the files measured alternately so that the machine's load
-falls on each alike. Also the bytes of the HTML and of the files beside it that it references
-(``report_files/``).
+``load``; then, in another fresh browser, the wall time of ``chromium --headless --screenshot``
+of the page's first screen (``shot s``: browser start, load, paint). Medians over ``--repeats``,
+the files measured alternately so that the machine's load falls on each alike. Also the bytes of
+the HTML and of the files beside it that it references (``report_files/``).
 
     python benchmarks/report_paint.py RUN/report.html OTHER/report.html [--repeats 5] [--width 1280]
 
-Measured (a run of 2 presets, nominal and jitter at 20 frames, 1 seed, the 7 standard pipelines;
-2 cores shared with other jobs; 5 runs each, alternated), before (pictures inline as base64 PNG)
-and after (downscaled pictures as files of ``report_files/``, ``loading="lazy"``): see the
-module's git log message and README's benchmark table.
+Measured on 2026-11-25, 2 cores shared with other jobs (load average 14-18), medians of 3, the
+files alternated. ``before``: the report as main wrote it (c8373f4: pictures inline as base64 PNG,
+the trajectories figure inline SVG); ``after``: this tree (pictures in ``report_files/``, lazy).
+``mini``: 2 presets (nominal, jitter) x 1 seed x the 7 standard pipelines, 20 frames. ``x9``: the
+scene blocks (pictures, stabilisation, tracking) of a real 60-frame nominal run with the 7
+pipelines, repeated 9 times in one page: the size of the ``standard`` report (its 9 scenes; 140.6
+MB against the 143.6 MB of issue 23), built from real blocks because ``standard`` cannot run here.
+
+    file            HTML MB  files MB  FCP s  FCP page s  load s  shot s
+    mini   before     27.49      0.00   0.74        0.62    3.28    7.31
+    mini   after       0.34      1.82   0.79        0.51    0.61    5.52
+    x9     before    140.60      0.00   0.54        0.37   48.82   47.65
+    x9     after       1.67      1.28   1.61        0.90    2.23    6.58
+
+Chromium paints the top of a page before it has parsed the rest, so the first contentful paint is
+early either way; the wait a person sees is ``load`` (the screenshot command waits for it, and
+``shot s`` adds the browser's start, about 5 s on this loaded machine). Per 60-frame scene block
+the page held 15.4 MB (pictures 13.5, trajectories 2.0); now 0.16 MB in the page and 1.28 MB of
+files (64 WebP pictures 0.35 MB, the trajectories SVG 0.92 MB; the x9 page repeats one block, so
+its files are one block's), so ``standard`` comes to about 2 MB of HTML and 11 MB of files.
 """
 
 from __future__ import annotations
@@ -124,7 +141,9 @@ def measure(html: Path, *, width: int, height: int, chromium: str) -> dict[str, 
         fcp_ms = pipe.call("Runtime.evaluate", {
             "expression": "(performance.getEntriesByName('first-contentful-paint')[0] || {startTime: NaN}).startTime",
             "returnByValue": True}, session=session)["result"].get("value")
-        return {"fcp_s": t_fcp - t0, "fcp_page_s": float(fcp_ms) / 1000.0, "load_s": t_load - t0}
+        # NaN when the page has no such entry (JSON null)
+        fcp_page_s = float(fcp_ms) / 1000.0 if isinstance(fcp_ms, (int, float)) else float("nan")
+        return {"fcp_s": t_fcp - t0, "fcp_page_s": fcp_page_s, "load_s": t_load - t0}
     finally:
         try:
             pipe.send("Browser.close")
@@ -134,6 +153,20 @@ def measure(html: Path, *, width: int, height: int, chromium: str) -> dict[str, 
             proc.wait()
         os.close(to_w)
         os.close(from_r)
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def screenshot_s(html: Path, *, width: int, height: int, chromium: str) -> float:
+    """Wall seconds of ``chromium --headless --screenshot`` of the page (what a person running that command
+    waits for: browser start, the page's load, its first screen painted into a PNG)."""
+    profile = tempfile.mkdtemp(prefix="report-paint-")
+    try:
+        t0 = time.perf_counter()
+        subprocess.run([chromium, *_FLAGS[:-1], f"--user-data-dir={profile}", f"--window-size={width},{height}",
+                        f"--screenshot={profile}/shot.png", html.resolve().as_uri()], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=600)
+        return time.perf_counter() - t0
+    finally:
         shutil.rmtree(profile, ignore_errors=True)
 
 
@@ -153,13 +186,16 @@ def main(argv: list[str] | None = None) -> int:
     runs: dict[Path, list[dict[str, float]]] = {h: [] for h in args.html}
     for _ in range(args.repeats):
         for h in args.html:
-            runs[h].append(measure(h, width=args.width, height=args.height, chromium=args.chromium))
-    print(f"{'file':60s} {'HTML MB':>8s} {'files MB':>8s} {'FCP s':>7s} {'FCP page s':>10s} {'load s':>7s}")
+            r = measure(h, width=args.width, height=args.height, chromium=args.chromium)
+            r["shot_s"] = screenshot_s(h, width=args.width, height=args.height, chromium=args.chromium)
+            runs[h].append(r)
+    print(f"{'file':44s} {'HTML MB':>8s} {'files MB':>8s} {'FCP s':>7s} {'FCP page s':>10s} {'load s':>7s} "
+          f"{'shot s':>7s}")
     for h, rs in runs.items():
         html_b, side_b = _bytes(h)
-        med = {k: statistics.median(r[k] for r in rs) for k in rs[0]}
-        print(f"{str(h)[-60:]:60s} {html_b / 1e6:8.2f} {side_b / 1e6:8.2f} {med['fcp_s']:7.2f} "
-              f"{med['fcp_page_s']:10.2f} {med['load_s']:7.2f}   (medians of {len(rs)})")
+        med = {k: statistics.median([r[k] for r in rs if r[k] == r[k]] or [float("nan")]) for k in rs[0]}
+        print(f"{str(h)[-44:]:44s} {html_b / 1e6:8.2f} {side_b / 1e6:8.2f} {med['fcp_s']:7.2f} "
+              f"{med['fcp_page_s']:10.2f} {med['load_s']:7.2f} {med['shot_s']:7.2f}   (medians of {len(rs)})")
     return 0
 
 

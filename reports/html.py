@@ -35,8 +35,8 @@ from reports.model import LOCAL_VS_TOTAL, ReportModel
 from reports.synthetic_vs_real import verdict as svr_verdict
 from reports.tables import Column, MetricTable, format_value
 
-__all__ = ["FILES_DIR", "SceneBlock", "SCENE_SECTIONS", "block_files", "cell_index", "render_html", "render_html_bytes", "scene_block", "scene_blocks",
-           "stylesheet"]
+__all__ = ["FILES_DIR", "SceneBlock", "SCENE_SECTIONS", "block_files", "cell_index", "render_html", "render_html_bytes",
+           "scene_block", "scene_blocks", "stylesheet"]
 
 FILES_DIR = "report_files"  # the pictures' folder, beside report.html
 _MAX_PICTURE_FRAMES = 2
@@ -188,7 +188,7 @@ def _gate_html(gate: dict) -> str:
 
 
 def _verdict_html(gate: dict | None, diffs: pd.DataFrame | None, note: str) -> str:
-    if gate is None and diffs is None:  # one line, at the end of the page (see _sections)
+    if gate is None and diffs is None:  # one line, at the end of the page (see _page_parts)
         return ('<p class="note">No gate verdict and no baseline were given. To judge this run against a '
                 "baseline: <code>aerobench gate RUN --baseline B --json V</code>, then "
                 "<code>aerobench report RUN --baseline B --gate V</code>.</p>")

@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from algorithms.jitter import least_squares_line  # noqa: E402
-from reports.pictures import png_data_uri  # noqa: E402
+from reports.pictures import webp_data_uri  # noqa: E402
 
 __all__ = ["pipeline_colors", "fig_to_svg", "difficulty_curves", "stabilisation_figure",
            "jitter_figure", "tracking_figure", "tracking_error_figure", "TRACKER_STYLE",
@@ -371,7 +371,7 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
                 st = TRACKER_STYLE.get(source, _OTHER_TRACKER)
                 ax.plot(g["x"], g["y"], "--o", color=st["color"], lw=1.0, ms=3.5, mfc="none", mew=0.9)
                 ax.plot(g["x_filt"], g["y_filt"], "-s", color=st["color"], lw=1.4, ms=2.5)
-    svg = fig_to_svg(fig)
+    svg = _compact_markers(fig_to_svg(fig))
     if crop is None:
         return svg
     # The frame is not drawn by matplotlib: its SVG backend would resample it per panel and PNG-encode each
@@ -379,7 +379,7 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
     # and shown under each panel's (transparent) axes in a nested <svg> whose viewBox is the panel's data
     # range: image pixel (col, row) covers col - 0.5 .. col + 0.5, as imshow draws it; the <svg> clips.
     img, (left, right, bottom, top) = crop
-    uri = png_data_uri(np.ascontiguousarray(img))
+    uri = webp_data_uri(np.ascontiguousarray(img))  # in a file of its own, shown at about its size
     # ids are global in an HTML page holding several figures: named by the picture's content, so one name is
     # one picture (a fixed name would show the first figure's frame in every figure)
     frame_id = "trackframe-" + hashlib.sha1(uri.encode("ascii")).hexdigest()[:12]
@@ -398,6 +398,33 @@ def tracking_figure(frame: np.ndarray | None, tracks: dict[str, pd.DataFrame], *
     start = svg.index('<g id="figure_1">')
     at = svg.index("</g>", start) + len("</g>")
     return svg[:at] + image + "".join(uses) + svg[at:]
+
+
+_USE_GROUP = re.compile(r'(<g clip-path="url\(#[^)]+\)")>((?:\s*<use [^>]*/>)+)(\s*</g>)')
+_USE_STYLE = re.compile(r' style="([^"]*)"(?=/>)')
+_COORD_ATTR = re.compile(r' (d|x|y)="([^"]*)"')
+_LONG_DECIMAL = re.compile(r"(-?\d+\.\d{2})\d+")
+
+
+def _compact_markers(svg: str) -> str:
+    """The same drawing in fewer bytes: a marker per point and frame (``<use>``, thousands in a
+    trajectories figure) made the figure about 1 MB for 7 pipelines and 20 frames.
+
+    Each group of markers that share one style carries it once, on the group (SVG inheritance
+    gives every ``<use>`` in it the same look), and coordinates of paths and markers are
+    rounded to 0.01 pt, far below a screen pixel. Text, ids and the frame picture are left as
+    they are.
+    """
+    def group(m: re.Match) -> str:
+        styles = set(_USE_STYLE.findall(m.group(2)))
+        if len(styles) != 1:
+            return m.group(0)
+        return f'{m.group(1)} style="{styles.pop()}">{_USE_STYLE.sub("", m.group(2))}{m.group(3)}'
+
+    def coords(m: re.Match) -> str:
+        return f' {m.group(1)}="{_LONG_DECIMAL.sub(lambda n: f"{float(n.group(0)):.2f}", m.group(2))}"'
+
+    return _COORD_ATTR.sub(coords, _USE_GROUP.sub(group, svg))
 
 
 def tracking_error_figure(errors: dict[str, pd.DataFrame], *, colors: dict[str, str], title: str) -> str:

@@ -121,7 +121,7 @@ def test_no_network_resources(report, html_text):
         assert href.startswith(("#", "data:image/png;base64,")), href[:40]
     for svg in folder.glob("*.svg"):  # a figure shown by <img> cannot load another file: all inside it
         text = svg.read_text()
-        assert re.findall(r'xlink:href="(?!#|data:image/png;base64,)', text) == [], svg.name
+        assert re.findall(r'xlink:href="(?!#|data:image/(png|webp);base64,)', text) == [], svg.name
         assert "@import" not in text and re.findall(r"url\((?!#)", text) == []
 
 
