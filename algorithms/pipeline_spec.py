@@ -291,6 +291,7 @@ class DetectionSpec(_Section):
     ground_model: StrictStr = DETECTION_DEFAULTS["ground_model"]
     noise_k: float = DETECTION_DEFAULTS["noise_k"]
     border_px: StrictInt = DETECTION_DEFAULTS["border_px"]
+    refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")

@@ -121,7 +121,7 @@ def test_multi_target_tracker_keeps_identities_through_a_crossing():
 
 
 def test_multi_target_tracker_birth_death_and_ground_frame():
-    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2)
+    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2, min_travel_px=0.0)
     trk.step(0, [(5.0, 5.0, 10), (40.0, 40.0, 10)])
     trk.step(1, [(6.0, 5.0, 10)])           # the second one was a one-frame blip
     trk.step(2, [])
@@ -132,7 +132,7 @@ def test_multi_target_tracker_birth_death_and_ground_frame():
     assert np.isnan(rows[2]["x_px"])
     # a target fixed on the ground seen by a camera panning 4 px/frame: in the
     # ground frame it does not move, so a tight gate still holds it
-    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1)
+    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1, min_travel_px=0.0)
     for t in range(6):
         pan.step(t, [(20.0 + 4 * t, 10.0, 5)], offset_px=(4.0 * t, 0.0))
     assert {r["track_id"] for r in pan.rows()} == {0}
