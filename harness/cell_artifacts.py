@@ -62,10 +62,14 @@ STABILISATION_COLUMNS = ("frame",
                          "cumulative_x_px", "cumulative_y_px", "flight_line_x_px", "flight_line_y_px",
                          "correction_x_px", "correction_y_px", "jitter_x_px", "jitter_y_px",
                          "true_cumulative_x_px", "true_cumulative_y_px", "true_jitter_x_px", "true_jitter_y_px")
-# the pipeline's track columns (algorithms.pipeline SequenceEstimate.tracks) and, for point tracks,
-# the seeded vehicle's true centre in the same frame (NaN for multi-target tracks)
+# the pipeline's track columns (algorithms.pipeline SequenceEstimate.tracks: the box of a multi-target
+# track, NaN for point tracks) and, for point tracks, the seeded vehicle's true centre in the same frame
+# (NaN for multi-target tracks)
 TRACK_COLUMNS = ("frame", "track_id", "source", "seed_vehicle_id", "x_px", "y_px", "x_filt_px", "y_filt_px",
-                 "x_pred_px", "y_pred_px", "true_x_px", "true_y_px", "true_visible")
+                 "x_pred_px", "y_pred_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px",
+                 "true_x_px", "true_y_px", "true_visible")
+# columns a tracks.csv of an older aerobench lacks: read as NaN
+_TRACK_COLUMNS_ADDED = ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")
 
 
 class CellArtifactError(ValueError):
@@ -120,7 +124,7 @@ def tracks_table(seq_estimate: Any, true_tracks: pd.DataFrame | None) -> pd.Data
     ----------
     seq_estimate : SequenceEstimate
         ``tracks``: frame, track_id, x_px, y_px, x_filt_px, y_filt_px, x_pred_px, y_pred_px, source,
-        seed_vehicle_id.
+        seed_vehicle_id, and the box ``bbox_x0_px .. bbox_y1_px`` (NaN when absent).
     true_tracks : DataFrame or None
         The sequence's tracks.csv (frame, vehicle_id, x_px, y_px, visible).
 
@@ -177,8 +181,11 @@ def write_stabilisation(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Pat
 
 
 def write_tracks(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Path:
-    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`)."""
+    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`; box columns absent: NaN)."""
     path = Path(cell_dir) / TRACKS_FILE
+    missing_boxes = [c for c in _TRACK_COLUMNS_ADDED if c not in table.columns]
+    if missing_boxes:
+        table = table.assign(**{c: np.nan for c in missing_boxes})
     _write_table(path, table, TRACK_COLUMNS)
     return path
 
@@ -224,10 +231,13 @@ def read_cell_info(cell_dir: str | os.PathLike) -> dict | None:
     return info
 
 
-def _read_table(path: Path, columns: tuple[str, ...]) -> pd.DataFrame | None:
+def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> pd.DataFrame | None:
     if not path.is_file():
         return None
     df = pd.read_csv(path)
+    for c in optional:
+        if c not in df.columns:
+            df[c] = np.nan
     missing = [c for c in columns if c not in df.columns]
     if missing:
         raise CellArtifactError(f"{path}: lacks the column(s) {missing} of {CELL_FORMAT}; expected {list(columns)}")
@@ -248,7 +258,7 @@ def read_tracks(cell_dir: str | os.PathLike) -> pd.DataFrame | None:
     ``track_id`` is unique only within a ``source`` ("point" or "multi"): a track is the
     pair ``(source, track_id)``. Positions float px; ``seed_vehicle_id`` NaN for multi tracks.
     """
-    df = _read_table(Path(cell_dir) / TRACKS_FILE, TRACK_COLUMNS)
+    df = _read_table(Path(cell_dir) / TRACKS_FILE, TRACK_COLUMNS, optional=_TRACK_COLUMNS_ADDED)
     if df is None or df.empty:
         return None
     df = df.copy()
