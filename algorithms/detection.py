@@ -23,8 +23,9 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    sampling distance ``gsd_m_per_px``: ``min_area_m2``, ``max_area_m2``), and
    regions whose flow does not explain the change between the frames
    (``min_explained``: an illumination change or a moving shadow edge changes
-   the grey values without moving the texture, so warping frame t+1 back by the
-   region's flow does not bring it closer to frame t).
+   the grey values without moving the texture, and noise changes them at
+   random, so warping frame t+1 back by the region's flow brings it no closer to
+   frame t than warping by the opposite flow does).
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
@@ -87,20 +88,29 @@ class Detection(NamedTuple):
 # merge_gap_px, merge_px, merge_rel: regions this close whose velocities agree this well are one mover;
 # parallax_max_ratio, parallax_perp_px, parallax_perp_rel: residuals along the global motion up to this
 #   fraction of it are parallax (0 turns the test off);
-# min_explained: the fraction of the grey-value change in a region that warping by its flow must remove
-#   (0 turns the test off; needs the frames);
+# min_explained: the fraction of the grey-value change in a region that warping by its motion must remove,
+#   and half of it the margin over warping by the opposite motion (interpolation alone smooths noise either
+#   way; 0 turns the test off; needs the frames);
 # core_rel: the centre, box and velocity of a region are those of its pixels at least this fraction of its
 #   90th-percentile speed (a flow window spreads a vehicle's motion onto the ground around it at a lower
 #   speed: that halo is left out of the box);
-# ground_model: "affine" subtracts a robust affine fit of the local flow first (ground_residual: the camera's
-#   rotation jitter and a tilted view leave the ground a smooth residual a shift model cannot remove), "none" not;
-# min_area_m2, max_area_m2: size limits where the ground sampling distance is known (a motorbike's top
-#   view is about 1.5 m^2, an articulated bus's 45 m^2; flow halos add to both).
+# refine_px: the region's motion is refined by block matching within this radius of the flow's (needs the
+#   frames; 0: the flow's median as it is);
+# border_px: moving pixels this close to the image border are left out (a flow window the border clips,
+#   content that enters the frame);
+# noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
+#   flow method's noise on this pair: sensor noise, compression; 0 turns it off);
+# ground_model: "affine" or "quadratic" subtracts a robust fit of the local flow first (ground_residual: the
+#   camera's rotation jitter, a tilted view, lens distortion leave the ground a smooth residual a shift model
+#   cannot remove), "none" not;
+# min_area_m2, max_area_m2: size limits where the ground sampling distance is known (a small car's top
+#   view is about 6 m^2, an articulated bus's 45 m^2; flow halos add to both; motorbikes, about 1.5 m^2,
+#   are given up by the default minimum, which flow noise on the ground passes too often).
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
-    "min_explained": 0.2, "min_area_m2": 1.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine",
+    "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12,
 }
 
 
@@ -120,16 +130,30 @@ class _Region:
     def velocity(self) -> np.ndarray:
         return np.median(self.w, axis=0) if len(self.w) else np.zeros(2)
 
-    def core(self, rel: float) -> _Region:
-        """The pixels at least ``rel`` times as fast as the region's 90th percentile speed (no halo)."""
-        if rel <= 0 or len(self.w) == 0:
-            return self
-        speed = np.hypot(self.w[:, 0], self.w[:, 1])
-        keep = speed >= rel * np.percentile(speed, 90)
-        return _Region(self.ys[keep], self.xs[keep], self.w[keep]) if keep.any() else self
-
     def box(self) -> tuple[int, int, int, int]:
         return int(self.xs.min()), int(self.ys.min()), int(self.xs.max()), int(self.ys.max())
+
+    def cores(self, rel: float, min_area_px: int) -> list[_Region]:
+        """The 8-connected parts of the region's pixels at least ``rel`` times its 90th percentile speed.
+
+        A flow window spreads a vehicle's motion onto the ground around it at a lower speed; that
+        halo joins vehicles that follow each other closely at the same speed into one region, and
+        leaving it out parts them again. Parts under ``min_area_px`` are dropped; with ``rel`` 0, or
+        when no part is left, the whole region.
+        """
+        if rel <= 0 or len(self.w) == 0:
+            return [self]
+        speed = np.hypot(self.w[:, 0], self.w[:, 1])
+        keep = speed >= rel * np.percentile(speed, 90)
+        x0, y0, x1, y1 = self.box()
+        img = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+        img[self.ys[keep] - y0, self.xs[keep] - x0] = 1
+        n, labels = cv2.connectedComponents(img, connectivity=8)
+        ys, xs, w = self.ys[keep], self.xs[keep], self.w[keep]
+        lab = labels[ys - y0, xs - x0]
+        parts = [_Region(ys[lab == j], xs[lab == j], w[lab == j]) for j in range(1, n)]
+        parts = [q for q in parts if len(q.ys) >= min_area_px]
+        return parts or [self]
 
 
 def _check_keys(params: dict) -> dict:
@@ -137,14 +161,14 @@ def _check_keys(params: dict) -> dict:
     if unknown:
         raise ValueError(f"detection: unknown key(s) {unknown}; valid: {', '.join(DETECTION_DEFAULTS)}")
     p = {**DETECTION_DEFAULTS, **params}
-    if p["ground_model"] not in ("affine", "none"):
-        raise ValueError(f"ground_model: expected affine or none, got {p['ground_model']!r}")
+    if p["ground_model"] not in ("affine", "quadratic", "none"):
+        raise ValueError(f"ground_model: expected affine, quadratic or none, got {p['ground_model']!r}")
     for k, v in p.items():
         if k == "ground_model" or (v is None and k in ("max_area_px", "min_area_m2", "max_area_m2")):
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise ValueError(f"{k}: expected a finite number >= 0, got {v!r}")
-    for k in ("open_px", "close_px", "min_area_px"):
+    for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px"):
         if not isinstance(p[k], (int, np.integer)):
             raise ValueError(f"{k}: expected an integer >= 0, got {p[k]!r}")
     if not p["min_explained"] <= 1:
@@ -219,6 +243,45 @@ def _merge(regions: list[_Region], p: dict) -> list[_Region]:
                                              np.concatenate([r.w for r in g])) for g in groups.values()]
 
 
+def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int) -> tuple[float, float]:
+    """The region's motion to the compensated frame t+1 by masked block matching around the flow's (u, v).
+
+    Flow methods fall short of motions much larger than their window or finest pyramid level can
+    see (a vehicle at 30 m/s moves 15 px a frame at 10 fps, 0.2 m/px); the region's own pixels of
+    frame t, searched in frame t+1 within ``radius_px`` of ``(0, 0)`` and of the flow's
+    prediction, are matched by the sum of squared differences over the region's pixels
+    (``cv2.matchTemplate`` with a mask), the minimum refined to sub-pixel by a parabola per axis.
+    """
+    g0, g1 = frames
+    h, w = g0.shape
+    x0, y0, x1, y1 = region.box()
+    tpl = np.ascontiguousarray(g0[y0:y1 + 1, x0:x1 + 1], dtype=np.float32)
+    mask = np.zeros(tpl.shape, np.float32)
+    mask[region.ys - y0, region.xs - x0] = 1.0
+    r = int(radius_px) + int(math.ceil(max(abs(u), abs(v))))
+    xa, ya, xb, yb = max(0, x0 - r), max(0, y0 - r), min(w - 1, x1 + r), min(h - 1, y1 + r)
+    area = np.ascontiguousarray(g1[ya:yb + 1, xa:xb + 1], dtype=np.float32)
+    if area.shape[0] < tpl.shape[0] + 2 or area.shape[1] < tpl.shape[1] + 2:
+        return u, v
+    ssd = cv2.matchTemplate(area, tpl, cv2.TM_SQDIFF, mask=mask)
+    # candidates: within radius_px of the flow's prediction (the stationary place is where the region's
+    # ground halo matches, so it is no candidate unless the flow predicts it)
+    dy, dx = np.mgrid[0:ssd.shape[0], 0:ssd.shape[1]]
+    dx, dy = dx + xa - x0, dy + ya - y0
+    ssd = np.where(np.hypot(dx - u, dy - v) <= radius_px, ssd, np.inf)
+    iy, ix = np.unravel_index(int(np.argmin(ssd)), ssd.shape)
+    if not np.isfinite(ssd[iy, ix]):
+        return u, v
+
+    def vertex(a, b, c):
+        den = a - 2 * b + c
+        return 0.0 if not (np.isfinite(a) and np.isfinite(c)) or den <= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+    ox = vertex(ssd[iy, ix - 1], ssd[iy, ix], ssd[iy, ix + 1]) if 0 < ix < ssd.shape[1] - 1 else 0.0
+    oy = vertex(ssd[iy - 1, ix], ssd[iy, ix], ssd[iy + 1, ix]) if 0 < iy < ssd.shape[0] - 1 else 0.0
+    return float(dx[iy, ix] + ox), float(dy[iy, ix] + oy)
+
+
 def _explained(region: _Region, frames, u: float, v: float) -> float:
     """The fraction of the region's grey-value change ``|I1' - I0|`` that warping ``I1'`` by (u, v) removes."""
     g0, g1 = frames
@@ -232,22 +295,26 @@ def _explained(region: _Region, frames, u: float, v: float) -> float:
     bw = cv2.warpAffine(b, M, (b.shape[1], b.shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                         borderMode=cv2.BORDER_REPLICATE)
     ys, xs = region.ys - ya, region.xs - xa
-    before = np.abs(b[ys, xs] - a[ys, xs])
-    after = np.abs(bw[ys, xs] - a[ys, xs])
-    # over the pixels that changed most: the flow method's halo (ground around a vehicle that the flow
+    # a change of brightness over the region (light, a cloud's shadow) is no motion: each difference is
+    # taken about its median over the region
+    d0, d1 = b[ys, xs] - a[ys, xs], bw[ys, xs] - a[ys, xs]
+    before, after = np.abs(d0 - np.median(d0)), np.abs(d1 - np.median(d1))
+    # over the quarter of the pixels that changed most: the flow method's halo (ground around a vehicle that the flow
     # window carries along) did not change, and warping it by the vehicle's motion would count against it
-    changed = before >= np.median(before)
+    changed = (before >= np.percentile(before, 75)) & (before > 0)
     total = float(before[changed].sum())
     return 1.0 - float(after[changed].sum()) / total if total > 0 else 0.0
 
 
-def ground_residual(flow: np.ndarray, valid: np.ndarray, *, step_px: int = 8, iterations: int = 3) -> np.ndarray:
+def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine", step_px: int = 8,
+                    iterations: int = 3) -> np.ndarray:
     """The local flow minus a robust affine fit of it: what the global model left of the ground's motion removed.
 
     A shift model leaves the ground with a residual that varies over the image (the camera's
     roll, pitch and yaw jitter, a change of height, a tilted view); it is smooth and covers most
     of the image, a vehicle's motion is neither. ``u = a0 + a1 x + a2 y``, ``v = b0 + b1 x + b2 y``
-    is fitted by least squares on a grid of valid pixels (``step_px``), ``iterations`` times,
+    (``model="affine"``; ``"quadratic"`` adds ``x^2, x y, y^2`` terms: lens distortion and a
+    rolling shutter bend the residual) is fitted by least squares on a grid of valid pixels (``step_px``), ``iterations`` times,
     each time on the pixels within 2.5 median absolute deviations (at least 0.3 px) of the last fit.
 
     Parameters
@@ -269,18 +336,28 @@ def ground_residual(flow: np.ndarray, valid: np.ndarray, *, step_px: int = 8, it
     if len(xs) < 12:
         return f
     z = f[ys.astype(int), xs.astype(int)].astype(np.float64)
-    A = np.column_stack([np.ones_like(xs), xs, ys])
+    if model not in ("affine", "quadratic"):
+        raise ValueError(f"model: expected affine or quadratic, got {model!r}")
+    # coordinates scaled to about [-1, 1]: the quadratic terms' least squares stay well conditioned
+    xn, yn = (xs - w / 2) / w, (ys - h / 2) / h
+    A = np.column_stack([np.ones_like(xs), xn, yn] + ([xn * xn, xn * yn, yn * yn] if model == "quadratic" else []))
     keep = np.ones(len(xs), bool)
-    coef = np.zeros((3, 2))
+    coef = np.zeros((A.shape[1], 2))
     for _ in range(iterations):
         if keep.sum() < 12:
             break
         coef = np.linalg.lstsq(A[keep], z[keep], rcond=None)[0]
         r = np.hypot(*(z - A @ coef).T)
         keep = r <= max(0.3, 2.5 * float(np.median(r[keep])))
-    gx = (coef[0] + coef[1] * np.arange(w)[:, None]).astype(np.float32)          # (W, 2)
-    gy = (coef[2] * np.arange(h)[:, None]).astype(np.float32)                    # (H, 2)
-    return f - gx[None, :, :] - gy[:, None, :]
+    X = ((np.arange(w) - w / 2) / w)[:, None]
+    Y = ((np.arange(h) - h / 2) / h)[:, None]
+    gx = (coef[0] + coef[1] * X).astype(np.float32)                              # (W, 2)
+    gy = (coef[2] * Y).astype(np.float32)                                        # (H, 2)
+    out = f - gx[None, :, :] - gy[:, None, :]
+    if model == "quadratic":
+        out -= (coef[3] * X * X).astype(np.float32)[None, :, :] + (coef[5] * Y * Y).astype(np.float32)[:, None, :]
+        out -= (X[None, :, :] * Y[:, None, :] * coef[4]).astype(np.float32)
+    return out
 
 
 @register_stage("detection")
@@ -320,10 +397,20 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if gsd_m_per_px is not None and not (math.isfinite(gsd_m_per_px) and gsd_m_per_px > 0):
         raise ValueError(f"gsd_m_per_px: expected None or a finite number > 0, got {gsd_m_per_px!r}")
     h, w = f.shape[:2]
-    if p["ground_model"] == "affine":
-        f = ground_residual(f, val)
+    if p["ground_model"] != "none":
+        f = ground_residual(f, val, model=p["ground_model"])
     mag2 = f[..., 0].astype(np.float32) ** 2 + f[..., 1].astype(np.float32) ** 2
-    mask = (val & (mag2 >= np.float32(p["min_magnitude_px"]) ** 2)).view(np.uint8)
+    thr = float(p["min_magnitude_px"])
+    if p["noise_k"] > 0:
+        # the flow's noise on the ground: the median residual speed on a grid of valid pixels (for 2-D
+        # Gaussian noise 1.18 sigma; 3 medians are 3.5 sigma, which 0.2 % of the ground exceeds)
+        grid = mag2[4::8, 4::8][val[4::8, 4::8]]
+        if grid.size:
+            thr = max(thr, p["noise_k"] * math.sqrt(float(np.median(grid))))
+    mask = (val & (mag2 >= np.float32(thr) ** 2)).view(np.uint8)
+    b = p["border_px"]
+    if b:  # a flow window clipped by the border, content that enters: the flow there is unreliable
+        mask[:b], mask[-b:], mask[:, :b], mask[:, -b:] = 0, 0, 0, 0
     if p["open_px"]:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disk(p["open_px"]))
     if p["close_px"]:
@@ -347,10 +434,8 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if frames is not None and (len(frames) != 2 or any(np.shape(a) != (h, w) for a in frames)):
         raise ValueError(f"frames: expected two gray frames of shape {(h, w)}")
     out = []
-    for r in regions:
-        if len(r.ys) < p["min_area_px"]:
-            continue
-        c = r.core(p["core_rel"])
+    cores = [c for r in regions if len(r.ys) >= p["min_area_px"] for c in r.cores(p["core_rel"], p["min_area_px"])]
+    for c in _merge(cores, p) if len(cores) > len(regions) else cores:
         area = len(c.ys)
         if p["max_area_px"] is not None and area > p["max_area_px"]:
             continue
@@ -361,6 +446,23 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         cx, cy = float(c.xs.mean()), float(c.ys.mean())
         u, v = (float(a) for a in c.velocity)
         speed = math.hypot(u, v)
+        if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0):
+            # evidence that the region's texture moved by (u, v): the change it explains, and its margin over
+            # the opposite motion
+            def evidence(a, b):
+                gain = _explained(c, frames, a, b)
+                return gain, gain - _explained(c, frames, -a, -b)
+
+            gain, margin = evidence(u, v)
+            if p["refine_px"] > 0:  # the block matching's motion where it explains the change better
+                ur, vr = _refine_velocity(c, frames, u, v, p["refine_px"])
+                gain_r, margin_r = evidence(ur, vr)
+                if margin_r > margin:
+                    u, v, gain, margin = ur, vr, gain_r, margin_r
+            # (half as much margin: a uniform roof moved less than its size matches itself either way)
+            if p["min_explained"] > 0 and (gain < p["min_explained"] or margin < p["min_explained"] / 2):
+                continue
+        speed = math.hypot(u, v)
         if g is not None and p["parallax_max_ratio"] > 0:
             gv = g if g.ndim == 1 else g[min(h - 1, round(cy)), min(w - 1, round(cx))]
             gn = math.hypot(*gv)
@@ -370,8 +472,6 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
                 if 0 <= along <= p["parallax_max_ratio"] * gn and perp <= p["parallax_perp_px"] + \
                         p["parallax_perp_rel"] * speed:
                     continue
-        if frames is not None and p["min_explained"] > 0 and _explained(c, frames, u, v) < p["min_explained"]:
-            continue
         x0, y0, x1, y1 = c.box()
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
     return sorted(out, key=lambda d: -d.area_px)

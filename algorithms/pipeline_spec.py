@@ -289,6 +289,9 @@ class DetectionSpec(_Section):
     max_area_m2: Any = DETECTION_DEFAULTS["max_area_m2"]
     core_rel: float = DETECTION_DEFAULTS["core_rel"]
     ground_model: StrictStr = DETECTION_DEFAULTS["ground_model"]
+    noise_k: float = DETECTION_DEFAULTS["noise_k"]
+    border_px: StrictInt = DETECTION_DEFAULTS["border_px"]
+    refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")
@@ -368,6 +371,7 @@ class MultiSpec(_Section):
     gate_px: float = MULTI_DEFAULTS["gate_px"]
     min_iou: float = MULTI_DEFAULTS["min_iou"]
     birth_hits: StrictInt = MULTI_DEFAULTS["birth_hits"]
+    min_travel_px: float = MULTI_DEFAULTS["min_travel_px"]
     death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
     coast_gate_growth: float = MULTI_DEFAULTS["coast_gate_growth"]
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]

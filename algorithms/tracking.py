@@ -602,6 +602,7 @@ class _Track:
     misses: int = 0
     confirmed: bool = False
     pending: list = field(default_factory=list)  # rows held until confirmation
+    start: np.ndarray | None = None  # ground-fixed centre of its first detection
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -610,6 +611,8 @@ class _Track:
 # min_iou: a pair whose boxes overlap at least this much is feasible whatever its distance (a bus's centre
 #   can jump when its region is found whole after being found in part);
 # birth_hits: consecutive detections before a track is confirmed (the detections' minimum persistence);
+# min_travel_px: a track is confirmed only once its ground-fixed centre has moved this far from its first
+#   detection (flow noise, compression artefacts and flicker make regions that recur in place);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -618,7 +621,7 @@ class _Track:
 # use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
 #   new track at the vehicle's speed;
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
-MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "death_misses": 10, "coast_gate_growth": 0.5,
+MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -656,8 +659,9 @@ class MultiTargetTracker:
     (``scipy.optimize.linear_sum_assignment``) on the cost ``(1 - IoU) + distance / gate``,
     a pair feasible when the distance is within the gate (``gate_px``, growing by
     ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
-    A new track is confirmed after ``birth_hits`` consecutive hits (its rows, from its first
-    frame, are then output; a miss before that deletes it); a confirmed track coasts on its
+    A new track is confirmed after ``birth_hits`` consecutive hits once it has travelled
+    ``min_travel_px`` over the ground (its rows, from its first frame, are then output; a miss
+    before that deletes it); a confirmed track coasts on its
     prediction through up to ``death_misses - 1`` frames without a detection (short
     occlusions) and ends at the ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
 
@@ -676,7 +680,7 @@ class MultiTargetTracker:
         for name in ("report_coasting", "use_velocity"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
-        for name in ("gate_px", "min_iou", "coast_gate_growth"):
+        for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -738,17 +742,19 @@ class MultiTargetTracker:
                     continue
                 z = None
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
-            if not trk.confirmed and trk.hits >= self.birth_hits:
+            if not trk.confirmed and trk.hits >= self.birth_hits and \
+                    float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= p["min_travel_px"]:
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
             survivors.append(trk)
         for c in range(len(boxes)):
             if c not in taken_d:
-                trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw))
+                trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
+                             start=boxes[c][:2].copy())
                 self._next_id += 1
                 self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
-                if self.birth_hits == 1:
+                if self.birth_hits == 1 and p["min_travel_px"] == 0:
                     trk.confirmed = True
                     self._rows.extend(trk.pending)
                     trk.pending = []

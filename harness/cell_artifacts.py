@@ -149,7 +149,7 @@ def tracks_table(seq_estimate: Any, true_tracks: pd.DataFrame | None) -> pd.Data
     ----------
     seq_estimate : SequenceEstimate
         ``tracks``: frame, track_id, x_px, y_px, x_filt_px, y_filt_px, x_pred_px, y_pred_px, source,
-        seed_vehicle_id.
+        seed_vehicle_id, and the box ``bbox_x0_px .. bbox_y1_px`` (NaN when absent).
     true_tracks : DataFrame or None
         The sequence's tracks.csv (frame, vehicle_id, x_px, y_px, visible).
 

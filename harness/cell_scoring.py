@@ -110,7 +110,8 @@ class CellOutcome:
 class _CellRun:
     """One cell of :func:`score_cells`: its pipeline's estimates as they come, its rows, its time."""
 
-    def __init__(self, payload: Mapping, tmp: Path, frames: Any, seeds: list, shared: Any):
+    def __init__(self, payload: Mapping, tmp: Path, frames: Any, seeds: list, shared: Any,
+                 gsd_m_per_px: float | None = None):
         from algorithms.pipeline import Pipeline
 
         self.payload, self.tmp = payload, tmp
@@ -121,7 +122,7 @@ class _CellRun:
         self.seconds = 0.0
         pipeline = Pipeline.from_dict(payload["pipeline_spec"])
         warm_up(pipeline)
-        self.estimates = pipeline.run(frames, seeds=seeds, shared=shared)
+        self.estimates = pipeline.run(frames, seeds=seeds, shared=shared, gsd_m_per_px=gsd_m_per_px)
 
 
 def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
@@ -155,11 +156,14 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     frames = _Frames(seq)
     shared = SharedWork(frames)
     seeds = point_seeds(seq.tracks)
+    # the ground sampling distance, where the sequence knows it: detections get an area in m^2
+    gsd = seq.meta.get("gsd_m")
+    gsd = float(gsd) if isinstance(gsd, (int, float)) and gsd > 0 else None
     runs: list[_CellRun | BaseException] = []
     for payload, tmp in zip(payloads, tmps):
         t0 = time.perf_counter()
         try:
-            runs.append(_CellRun(payload, tmp, frames, seeds, shared))
+            runs.append(_CellRun(payload, tmp, frames, seeds, shared, gsd))
             runs[-1].seconds += time.perf_counter() - t0
         except Exception as exc:  # an invalid pipeline fails its cell only
             runs.append(exc)

@@ -13,7 +13,9 @@ def test_detection_finds_known_blobs_with_centroids_and_areas():
     m[30:34, 40:44] = True       # 4 x 4 block, centroid (41.5, 31.5)
     m[20, 5] = True              # single noisy pixel
     det = detect_moving_objects(m, min_area_px=4)
-    assert det == [(14.5, 7.0, 50), (41.5, 31.5, 16)]
+    assert [d[:3] for d in det] == [(14.5, 7.0, 50), (41.5, 31.5, 16)]
+    # inclusive boxes: first and last column and row
+    assert [(d.x0_px, d.y0_px, d.x1_px, d.y1_px) for d in det] == [(10, 5, 19, 9), (40, 30, 43, 33)]
     with pytest.raises(ValueError, match=r"mask: expected \(H, W\) bool"):
         detect_moving_objects(m.astype(np.uint8))
 
@@ -55,7 +57,7 @@ def test_detection_numbers_regions_as_opencvs_default_labelling_does(threads):
                 n, _, stats, cents = cv2.connectedComponentsWithStats(m.view(np.uint8), connectivity=8)
                 ref = sorted([(float(cents[i, 0]), float(cents[i, 1]), int(stats[i, cv2.CC_STAT_AREA]))
                               for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= 2], key=lambda d: -d[2])
-                assert detect_moving_objects(m, min_area_px=2) == ref
+                assert [d[:3] for d in detect_moving_objects(m, min_area_px=2)] == ref
     finally:
         cv2.setNumThreads(old)
 
@@ -98,7 +100,8 @@ def _crossing(rng: np.random.Generator, n=30):
 
 def test_multi_target_tracker_keeps_identities_through_a_crossing():
     a, b = _crossing(np.random.default_rng(0))
-    trk = MultiTargetTracker(gate_px=5.0, birth_hits=3, death_misses=2, sigma_accel_px=0.1, sigma_meas_px=0.3)
+    trk = MultiTargetTracker(gate_px=5.0, birth_hits=3, death_misses=2, sigma_accel_px=0.1, sigma_meas_px=0.3,
+                             report_coasting=True)
     for t in range(len(a)):
         dets = [(a[t, 0], a[t, 1], 30), (b[t, 0], b[t, 1], 30)]
         if t % 2:
@@ -118,7 +121,7 @@ def test_multi_target_tracker_keeps_identities_through_a_crossing():
 
 
 def test_multi_target_tracker_birth_death_and_ground_frame():
-    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2)
+    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2, min_travel_px=0.0)
     trk.step(0, [(5.0, 5.0, 10), (40.0, 40.0, 10)])
     trk.step(1, [(6.0, 5.0, 10)])           # the second one was a one-frame blip
     trk.step(2, [])
@@ -129,7 +132,7 @@ def test_multi_target_tracker_birth_death_and_ground_frame():
     assert np.isnan(rows[2]["x_px"])
     # a target fixed on the ground seen by a camera panning 4 px/frame: in the
     # ground frame it does not move, so a tight gate still holds it
-    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1)
+    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1, min_travel_px=0.0)
     for t in range(6):
         pan.step(t, [(20.0 + 4 * t, 10.0, 5)], offset_px=(4.0 * t, 0.0))
     assert {r["track_id"] for r in pan.rows()} == {0}

@@ -1,0 +1,191 @@
+"""Moving-vehicle detection (algorithms.detection) and the box tracker over it."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from algorithms.detection import DETECTION_DEFAULTS, Detection, detect_vehicles, ground_residual
+from algorithms.kalman import BoxKalman
+from algorithms.pipeline import Pipeline, PipelineError
+from algorithms.tracking import MultiTargetTracker
+
+H, W = 120, 160
+
+
+def _field(rng, blocks, *, sigma_noise=0.05, blur=1.0):
+    """A local flow field: ground noise plus blocks (y0, y1, x0, x1, (u, v)), smoothed as a flow method would."""
+    f = rng.normal(0.0, sigma_noise, size=(H, W, 2)).astype(np.float32)
+    for y0, y1, x0, x1, uv in blocks:
+        f[y0:y1, x0:x1] = uv
+    return cv2.GaussianBlur(f, (0, 0), blur) if blur else f
+
+
+def _near(dets, x, y, tol=2.5):
+    return [d for d in dets if abs(d.x_px - x) <= tol and abs(d.y_px - y) <= tol]
+
+
+def test_adjacent_cars_with_different_velocities_split_and_a_bus_stays_whole():
+    rng = np.random.default_rng(0)
+    flow = _field(rng, [(40, 48, 40, 60, (3.0, 0.0)),     # car A, 20 x 8 px
+                        (48, 56, 40, 60, (-3.0, 0.0)),    # car B, touching A, driving the other way
+                        (90, 102, 30, 90, (2.5, 0.5))])   # a bus, 60 x 12 px
+    dets = detect_vehicles(flow, np.ones((H, W), bool))
+    assert all(isinstance(d, Detection) for d in dets)
+    assert len(dets) == 3, dets
+    (a,), (b,) = _near(dets, 49.5, 43.5), _near(dets, 49.5, 51.5)
+    assert (a.u_px, b.u_px) == pytest.approx((3.0, -3.0), abs=0.5)
+    (bus,) = _near(dets, 59.5, 95.5)
+    assert (bus.u_px, bus.v_px) == pytest.approx((2.5, 0.5), abs=0.3)
+    # the bus's box is the bus (the smoothing's halo below half its speed left out), within 2 px
+    assert (bus.x0_px, bus.y0_px, bus.x1_px, bus.y1_px) == pytest.approx((30, 90, 89, 101), abs=2)
+    # the same pair at one velocity is one rigid mover: no split
+    one = detect_vehicles(_field(rng, [(40, 56, 40, 60, (3.0, 0.0))]), np.ones((H, W), bool))
+    assert len(one) == 1
+    assert (one[0].x0_px, one[0].y0_px, one[0].x1_px, one[0].y1_px) == pytest.approx((40, 40, 59, 55), abs=1)
+
+
+def test_parallax_along_the_global_motion_is_rejected_and_motion_across_it_is_not():
+    rng = np.random.default_rng(1)
+    valid = np.ones((H, W), bool)
+    shift = (0.0, 5.0)  # the ground's image motion of the pair
+    # a roof 15 % of the flight height up: residual 0.18 x the ground's motion, along it and in its sense
+    roof = _field(rng, [(30, 60, 30, 60, (0.0, 0.9))])
+    assert detect_vehicles(roof, valid, global_flow_px=shift) == []
+    # the same residual across the global motion is no parallax of a static point: a vehicle
+    across = _field(rng, [(30, 60, 30, 60, (0.9, 0.0))])
+    assert len(detect_vehicles(across, valid, global_flow_px=shift)) == 1
+    # against the flight, or faster than any roof's parallax, along it: vehicles
+    for uv in ((0.0, -0.9), (0.0, 3.0)):
+        assert len(detect_vehicles(_field(rng, [(30, 60, 30, 60, uv)]), valid, global_flow_px=shift)) == 1
+    # without the global motion the test is off
+    assert len(detect_vehicles(roof, valid)) == 1
+    # a parallax field over a whole textured scene (a field of roofs and trees) after the affine ground fit
+    yy = np.linspace(0, 1, H, dtype=np.float32)[:, None]
+    scene = np.zeros((H, W, 2), np.float32)
+    scene[..., 1] = 0.3 + 0.4 * yy   # a tilted view: the residual grows smoothly down the frame
+    scene[50:70, 100:130, 1] += 0.8  # a building
+    assert detect_vehicles(scene, valid, global_flow_px=shift) == []
+
+
+def test_ground_residual_removes_a_smooth_field_and_keeps_a_block():
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    f = np.stack([0.5 + 0.01 * xx - 0.005 * yy, -0.3 + 0.004 * xx + 0.008 * yy], axis=-1)
+    f[20:30, 20:40] += (3.0, 1.0)
+    r = ground_residual(f, np.ones((H, W), bool))
+    outside = np.ones((H, W), bool)
+    outside[20:30, 20:40] = False
+    assert np.abs(r[outside]).max() < 1e-3
+    np.testing.assert_allclose(r[20:30, 20:40], np.broadcast_to((3.0, 1.0), (10, 20, 2)), atol=1e-3)
+
+
+def test_a_region_whose_flow_does_not_move_the_texture_is_rejected():
+    rng = np.random.default_rng(2)
+    g0 = cv2.GaussianBlur(rng.uniform(0, 255, (H, W)).astype(np.float32), (0, 0), 1.5)
+    flow = _field(rng, [(40, 60, 60, 90, (2.0, 0.0))], blur=0)
+    valid = np.ones((H, W), bool)
+    # an illumination change: the block brightens, nothing moves
+    lit = g0.copy()
+    lit[40:60, 60:90] += 25.0
+    assert detect_vehicles(flow, valid, frames=(g0, lit)) == []
+    # the block's texture moved 2 px right: found, at its velocity
+    moved = g0.copy()
+    moved[40:60, 62:92] = g0[40:60, 60:90]
+    (d,) = detect_vehicles(flow, valid, frames=(g0, moved))
+    assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.25)
+    # block matching recovers a motion the flow saw only in part (a fast vehicle)
+    fast = g0.copy()
+    fast[40:60, 69:99] = g0[40:60, 60:90]
+    slow_flow = _field(rng, [(40, 60, 60, 90, (3.0, 0.0))], blur=0)
+    (d,) = detect_vehicles(slow_flow, valid, frames=(g0, fast))
+    assert (d.u_px, d.v_px) == pytest.approx((9.0, 0.0), abs=0.25)
+
+
+def test_area_in_square_metres_and_its_limits():
+    rng = np.random.default_rng(3)
+    flow = _field(rng, [(40, 48, 40, 60, (3.0, 0.0))], blur=0)
+    valid = np.ones((H, W), bool)
+    (d,) = detect_vehicles(flow, valid, gsd_m_per_px=0.25)
+    assert d.area_m2 == pytest.approx(d.area_px * 0.0625)
+    assert math.isnan(detect_vehicles(flow, valid)[0].area_m2)
+    # 160 px at 0.1 m/px are 1.6 m^2: under the default minimum of a vehicle's top view
+    assert detect_vehicles(flow, valid, gsd_m_per_px=0.1) == []
+
+
+def test_box_tracker_keeps_identity_through_a_five_frame_occlusion():
+    n = 30
+    a = np.array([[20.0 + 3.0 * t, 50.0] for t in range(n)])           # hidden in frames 10..14
+    b = np.array([[140.0 - 2.0 * t, 70.0 + 0.5 * t] for t in range(n)])
+    occluded = set(range(10, 15))
+    rng = np.random.default_rng(4)
+
+    def det(c, uv):
+        x, y = c + rng.normal(0, 0.3, 2)
+        return Detection(x, y, 160, x - 9.5, y - 3.5, x + 9.5, y + 3.5, *uv)
+
+    runs = {}
+    for coasting in (False, True):
+        trk = MultiTargetTracker(report_coasting=coasting)
+        for t in range(n):
+            dets = [det(b[t], (-2.0, 0.5))] + ([] if t in occluded else [det(a[t], (3.0, 0.0))])
+            trk.step(t, dets)
+        runs[coasting] = trk.rows()
+    rows = runs[False]
+    ids = {r["track_id"] for r in rows}
+    assert len(ids) == 2
+    for tid in ids:
+        mine = sorted((r for r in rows if r["track_id"] == tid), key=lambda r: r["frame"])
+        assert [r["frame"] for r in mine] == list(range(n))  # one id from birth to the end, through the gap
+        truth = a if abs(mine[0]["x_filt_px"] - a[0, 0]) < 3 else b
+        xy = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in mine])
+        seen = np.isfinite(xy[:, 0])
+        assert np.abs(xy[seen] - truth[seen]).max() < 1.5
+        if truth is a:
+            assert not seen[10:15].any()  # a hidden vehicle is not reported by default
+            assert mine[0]["bbox_x1_px"] - mine[0]["bbox_x0_px"] == pytest.approx(19.0, abs=1.0)
+    # reported, the coasting frames carry the constant-velocity prediction
+    coast = [r for r in runs[True] if r["frame"] in occluded and abs(r["y_filt_px"] - 50.0) < 5]
+    assert len(coast) == 5
+    for r in coast:
+        assert (r["x_filt_px"], r["y_filt_px"]) == pytest.approx(tuple(a[r["frame"]]), abs=1.5)
+        assert math.isnan(r["x_px"])
+
+
+def test_box_kalman_recovers_a_constant_velocity_and_growth():
+    kf = BoxKalman((10.0, 20.0, 8.0, 4.0))
+    for k in range(1, 40):
+        kf.predict()
+        kf.update((10.0 + 2.0 * k, 20.0 - 1.0 * k, 8.0 + 0.1 * k, 4.0))
+    np.testing.assert_allclose(kf.x[4:8], (2.0, -1.0, 0.1, 0.0), atol=0.02)
+    with pytest.raises(ValueError, match=r"box: expected a finite \(cx, cy, w, h\)"):
+        kf.update((1.0, 2.0, 3.0))
+
+
+BASE = {"name": "t", "flow": {"method": "dis"}}
+
+
+@pytest.mark.parametrize("section, match", [
+    ({"detection": {"bogus": 1}}, r"detection.bogus: unknown key; valid: field, min_magnitude_px"),
+    ({"detection": {"split_px": -1.0}}, r"detection.split_px: expected a finite number >= 0, got -1.0"),
+    ({"detection": {"ground_model": "cubic"}}, r"detection.ground_model: expected affine, quadratic or none"),
+    ({"detection": {"field": "total"}}, r"detection.field: expected local or filtered, got 'total'"),
+    ({"detection": {"min_explained": 1.5}}, r"detection.min_explained: expected a fraction in \[0, 1\]"),
+    ({"detection": {"gsd_m_per_px": 0}}, r"detection.gsd_m_per_px: expected null or a finite number > 0"),
+    ({"tracking": {"multi": {"bogus": 1}}}, r"tracking.multi.bogus: unknown key; valid: gate_px"),
+    ({"tracking": {"multi": {"min_iou": 0.0}}}, r"tracking.multi.min_iou: expected a number in \(0, 1\], got 0.0"),
+    ({"tracking": {"multi": {"death_misses": 0}}}, r"tracking.multi.death_misses: expected an integer >= 1"),
+    ({"tracking": {"multi": {"sigma_meas_px": 0.0}}}, r"tracking.multi.sigma_meas_px: expected a finite number > 0"),
+])
+def test_bad_detection_and_tracker_keys_are_rejected_naming_them(section, match):
+    with pytest.raises(PipelineError, match=match):
+        Pipeline.from_dict({**BASE, **section})
+
+
+def test_every_detection_key_is_a_pipeline_key_and_unknown_function_keys_fail():
+    d = Pipeline.from_dict(BASE).config["detection"]
+    assert {k: d[k] for k in DETECTION_DEFAULTS} == DETECTION_DEFAULTS
+    with pytest.raises(ValueError, match=r"detection: unknown key\(s\) \['bogus'\]"):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), bogus=1)
+    with pytest.raises(ValueError, match=r"valid: expected \(4, 4\) bool"):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 5), bool))
