@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from reports import write_report
+from reports.html import SCENE_SECTIONS
 
 SECTIONS = ["verdict", "lk-vs-hs", "provenance", "headline", "per-scene", "regions", "all-metrics", "difficulty",
             "pictures", "stabilisation", "tracking", "failed"]
@@ -157,7 +158,7 @@ def test_scene_block_rejects_an_unknown_section(run_dir):
     from reports.load import load_run
 
     data = load_run(run_dir)
-    with pytest.raises(ValueError, match="section: expected one of tracking, pictures, stabilisation, got 'maps'"):
+    with pytest.raises(ValueError, match="section: expected one of tracking, pictures, stabilisation, real-footage, got 'maps'"):
         scene_block(data, cell_index(data), "maps", "urban")
 
 
@@ -269,7 +270,7 @@ def test_a_figure_process_that_dies_costs_no_figure(run_dir, capsys):
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=os._exit,
                              initargs=(3,)) as pool:
         drawn = _draw_blocks(data, pool, False, lambda: "numbers")
-    assert drawn == alone and len(drawn[1]) == 6  # 2 scenes x 3 sections, each drawn here instead
+    assert drawn == alone and len(drawn[1]) == 2 * len(SCENE_SECTIONS)  # 2 scenes x every section, each drawn here instead
     assert "a report figure process died" in capsys.readouterr().err
 
 
@@ -289,7 +290,7 @@ def test_figures_handed_out_before_the_report_give_the_same_bytes(run_dir, repor
 
     with figure_pool(run_dir, 2) as pool:
         early = _early(run_dir, pool)
-        assert len(early.futures) == 6  # 2 scenes x 3 sections
+        assert len(early.futures) == 2 * len(SCENE_SECTIONS)  # 2 scenes x every section
         table = read_results(run_dir)  # the table in hand, as the runner has it
         data = load_run(run_dir, table=table)
         assert early.fit(data, cell_index(data))  # the report uses them (does not draw them again)
