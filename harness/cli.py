@@ -271,13 +271,88 @@ def cmd_report(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- datasets, gate
 
 
+_KIND_WORDS = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
+
+
+def _param_kinds(method: Any) -> dict[str, tuple[type, ...]]:
+    """Keyword parameter -> the accepted value types, from the method's annotations (else its default's
+    type); ``type(None)`` among them when it may be null; an empty tuple when nothing is known."""
+    import typing
+
+    try:
+        hints = typing.get_type_hints(method)
+    except Exception:  # an annotation that cannot be evaluated: fall back on the defaults
+        hints = {}
+    out = {}
+    for p in inspect.signature(method).parameters.values():
+        if p.kind is not p.KEYWORD_ONLY:
+            continue
+        hint = hints.get(p.name)
+        kinds = tuple(a for a in (typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, _union_type())
+                                  else (hint,)) if isinstance(a, type))
+        if not kinds and p.default is not p.empty and p.default is not None:
+            kinds = (type(p.default),)
+        out[p.name] = kinds if any(k in _KIND_WORDS for k in kinds) else ()
+    return out
+
+
+def _union_type() -> Any:
+    import types
+
+    return types.UnionType
+
+
+def _coerce_params(params: dict[str, Any], kinds: dict[str, tuple[type, ...]]) -> dict[str, Any]:
+    """``params`` (values as YAML read them) checked against the types of the method's parameters:
+    an int where a float is expected becomes a float; anything else raises UsageError naming the key."""
+    out = {}
+    for key, value in params.items():
+        accepted = kinds.get(key, ())
+        if not accepted or (value is None and type(None) in accepted):
+            out[key] = value
+            continue
+        if bool in accepted and isinstance(value, bool):
+            out[key] = value
+        elif int in accepted and isinstance(value, int) and not isinstance(value, bool):
+            out[key] = value
+        elif float in accepted and isinstance(value, (int, float)) and not isinstance(value, bool):
+            out[key] = float(value)
+        elif str in accepted and isinstance(value, str):
+            out[key] = value
+        else:
+            words = [_KIND_WORDS[k] for k in accepted if k in _KIND_WORDS]
+            if type(None) in accepted:
+                words.append("null")
+            raise UsageError(f"--param {key}: expected {' or '.join(words)}, got {value!r}")
+    return out
+
+
+EVAL_FLOW_LAYOUTS = """\
+folder layouts (--format; without it, found from what the folder holds):
+  sintel      the training folder: ROOT/clean/<scene>/frame_NNNN.png (or ROOT/final/..., --pass final)
+              and ROOT/flow/<scene>/frame_NNNN.flo; ROOT/invalid/<scene>/frame_NNNN.png used when present
+  kitti       ROOT/image_2/NNNNNN_10.png, NNNNNN_11.png and ROOT/flow_occ/NNNNNN_10.png: a 16-bit RGB PNG
+              (u, v, valid), u = (R - 2^15) / 64 px
+  middlebury  every folder under ROOT holding one .flo and two PNG frames numbered in a row with the same
+              prefix: frame10.png frame11.png flow10.flo; yos9.png yos10.png correct_yos.flo (Yosemite's sky
+              masked)
+  pair        ROOT itself holds two frame images (.png .jpg .ppm .pgm .bmp .tif) and one truth file: a .flo,
+              or else the one 16-bit RGB PNG (KITTI encoding); the frames in name order, numbers compared
+              as numbers (img9.png before img10.png); other files are ignored
+"""
+
+
 def cmd_eval_flow(args: argparse.Namespace) -> int:
-    from harness.datasets import evaluate_flow_dataset
+    from harness.datasets import FlowMethodError, detect_format, evaluate_flow_dataset
 
     from harness.metrics import aggregate
 
     if not Path(args.dir).is_dir():
         raise UsageError(f"{args.dir}: no such folder")
+    fmt = args.format or detect_format(args.dir)
+    if args.pass_ is not None and fmt != "sintel":
+        raise UsageError(f"--pass: only for --format sintel, got --format {fmt}")
+    pass_ = args.pass_ or "clean"
     import algorithms.pipeline  # noqa: F401  (importing it registers every flow method)
     from algorithms.registry import get_flow_method
 
@@ -291,14 +366,18 @@ def cmd_eval_flow(args: argparse.Namespace) -> int:
     if unknown:
         raise UsageError(f"--param: {args.method} has no parameter {', '.join(unknown)}; "
                          f"valid: {', '.join(knobs)}")
-    try:
-        table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method, params=params)
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"--param: {args.method} rejected {params}: {exc}") from None
+    params = _coerce_params(params, _param_kinds(method))
+    try:  # a data problem (missing file, truncated .flo, 8-bit KITTI PNG) propagates naming its file
+        table = evaluate_flow_dataset(args.dir, format=fmt, method=args.method, params=params, pass_=pass_)
+    except FlowMethodError as exc:
+        if params:
+            raise UsageError(f"--param: {args.method} rejected {params} on pair {exc.pair}: {exc.cause}") from None
+        raise UsageError(f"--method {args.method} failed on pair {exc.pair}: {exc.cause}") from None
     pairs = table["scene"].nunique()
     float_format = lambda v: f"{v:.4f}"  # noqa: E731
     setting = ", ".join(f"{k}={v}" for k, v in params.items()) or "default parameters"
-    print(f"{args.method} ({setting}) on {pairs} {args.format} pair(s) in {args.dir}:")
+    kind = f"sintel ({pass_} pass)" if fmt == "sintel" else fmt
+    print(f"{args.method} ({setting}) on {pairs} {kind} pair(s) in {args.dir}:")
     per_pair = aggregate(table[table["metric"] == "epe_mean"], by=["scene"])
     print(per_pair[["scene", "metric", "value", "unit", "count"]].astype({"count": "int64"})
           .to_string(index=False, float_format=float_format))
@@ -398,9 +477,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_report)
 
-    s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder")
-    s.add_argument("dir")
-    s.add_argument("--format", required=True, choices=("middlebury", "sintel", "kitti"))
+    s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder or one pair",
+                       description="Score a flow method on a data set with ground-truth flow: per pair and "
+                                   "pooled over every pair.",
+                       epilog=EVAL_FLOW_LAYOUTS, formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("dir", help="the data set folder (see the layouts below)")
+    s.add_argument("--format", default=None, choices=("middlebury", "sintel", "kitti", "pair"),
+                   help="the folder layout (default: found from what the folder holds)")
+    s.add_argument("--pass", dest="pass_", default=None, choices=("clean", "final"),
+                   help="Sintel's rendering pass (default clean); only with the sintel layout")
     s.add_argument("--method", required=True, help="flow method name (see aerobench list)")
     s.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")

@@ -218,3 +218,160 @@ def test_report_refuses_fewer_than_one_worker(tmp_path, capsys):
     (tmp_path / "results.parquet").write_bytes(b"")
     assert main(["report", str(tmp_path), "--workers", "0"]) == 2
     assert capsys.readouterr().err == "aerobench: error: --workers: expected at least 1, got 0\n"
+
+
+# --------------------------------------------------------------------------- eval-flow: layouts and errors
+
+
+def _sintel_tree(root: Path, *, passes=("clean",), flows: bool = True) -> Path:
+    """A one-scene Sintel training tree: frames 1..2 of each pass, the flow of pair 1 (zero)."""
+    import numpy as np
+
+    from scenes.formats import write_flo, write_png
+
+    rng = np.random.default_rng(3)
+    for pass_ in passes:
+        for n in (1, 2):
+            write_png(root / pass_ / "alley_1" / f"frame_{n:04d}.png", rng.integers(0, 255, (40, 48, 3), np.uint8))
+    (root / "flow").mkdir(parents=True, exist_ok=True)
+    if flows:
+        write_flo(root / "flow" / "alley_1" / "frame_0001.flo", np.zeros((40, 48, 2), np.float32))
+    return root
+
+
+def _eval(capsys, *argv) -> tuple[int, str, str]:
+    code = main(["eval-flow", *map(str, argv)])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_eval_flow_blames_the_data_not_param_for_data_problems(tmp_path, capsys):
+    import numpy as np
+
+    from scenes.formats import write_png
+
+    # a Sintel tree without flow files
+    sintel = _sintel_tree(tmp_path / "sintel", flows=False)
+    code, _, err = _eval(capsys, sintel, "--format", "sintel", "--method", "lucas_kanade")
+    assert code == 2 and "--param" not in err and err.count("\n") == 1
+    assert f"{sintel / 'flow'}: no <scene>/frame_NNNN.flo files" in err
+    # a truncated .flo
+    root = _middlebury_pair(tmp_path / "mb")
+    flo = root / "pair" / "flow10.flo"
+    flo.write_bytes(flo.read_bytes()[:100])
+    code, _, err = _eval(capsys, root, "--format", "middlebury", "--method", "lucas_kanade")
+    assert code == 2 and "--param" not in err
+    assert f"{flo}: 100 bytes, expected" in err
+    # an 8-bit KITTI flow PNG
+    kitti = tmp_path / "kitti"
+    for k in (10, 11):
+        write_png(kitti / "image_2" / f"000000_{k}.png", np.zeros((4, 6, 3), np.uint8))
+    write_png(kitti / "flow_occ" / "000000_10.png", np.zeros((4, 6, 3), np.uint8))
+    code, _, err = _eval(capsys, kitti, "--format", "kitti", "--method", "dis")
+    assert code == 2 and "--param" not in err
+    assert f"{kitti / 'flow_occ' / '000000_10.png'}: a KITTI flow file must be a 16-bit RGB PNG" in err
+
+
+def test_eval_flow_points_at_the_training_root_when_given_a_scene_folder(tmp_path, capsys):
+    sintel = _sintel_tree(tmp_path / "sintel")
+    code, _, err = _eval(capsys, sintel / "clean" / "alley_1", "--format", "sintel", "--method", "dis")
+    assert code == 2 and "--param" not in err
+    assert "not a Sintel layout" in err and "ROOT/clean/<scene>/frame_NNNN.png" in err
+
+
+@pytest.mark.parametrize("method, param, message", [
+    ("lucas_kanade", "window=abc", "--param window: expected an integer, got 'abc'"),
+    ("lucas_kanade", "window=2.5", "--param window: expected an integer, got 2.5"),
+    ("horn_schunck", "alpha=strong", "--param alpha: expected a number, got 'strong'"),
+    ("lucas_kanade", "gaussian_window=3", "--param gaussian_window: expected true or false, got 3"),
+    ("horn_schunck", "warps=many", "--param warps: expected an integer or null, got 'many'"),
+])
+def test_eval_flow_param_types_come_from_the_method_signature(tmp_path, capsys, method, param, message):
+    root = _middlebury_pair(tmp_path)
+    code, _, err = _eval(capsys, root, "--format", "middlebury", "--method", method, "--param", param)
+    assert code == 2
+    assert err == f"aerobench: error: {message}\n"
+
+
+def test_eval_flow_a_method_failing_without_param_names_the_method_and_pair(tmp_path, capsys, monkeypatch):
+    from algorithms import registry
+
+    def broken(frame0, frame1, *, knob: int = 1):
+        raise ValueError("frame0: too small for this method")
+
+    monkeypatch.setitem(registry.FLOW_METHODS, "broken_for_test", broken)
+    root = _middlebury_pair(tmp_path)
+    code, _, err = _eval(capsys, root, "--format", "middlebury", "--method", "broken_for_test")
+    assert code == 2 and "--param" not in err
+    assert "--method broken_for_test failed on pair pair: frame0: too small for this method" in err
+    code, _, err = _eval(capsys, root, "--format", "middlebury", "--method", "broken_for_test", "--param", "knob=2")
+    assert code == 2 and "--param: broken_for_test rejected {'knob': 2} on pair pair: frame0: too small" in err
+
+
+@pytest.mark.parametrize("names, reversed_", [
+    (("frame10.png", "frame11.png", "flow10.flo"), False),
+    (("b_second.png", "a_first.png", "truth.flo"), True),  # frames in name order: a_first.png is frame 0
+    (("img9.png", "img10.png", "gt.png"), False),           # numbers compared as numbers; a 16-bit KITTI truth
+])
+def test_eval_flow_takes_a_plain_pair_folder(tmp_path, capsys, names, reversed_):
+    """Two frames and one truth file, in one folder: --format pair, and found without --format."""
+    import cv2
+    import numpy as np
+
+    from harness.datasets import write_kitti_flow
+    from scenes.formats import write_flo, write_png
+
+    rng = np.random.default_rng(5)
+    big = cv2.GaussianBlur((rng.random((70, 90)) * 255).astype(np.float32), (0, 0), 2.0)
+    first, second, truth = names
+    folder = tmp_path / "mine"
+    write_png(folder / first, big[3:67, 4:84].round().astype(np.uint8))
+    write_png(folder / second, big[3:67, 3:83].round().astype(np.uint8))
+    flow = np.zeros((64, 80, 2), np.float32)
+    flow[..., 0] = 1.0
+    if reversed_:  # the truth from the frame that sorts first to the other: -1 px
+        flow[..., 0] = -1.0
+    (write_flo if truth.endswith(".flo") else write_kitti_flow)(folder / truth, flow)
+    (folder / "notes.txt").write_text("not a frame")
+    for fmt in (["--format", "pair"], []):
+        code, out, err = _eval(capsys, folder, *fmt, "--method", "dis")
+        assert code == 0, err
+        assert "on 1 pair pair(s)" in out
+        epe = float(next(line for line in out.splitlines() if line.startswith("pair:mine epe_mean")).split()[2])
+        assert epe < 0.2, out
+
+
+def test_eval_flow_a_folder_that_is_no_pair_says_the_rule(tmp_path, capsys):
+    import numpy as np
+
+    from scenes.formats import write_png
+
+    for name in ("a.png", "b.png", "c.png"):
+        write_png(tmp_path / name, np.zeros((4, 6, 3), np.uint8))
+    code, _, err = _eval(capsys, tmp_path, "--format", "pair", "--method", "dis")
+    assert code == 2
+    assert ("expected two frame images and one ground-truth file (a .flo, or a 16-bit RGB KITTI flow PNG); "
+            "found 3 image(s), 0 .flo, 0 16-bit PNG") in err
+
+
+def test_eval_flow_pass_chooses_the_sintel_pass(tmp_path, capsys):
+    sintel = _sintel_tree(tmp_path / "sintel", passes=("clean",))
+    code, _, err = _eval(capsys, sintel, "--format", "sintel", "--pass", "final", "--method", "dis")
+    assert code == 2 and "expected folders final/ and flow/" in err
+    _sintel_tree(sintel, passes=("final",))
+    code, out, err = _eval(capsys, sintel, "--format", "sintel", "--pass", "final", "--method", "dis")
+    assert code == 0, err
+    assert "on 1 sintel (final pass) pair(s)" in out
+    code, out, err = _eval(capsys, sintel, "--method", "dis")  # the layout found, the clean pass by default
+    assert code == 0 and "on 1 sintel (clean pass) pair(s)" in out
+    code, _, err = _eval(capsys, sintel, "--format", "middlebury", "--pass", "final", "--method", "dis")
+    assert code == 2 and err == "aerobench: error: --pass: only for --format sintel, got --format middlebury\n"
+
+
+def test_eval_flow_help_documents_every_layout(capsys):
+    with pytest.raises(SystemExit):
+        main(["eval-flow", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    for text in ("ROOT/clean/<scene>/frame_NNNN.png", "ROOT/flow/<scene>/frame_NNNN.flo", "ROOT/image_2/NNNNNN_10.png",
+                 "ROOT/flow_occ/NNNNNN_10.png", "frame10.png frame11.png flow10.flo", "16-bit", "--pass"):
+        assert text in out, text
