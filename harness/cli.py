@@ -262,6 +262,15 @@ def cmd_report(args: argparse.Namespace) -> int:
     for option, value in (("--baseline", args.baseline), ("--gate", args.gate), ("--rules", args.rules)):
         if value is not None and not Path(value).is_file():
             raise UsageError(f"{option}: {value}: no such file")
+    from harness import gate
+
+    # a file the gate refuses (GateError, exit 2) is refused here too, before the old report is touched
+    if args.baseline is not None:
+        gate.read_baseline(args.baseline)
+    if args.gate is not None:
+        gate.read_verdict(args.gate)
+    if args.rules is not None:
+        gate.load_rules(args.rules)
     report = _write_report(run_dir, args.baseline, args.gate, args.rules, workers=args.workers,
                            progress=not args.quiet)
     print(f"report: {_paths(report)}")
@@ -394,7 +403,11 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    path = gate.baseline_from_run(run_dir, args.out)
+    path = gate.baseline_from_run(run_dir, args.out, allow_failed=args.allow_failed)
+    failed = gate.read_baseline(path).get("failed_cells") or []
+    if failed:
+        print(f"aerobench: warning: {len(failed)} cell(s) failed; their metrics are not in the baseline "
+              f"(recorded under failed_cells; a gate on it says so)", file=sys.stderr)
     print(f"baseline: {path}")
     return EXIT_OK
 
@@ -494,6 +507,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")
     s.add_argument("run_dir")
     s.add_argument("--out", required=True, help="the baseline JSON to write")
+    s.add_argument("--allow-failed", action="store_true",
+                   help="write the baseline although cells failed (they are recorded in it; their metrics are "
+                        "missing); without it, a run with a failed cell is refused")
     s.set_defaults(fn=cmd_baseline)
 
     s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")

@@ -375,3 +375,61 @@ def test_eval_flow_help_documents_every_layout(capsys):
     for text in ("ROOT/clean/<scene>/frame_NNNN.png", "ROOT/flow/<scene>/frame_NNNN.flo", "ROOT/image_2/NNNNNN_10.png",
                  "ROOT/flow_occ/NNNNNN_10.png", "frame10.png frame11.png flow10.flo", "16-bit", "--pass"):
         assert text in out, text
+
+
+# --------------------------------------------------------------------------- report, baseline: bad files, failed cells
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("option, text, match", [
+    ("--baseline", "{not json", r"corrupt\.json: baseline is not valid JSON"),
+    ("--baseline", '{"format": "something-else"}', r"corrupt\.json: not an aerobench baseline: format 'something-else'"),
+    ("--gate", "[1, 2", r"corrupt\.json: gate verdict is not valid JSON"),
+    ("--rules", "rules: {epe_mean: about 3}", r"corrupt\.json: epe_mean: rule 'about 3': expected 'abs <number>'"),
+])
+def test_report_refuses_a_corrupt_file_like_gate_and_keeps_the_old_report(tmp_path, capsys, option, text, match):
+    import re
+
+    from tests.reports.conftest import build_run
+
+    run = build_run(tmp_path)
+    (run / "report.html").write_text("the old report")
+    (run / "report.md").write_text("the old report")
+    before = _tree(run)
+    bad = tmp_path / "corrupt.json"
+    bad.write_text(text)
+    assert main(["report", str(run), option, str(bad), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("aerobench: error: ") and err.count("\n") == 1 and re.search(match, err), err
+    assert _tree(run) == before
+
+
+def test_baseline_of_a_run_with_a_failed_cell_is_refused_unless_allowed(tmp_path, capsys):
+    import json
+
+    from tests.reports.conftest import FAILED, FAILED_ERROR, build_run
+
+    run = build_run(tmp_path)
+    out = tmp_path / "baseline.json"
+    assert main(["baseline", str(run), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "1 cell(s) failed" in err and "--allow-failed" in err
+    assert f"{FAILED[0]}" in err and FAILED[2] in err and "diverged" in err
+    assert not out.exists()
+    assert main(["baseline", str(run), "--out", str(out), "--allow-failed"]) == 0
+    captured = capsys.readouterr()
+    assert "warning: 1 cell(s) failed" in captured.err and "their metrics are not in the baseline" in captured.err
+    recorded = json.loads(out.read_text())["failed_cells"]
+    assert [(c["scene"], c["pipeline"], c["error"]) for c in recorded] == [
+        (f"{FAILED[0]}[noise_sigma=10]", FAILED[2], FAILED_ERROR)]
+    # the gate of the same run on it: the failed cell fails the gate, in words, never as nan
+    summary = tmp_path / "gate.md"
+    assert main(["gate", str(run), "--baseline", str(out), "--summary", str(summary)]) == 1
+    printed = capsys.readouterr().out
+    for text in (printed, summary.read_text()):
+        assert "nan" not in text.lower(), text
+        assert "cell failed" in text and "diverged" in text
+        assert "the baseline was made with --allow-failed" in text

@@ -509,7 +509,8 @@ def test_a_failed_cell_never_passes_the_gate_even_when_other_seeds_fill_its_aggr
     assert not result.passed and result.exit_code == 1
     (f,) = result.failures
     assert "cell c2 seed 2 failed: RuntimeError: boom" in f.reason
-    assert "cell_failed" in G.to_markdown(result) and "boom" in G.to_junit_xml(result)
+    assert "tiny / thesis-lk: cell failed: RuntimeError: boom" in G.to_markdown(result) and "boom" in G.to_junit_xml(result)
+    assert "nan" not in G.to_markdown(result)
 
 
 def test_an_empty_comparison_is_an_error_not_a_pass():
