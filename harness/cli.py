@@ -15,7 +15,8 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
 
 Your own flow method: a module that registers it (``algorithms.registry.register_flow``),
-listed under ``imports:`` of a suite; modules in the working folder are importable
+listed under ``imports:`` of a suite; modules beside the suite file, then in the working folder, are
+importable
 (README, "Benchmark your own method").
 """
 
@@ -448,7 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Your own flow method: write a module that registers it with "
                "algorithms.registry.register_flow, list the module under `imports:` in a suite YAML and use "
                "the method in an inline pipeline ({name: mine, base: thesis-lk, spec: {flow: {method: NAME}}}); "
-               "modules in the working folder are importable. `aerobench list` shows the flow methods and "
+               "modules beside the suite file, then in the working folder, are importable. `aerobench list` shows the flow methods and "
                "the pipeline stage keys; README.md, 'Benchmark your own method', has a complete example.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 

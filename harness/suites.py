@@ -20,8 +20,9 @@ Example::
     metrics: [epe_mean, shift_error]
 
 (``tests/harness/test_suites.py`` parses and expands this example.) ``imports:`` names
-modules to import first, e.g. one that registers your own flow method; modules in the
-working folder are importable (:func:`import_modules`).
+modules to import first, e.g. one that registers your own flow method; modules beside the
+suite file, then in the working folder, are importable (:func:`import_modules`,
+:func:`import_paths`).
 
 Errors raise :class:`SuiteError` naming the file and the field
 (``suite.yaml: scenes[0].sweep: an empty sweep ...``); YAML syntax errors give the line.
@@ -40,7 +41,7 @@ from pathlib import Path
 from typing import Annotated, Any, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, PrivateAttr, Tag, ValidationError, field_validator
 
 __all__ = [
     "SuiteError",
@@ -57,6 +58,7 @@ __all__ = [
     "pipeline_names",
     "metric_names",
     "import_modules",
+    "import_paths",
 ]
 
 # A scene override or pipeline parameter as YAML gives it (checked finite below; the scene
@@ -155,6 +157,8 @@ class Suite(_Model):
         default_factory=list,
         description="modules every worker imports first (plugins that register flow methods or stages)",
     )
+    # the folder of the suite file (set by load_suite): its `imports:` are looked up there first
+    _folder: str | None = PrivateAttr(default=None)
 
     @field_validator("seeds")
     @classmethod
@@ -350,7 +354,9 @@ def load_suite(name_or_path: str | os.PathLike) -> Suite:
         raise SuiteError(f"{path}: YAML syntax error at {line}{exc.problem or exc}") from None
     except yaml.YAMLError as exc:
         raise SuiteError(f"{path}: not valid YAML: {exc}") from None
-    return parse_suite(data, source=str(path))
+    suite = parse_suite(data, source=str(path))
+    suite._folder = str(path.resolve().parent)
+    return suite
 
 
 # --------------------------------------------------------------------------- expansion
@@ -393,11 +399,22 @@ class Cell:
         }
 
 
-def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>") -> None:
+def import_paths(suite: Suite) -> list[str]:
+    """The folders a suite's ``imports:`` are looked up in after the installed packages, in order: the
+    suite file's folder (a suite loaded from a file), then the working folder; absolute paths, so that
+    workers (spawned, or on other machines) search the same folders."""
+    folders = [suite._folder] if suite._folder else []
+    return list(dict.fromkeys([*folders, os.getcwd()]))
+
+
+def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>",
+                   folders: list[str] | tuple[str, ...] | None = None) -> None:
     """Import each module of a suite's ``imports:`` (plugins that register flow methods or stages).
 
-    The working folder is searched too (after everything else, so a local file never shadows an
-    installed package): ``aerobench`` is a console script, whose ``sys.path`` does not hold it.
+    ``folders`` (default: the working folder; :func:`import_paths` gives a suite's) are searched after
+    the installed packages, in order, so a local file never shadows an installed package; a folder
+    goes just before the working folder where that is on ``sys.path`` already (``python -m``).
+    ``aerobench`` is a console script, whose ``sys.path`` holds neither.
 
     Raises
     ------
@@ -408,14 +425,22 @@ def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>
     import sys
 
     cwd = os.getcwd()
-    if cwd not in sys.path:
-        sys.path.append(cwd)
+    folders = list(dict.fromkeys(folders if folders is not None else [cwd]))
+    for folder in folders:
+        if folder in sys.path:
+            continue
+        at = next((i for i, p in enumerate(sys.path) if p in ("", cwd)), None)
+        if at is not None and folder != cwd:
+            sys.path.insert(at, folder)
+        else:
+            sys.path.append(folder)
+    where = [f"the suite's folder {f}" for f in folders[:-1]] + [f"the working folder {folders[-1]}"] if folders else []
+    searched = ", ".join(["the installed packages", *where[:-1]]) + (f" and {where[-1]}" if where else "")
     for i, module in enumerate(names):
         try:
             importlib.import_module(module)
         except ImportError as exc:
-            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r} (searched the installed packages "
-                             f"and the working folder {cwd}): {exc}") from None
+            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r} (searched {searched}): {exc}") from None
 
 
 def _format_value(v: Any) -> str:
@@ -425,7 +450,7 @@ def _format_value(v: Any) -> str:
 def _resolve_pipelines(suite: Suite, source: str) -> list[tuple[str, dict]]:
     from algorithms.pipeline import Pipeline
 
-    import_modules(suite.imports, source=source)
+    import_modules(suite.imports, source=source, folders=import_paths(suite))
     builtins = pipeline_names()
     out = []
     for i, p in enumerate(suite.pipelines):

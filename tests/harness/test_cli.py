@@ -433,3 +433,30 @@ def test_baseline_of_a_run_with_a_failed_cell_is_refused_unless_allowed(tmp_path
         assert "nan" not in text.lower(), text
         assert "cell failed" in text and "diverged" in text
         assert "the baseline was made with --allow-failed" in text
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_a_suite_imports_its_plugin_from_its_own_folder_in_the_workers(tmp_path, cli_env):
+    """`cd elsewhere; aerobench run own/my-suite.yaml`: the plugin beside the suite file reaches the
+    worker processes (spawned: they import it again, from the same folders)."""
+    own, elsewhere = tmp_path / "own", tmp_path / "elsewhere"
+    own.mkdir()
+    elsewhere.mkdir()
+    (own / "own_folder_flow_xyz.py").write_text(
+        "import numpy as np\n"
+        "from algorithms.flow import as_gray\n"
+        "from algorithms.registry import register_flow\n\n\n"
+        "@register_flow\n"
+        "def own_folder_zero_flow(frame0, frame1):\n"
+        "    g = as_gray(frame0)\n"
+        "    return np.zeros((*g.shape, 2), np.float32), np.ones(g.shape, bool)\n")
+    (own / "my-suite.yaml").write_text(
+        "name: mine\nimports: [own_folder_flow_xyz]\nscenes: [{preset: tiny, overrides: {image.n_frames: 4}}]\n"
+        "seeds: [1]\npipelines:\n  - {name: zero, base: thesis-lk, spec: {flow: {method: own_folder_zero_flow}}}\n")
+    env = {**cli_env, "PYTHONPATH": str(ROOT)}  # the project as installed; the plugin only beside the suite
+    done = subprocess.run([sys.executable, "-m", "harness.cli", "run", "../own/my-suite.yaml", "--out", "run",
+                           "--quiet", "--no-report", "--workers", "1"],
+                          cwd=elsewhere, env=env, capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "1 cells (0 reused)" in done.stdout

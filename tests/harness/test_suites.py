@@ -202,3 +202,34 @@ def test_imports_find_a_module_in_the_working_folder(tmp_path, monkeypatch):
     assert sys.modules["my_local_plugin_xyz"].LOADED
     with pytest.raises(SuiteError, match=r"imports\[0\]: cannot import 'no_such_plugin_xyz' .*working folder"):
         import_modules(["no_such_plugin_xyz"])
+
+
+def test_imports_are_looked_up_beside_the_suite_file_first(tmp_path, monkeypatch):
+    """`cd elsewhere; aerobench run own/my-suite.yaml` imports own/my_flow.py (then the working folder)."""
+    import sys
+
+    from harness.suites import SuiteError, import_paths, load_suite
+
+    own, elsewhere = tmp_path / "own", tmp_path / "elsewhere"
+    own.mkdir()
+    elsewhere.mkdir()
+    (own / "beside_suite_plugin_xyz.py").write_text("WHERE = 'beside the suite'\n")
+    (elsewhere / "beside_suite_plugin_xyz.py").write_text("WHERE = 'working folder'\n")
+    (elsewhere / "cwd_only_plugin_xyz.py").write_text("WHERE = 'working folder'\n")
+    (own / "my-suite.yaml").write_text(
+        "name: mine\nimports: [beside_suite_plugin_xyz, cwd_only_plugin_xyz]\nscenes: [{preset: tiny}]\n"
+        "seeds: [1]\npipelines: [thesis-lk]\n")
+    monkeypatch.chdir(elsewhere)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(own), str(elsewhere))])
+    for name in ("beside_suite_plugin_xyz", "cwd_only_plugin_xyz"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    suite = load_suite("../own/my-suite.yaml")
+    assert import_paths(suite) == [str(own), str(elsewhere)]
+    expand(suite)
+    assert sys.modules["beside_suite_plugin_xyz"].WHERE == "beside the suite"
+    assert sys.modules["cwd_only_plugin_xyz"].WHERE == "working folder"
+    (own / "bad.yaml").write_text("name: bad\nimports: [no_such_plugin_xyz]\nscenes: [{preset: tiny}]\n"
+                                  "seeds: [1]\npipelines: [thesis-lk]\n")
+    with pytest.raises(SuiteError, match=rf"imports\[0\]: cannot import 'no_such_plugin_xyz' \(searched the installed "
+                                         rf"packages, the suite's folder {own} and the working folder {elsewhere}\)"):
+        expand(load_suite(own / "bad.yaml"))
