@@ -5,13 +5,14 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 
 ::
 
-    aerobench list
+    aerobench list [--full]
     aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
-    aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
-    aerobench baseline RUN_DIR --out FILE
+    aerobench eval-flow DIR [--format middlebury|sintel|kitti|pair] [--pass clean|final] --method NAME
+                        [--param KEY=VALUE ...]
+    aerobench baseline RUN_DIR --out FILE [--allow-failed]
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
 
 Your own flow method: a module that registers it (``algorithms.registry.register_flow``),
@@ -57,10 +58,13 @@ def _user_errors() -> tuple[type[BaseException], ...]:
             SceneSpecError, OSError)
 
 
-def _one_line(text: str, width: int = 100) -> str:
-    """``text`` on one line (lines joined by "; "), shortened to ``width`` characters."""
+def _one_line(text: str, width: int | None = 100) -> str:
+    """``text`` on one line (lines joined by "; "), shortened to ``width`` characters (None: whole)."""
     lines = [line.strip() for line in (text or "").strip().splitlines() if line.strip()]
-    return textwrap.shorten("; ".join(lines), width, placeholder=" ...") if lines else ""
+    if not lines:
+        return ""
+    joined = "; ".join(lines)
+    return " ".join(joined.split()) if width is None else textwrap.shorten(joined, width, placeholder=" ...")
 
 
 def _error_text(exc: BaseException) -> str:
@@ -79,7 +83,7 @@ def _list_presets() -> dict[str, str]:
 
     presets = list_presets()
     if isinstance(presets, dict):
-        return {k: _one_line(str(v)) for k, v in presets.items()}
+        return {k: _one_line(str(v), None) for k, v in presets.items()}
     out = {}
     for name in presets:
         desc = ""
@@ -90,7 +94,20 @@ def _list_presets() -> dict[str, str]:
             desc = getattr(spec, "description", "") or ""
         except Exception:  # a broken preset still lists, without its description
             desc = "(cannot be loaded)"
-        out[name] = _one_line(desc)
+        out[name] = _one_line(desc, None)
+    return out
+
+
+def _list_suites() -> dict[str, str]:
+    """Built-in suite name -> its whole description on one line."""
+    from harness.suites import SuiteError, builtin_suites, load_suite
+
+    out = {}
+    for name, path in builtin_suites().items():
+        try:
+            out[name] = " ".join(load_suite(path).description.split()) or "(undescribed)"
+        except SuiteError:
+            out[name] = "(invalid)"
     return out
 
 
@@ -99,14 +116,14 @@ def _list_pipelines() -> dict[str, str]:
 
     out = {}
     for name, p in pipeline_names().items():
-        out[name] = _one_line(p.get("description") or "")
+        out[name] = _one_line(p.get("description") or "", None)
     return out
 
 
 def _list_metrics() -> dict[str, str]:
     from harness.metrics import METRICS
 
-    return {n: f"[{d.unit}, {'higher' if d.higher_is_better else 'lower'} is better] {_one_line(d.description)}"
+    return {n: f"[{d.unit}, {'higher' if d.higher_is_better else 'lower'} is better] {_one_line(d.description, None)}"
             for n, d in sorted(METRICS.items())}
 
 
@@ -118,7 +135,7 @@ def _list_flow_methods() -> dict[str, str]:
     for name, doc in describe()["flow"].items():
         knobs = [p.name for p in inspect.signature(FLOW_METHODS[name]).parameters.values()
                  if p.kind is p.KEYWORD_ONLY]
-        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc)}"
+        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc, None)}"
     return out
 
 
@@ -135,7 +152,7 @@ def _list_stage_keys() -> dict[str, str]:
 def cmd_list(args: argparse.Namespace) -> int:
     from harness.suites import describe_suites
 
-    sections = [("scene presets", _list_presets), ("suites", describe_suites),
+    sections = [("scene presets", _list_presets), ("suites", _list_suites if args.full else describe_suites),
                 ("pipelines", _list_pipelines), ("flow methods", _list_flow_methods),
                 ("pipeline stage keys (the flow key names a flow method)", _list_stage_keys),
                 ("metrics", _list_metrics)]
@@ -145,7 +162,7 @@ def cmd_list(args: argparse.Namespace) -> int:
         width = max((len(k) for k in items), default=0)
         keep_order = title.startswith("pipeline stage keys")  # in the order the stages run
         for name, desc in (items.items() if keep_order else sorted(items.items())):
-            print(f"  {name:<{width}}  {_one_line(desc, 110)}".rstrip())
+            print(f"  {name:<{width}}  {_one_line(desc, None if args.full else 110)}".rstrip())
         print()
     return EXIT_OK
 
@@ -451,14 +468,23 @@ def build_parser() -> argparse.ArgumentParser:
                "the method in an inline pipeline ({name: mine, base: thesis-lk, spec: {flow: {method: NAME}}}); "
                "modules beside the suite file, then in the working folder, are importable. `aerobench list` shows the flow methods and "
                "the pipeline stage keys; README.md, 'Benchmark your own method', has a complete example.")
+    p.add_argument("--version", action="version", version=f"aerobench {_version()}",
+                   help="print aerobench's version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics")
+    s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics",
+                       description="List every name a suite or command takes: scene presets, suites, pipelines, "
+                                   "flow methods with their parameters, pipeline stage keys and metrics, one line "
+                                   "each.")
+    s.add_argument("-v", "--full", action="store_true",
+                   help="show each description whole instead of cutting it at the line's end")
     s.set_defaults(fn=cmd_list)
 
-    s = sub.add_parser("render", help="render one scene into a sequence folder")
+    s = sub.add_parser("render", help="render one scene into a sequence folder",
+                       description="Render one scene (a preset or a scene YAML) into a sequence folder: frames, "
+                                   "ground-truth flow, valid masks, instances, camera path, tracks and a preview.")
     s.add_argument("scene", help="preset name or scene YAML")
-    s.add_argument("--out", required=True, help="the sequence folder to write")
+    s.add_argument("--out", required=True, help="the sequence folder to write (absent or empty)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter by dotted key (repeatable)")
     s.add_argument("--flow-format", choices=("npz", "flo"), default="npz",
@@ -466,20 +492,26 @@ def build_parser() -> argparse.ArgumentParser:
                         ".flo in flow/ and flow_camera/ (about 10x larger)")
     s.set_defaults(fn=cmd_render)
 
-    s = sub.add_parser("run", help="run a suite into a run folder")
+    s = sub.add_parser("run", help="run a suite into a run folder",
+                       description="Run a suite: render (or reuse from the cache) its scenes, run every pipeline on "
+                                   "them, score them and write results.parquet and the report into the run folder.")
     s.add_argument("suite", help="built-in suite name or suite YAML")
     s.add_argument("--out", required=True, help="the run folder (must be empty unless --resume)")
     s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
-    s.add_argument("--executor", choices=EXECUTORS, default="process")
+    s.add_argument("--executor", choices=EXECUTORS, default="process",
+                   help="where the cells run: local worker processes (default), a dask cluster at --scheduler, "
+                        "or a local dask cluster")
     s.add_argument("--scheduler", default=None, help="dask scheduler address (with --executor dask)")
     s.add_argument("--cache", default=None, help="render cache (default: $AEROBENCH_CACHE or ~/.cache/aerobench)")
     s.add_argument("--no-report", action="store_true", help="do not write report.html / report.md")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_run)
 
-    s = sub.add_parser("report", help="(re)write report.html and report.md of a run")
-    s.add_argument("run_dir")
+    s = sub.add_parser("report", help="(re)write report.html and report.md of a run",
+                       description="Rewrite report.html and report.md of a finished run from its results table, "
+                                   "optionally compared with a baseline and headed by a gate verdict.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
     s.add_argument("--baseline", default=None,
                    help="a baseline JSON to compare against (directions and tolerances from the gate rules)")
     s.add_argument("--gate", default=None, metavar="VERDICT_JSON",
@@ -505,23 +537,37 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")
     s.set_defaults(fn=cmd_eval_flow)
 
-    s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")
-    s.add_argument("run_dir")
+    s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)",
+                       description="Write the baseline of a finished run: its aggregated metrics, for `aerobench "
+                                   "gate` to compare later runs with.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
     s.add_argument("--out", required=True, help="the baseline JSON to write")
     s.add_argument("--allow-failed", action="store_true",
                    help="write the baseline although cells failed (they are recorded in it; their metrics are "
                         "missing); without it, a run with a failed cell is refused")
     s.set_defaults(fn=cmd_baseline)
 
-    s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")
-    s.add_argument("run_dir")
-    s.add_argument("--baseline", required=True)
+    s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression",
+                       description="Compare a finished run with a baseline by tolerance rules: exit 0 pass, 1 a "
+                                   "regression or a failed cell, 2 bad usage or input.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
+    s.add_argument("--baseline", required=True,
+                   help="the baseline JSON written by `aerobench baseline` (a missing one is an error, not a pass)")
     s.add_argument("--rules", default=None, help="gate rules YAML (default: gate_rules.yaml of aerobench)")
     s.add_argument("--junit", default=None, help="write a JUnit XML report here")
     s.add_argument("--summary", default=None, help="write the Markdown summary here (e.g. $GITHUB_STEP_SUMMARY)")
     s.add_argument("--json", default=None, help="write the machine-readable verdict here (for `aerobench report --gate`)")
     s.set_defaults(fn=cmd_gate)
     return p
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("aerobench")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "(not installed)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -460,3 +460,58 @@ def test_a_suite_imports_its_plugin_from_its_own_folder_in_the_workers(tmp_path,
                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "1 cells (0 reused)" in done.stdout
+
+
+# --------------------------------------------------------------------------- help, version, list --full
+
+
+def _subparsers() -> dict:
+    import argparse
+
+    from harness.cli import build_parser
+
+    parser = build_parser()
+    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(action.choices)
+
+
+def test_every_subcommand_help_has_a_summary_and_every_argument_a_help_text(capsys):
+    import argparse
+
+    subs = _subparsers()
+    assert set(subs) >= {"list", "render", "run", "report", "eval-flow", "baseline", "gate"}
+    for name, sub in subs.items():
+        assert sub.description and sub.description[0].isupper() and sub.description.rstrip().endswith("."), name
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        assert " ".join(sub.description.split()) in out, name
+        for action in sub._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            assert action.help and action.help != argparse.SUPPRESS, f"{name} {action.dest}: no help text"
+
+
+def test_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out == f"aerobench {version('aerobench')}\n"
+
+
+def test_list_full_shows_descriptions_whole(capsys):
+    from scenes import load_scene_spec
+
+    whole = " ".join(load_scene_spec("nominal").description.split())
+    assert len(whole) > 120, "the nominal preset's description is short: pick a longer one to check"
+    assert main(["list"]) == 0
+    short = next(line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("nominal "))
+    assert short.endswith("...") and whole not in short
+    for flag in ("--full", "-v"):
+        assert main(["list", flag]) == 0
+        out = capsys.readouterr().out
+        line = next(line for line in out.splitlines() if line.strip().startswith("nominal "))
+        assert whole in line
+        assert not [line for line in out.splitlines() if line.endswith("...")]
