@@ -17,8 +17,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 
 Your own flow method: a module that registers it (``algorithms.registry.register_flow``),
 listed under ``imports:`` of a suite; modules beside the suite file, then in the working folder, are
-importable
-(README, "Benchmark your own method").
+importable (README, "Benchmark your own method").
 """
 
 from __future__ import annotations
