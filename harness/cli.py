@@ -74,6 +74,47 @@ def _error_text(exc: BaseException) -> str:
     return _one_line(str(exc), 2000)
 
 
+# --------------------------------------------------------------------------- output paths
+
+
+def _why_not_writable(exc: OSError) -> str:
+    import errno
+
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return "permission denied"
+    if exc.errno == errno.EROFS:
+        return "read-only file system"
+    if exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    return f"the file system refuses it ({exc.strerror or exc})"
+
+
+def _check_out(path: str | os.PathLike, option: str = "--out", *, file: bool = False) -> None:
+    """Refuse an output path that cannot be made or written, before any work: one UsageError line
+    saying what is wrong with it. ``file``: the path is a file to write (its folder is checked).
+
+    The nearest existing folder on the path is probed by making (and removing) a temporary folder in
+    it, so a read-only mount, a pseudo file system (``/proc``) or a folder of another user is found as
+    the write would find it, whoever runs the command.
+    """
+    import tempfile
+
+    path = Path(path)
+    if path.is_dir() if file else (path.exists() and not path.is_dir()):
+        raise UsageError(f"{option} {path}: is a {'folder' if file else 'file'}; expected a "
+                         f"{'file to write' if file else 'folder'}")
+    probe = path.parent if file else path
+    while not probe.exists() and not probe.is_symlink() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise UsageError(f"{option} {path}: {probe} is a file, not a folder")
+    try:
+        made = tempfile.mkdtemp(prefix=".aerobench-write-check-", dir=probe)
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: cannot create anything in {probe}: {_why_not_writable(exc)}") from None
+    os.rmdir(made)
+
+
 # --------------------------------------------------------------------------- list
 
 
@@ -188,10 +229,11 @@ def _parse_set(items: Sequence[str], *, option: str = "--set",
 def cmd_render(args: argparse.Namespace) -> int:
     from scenes import load_scene_spec, render_sequence
 
-    spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: is a file; expected a folder to write the sequence into")
+    _check_out(out)
+    spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     if out.exists() and any(out.iterdir()):
         raise UsageError(f"{out}: the output folder is not empty")
     render_sequence(spec, out, flow_format=args.flow_format)
@@ -238,6 +280,10 @@ def _paths(report: Any) -> str:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from harness.runner import run_suite
+
+    _check_out(args.out)
+    if args.cache is not None:
+        _check_out(args.cache, "--cache")
 
     with ExitStack() as stack:  # the report's figure processes, if started early
         early: dict[str, Any] = {}
@@ -420,6 +466,7 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
+    _check_out(args.out, file=True)
     path = gate.baseline_from_run(run_dir, args.out, allow_failed=args.allow_failed)
     failed = gate.read_baseline(path).get("failed_cells") or []
     if failed:
@@ -441,6 +488,9 @@ def cmd_gate(args: argparse.Namespace) -> int:
     if args.rules is None and not gate.DEFAULT_RULES.is_file():  # an install without the package data
         print(f"aerobench: warning: {gate.DEFAULT_RULES} is missing; gating with the built-in defaults",
               file=sys.stderr)
+    for option, value in (("--junit", args.junit), ("--summary", args.summary), ("--json", args.json)):
+        if value is not None:
+            _check_out(value, option, file=True)
     rules = gate.load_rules(args.rules or (gate.DEFAULT_RULES if gate.DEFAULT_RULES.is_file() else None))
     outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)

@@ -515,3 +515,53 @@ def test_list_full_shows_descriptions_whole(capsys):
         line = next(line for line in out.splitlines() if line.strip().startswith("nominal "))
         assert whole in line
         assert not [line for line in out.splitlines() if line.endswith("...")]
+
+
+# --------------------------------------------------------------------------- --out that cannot be written
+
+
+def _out_case(tmp_path: Path, case: str) -> tuple[Path, str]:
+    """An --out path that cannot be made, and the line that must say why."""
+    import os
+
+    if case == "proc":
+        return Path("/proc/aerobench_out"), "--out /proc/aerobench_out: cannot create anything in /proc: "
+    if case == "sys":
+        return Path("/sys/aerobench_out"), "--out /sys/aerobench_out: cannot create anything in /sys: "
+    if case == "under-a-file":
+        (tmp_path / "a-file").write_text("x")
+        out = tmp_path / "a-file" / "x"
+        return out, f"--out {out}: {tmp_path / 'a-file'} is a file, not a folder"
+    if case == "read-only":
+        if os.geteuid() == 0:
+            pytest.skip("root writes into a read-only folder")
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        ro.chmod(0o555)
+        return ro / "out", f"--out {ro / 'out'}: cannot create anything in {ro}: permission denied"
+    raise AssertionError(case)
+
+
+@pytest.mark.parametrize("case", ["proc", "sys", "under-a-file", "read-only"])
+@pytest.mark.parametrize("command", ["run", "render", "baseline"])
+def test_an_impossible_out_is_one_line_naming_what_is_wrong(tmp_path, capsys, monkeypatch, case, command):
+    import harness.runner
+    import scenes
+
+    out, message = _out_case(tmp_path, case)
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work started before --out was checked")
+
+    monkeypatch.setattr(harness.runner, "run_suite", no_work)
+    monkeypatch.setattr(scenes, "render_sequence", no_work)
+    monkeypatch.setattr("harness.gate.baseline_from_run", no_work)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "results.parquet").write_bytes(b"")
+    argv = {"run": ["run", "smoke", "--out", str(out)], "render": ["render", "tiny", "--out", str(out)],
+            "baseline": ["baseline", str(run_dir), "--out", str(out)]}[command]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"aerobench: error: {message}"), err
+    assert "[Errno" not in err and "Traceback" not in err
