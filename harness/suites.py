@@ -271,10 +271,40 @@ def _field_path(loc: tuple) -> str:
     return s or "(top level)"
 
 
+# words a user may write for a key (the CLI's `--set`, a flow method's `params`), and the key meant
+_KEY_ALIASES = {"set": "overrides", "override": "overrides", "params": "spec", "parameters": "spec",
+                "import": "imports", "plugins": "imports"}
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The model whose field ``loc`` (a pydantic error location) names, e.g. SceneEntry for
+    ``('scenes', 0, 'set')``; None where no suite model is."""
+    parents = tuple(p for p in loc[:-1] if isinstance(p, str) and p not in ("pipeline-name", "inline-pipeline",
+                                                                          "function-after"))
+    return {(): Suite, ("scenes",): SceneEntry, ("pipelines",): InlinePipeline}.get(parents)
+
+
+def _unknown_key(loc: tuple) -> str:
+    """The message for a key the model forbids: the closest valid key (an alias first, then difflib)."""
+    import difflib
+
+    model, key = _model_at(loc), str(loc[-1])
+    if model is None:
+        return "unknown key"
+    valid = list(model.model_fields)
+    alias = _KEY_ALIASES.get(key.lower())
+    close = [alias] if alias in valid else difflib.get_close_matches(key, valid, n=1, cutoff=0.6)
+    if close:
+        return f"unknown key; did you mean {close[0]!r}? (valid: {', '.join(valid)})"
+    return f"unknown key; valid: {', '.join(valid)}"
+
+
 def _format_validation(err: ValidationError, source: str) -> str:
     lines = []
     for e in err.errors():
         msg = e["msg"].removeprefix("Value error, ")
+        if e["type"] == "extra_forbidden":
+            msg = _unknown_key(tuple(e["loc"]))
         lines.append(f"{source}: {_field_path(tuple(e['loc']))}: {msg}")
     # one clear line first; union branches repeat the same field, keep distinct messages
     return "; ".join(dict.fromkeys(lines))

@@ -98,13 +98,13 @@ def test_yaml_syntax_error_gives_the_line(write_suite):
 
 def test_unknown_key_is_named(write_suite):
     path = write_suite(_suite(scenes=[{"preset": "tiny", "overides": {"seed": 1}}]))
-    with pytest.raises(SuiteError, match=rf"{path}: scenes\[0\]\.overides: Extra inputs are not permitted"):
+    with pytest.raises(SuiteError, match=rf"{path}: scenes\[0\]\.overides: unknown key; did you mean 'overrides'\?"):
         load_suite(path)
 
 
 def test_unknown_top_level_key_is_named(write_suite):
     path = write_suite(_suite(workers=4))
-    with pytest.raises(SuiteError, match=r"workers: Extra inputs"):
+    with pytest.raises(SuiteError, match=r"workers: unknown key; valid: name, description, scenes"):
         load_suite(path)
 
 
@@ -233,3 +233,25 @@ def test_imports_are_looked_up_beside_the_suite_file_first(tmp_path, monkeypatch
     with pytest.raises(SuiteError, match=rf"imports\[0\]: cannot import 'no_such_plugin_xyz' \(searched the installed "
                                          rf"packages, the suite's folder {own} and the working folder {elsewhere}\)"):
         expand(load_suite(own / "bad.yaml"))
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"scenes": [{"preset": "tiny", "set": {"image.n_frames": 3}}]},
+     "s.yaml: scenes[0].set: unknown key; did you mean 'overrides'? (valid: preset, label, overrides, sweep)"),
+    ({"seed": [1]}, "s.yaml: seed: unknown key; did you mean 'seeds'?"),
+    ({"pipelines": [{"name": "x", "base": "thesis-lk", "params": {}}]},
+     "s.yaml: pipelines[0].params: unknown key; did you mean 'spec'? (valid: name, base, spec)"),
+    ({"scenes": [{"preset": "tiny", "zzz": 1}]},
+     "s.yaml: scenes[0].zzz: unknown key; valid: preset, label, overrides, sweep"),
+])
+def test_an_unknown_key_suggests_the_right_one(data, message):
+    from harness.suites import SuiteError
+
+    suite = {"name": "x", "scenes": [{"preset": "tiny"}], "seeds": [1], "pipelines": ["thesis-lk"]}
+    suite.update(data)
+    if "seed" in data:
+        del suite["seeds"]
+    with pytest.raises(SuiteError) as exc:
+        parse_suite(suite, source="s.yaml")
+    assert message in str(exc.value)
+    assert "Extra inputs are not permitted" not in str(exc.value)
