@@ -11,7 +11,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
     aerobench eval-flow DIR [--format middlebury|sintel|kitti|pair] [--pass clean|final] --method NAME
-                        [--param KEY=VALUE ...]
+                        [--param KEY=VALUE ...] [--import MODULE ...]
     aerobench baseline RUN_DIR --out FILE [--allow-failed]
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
 
@@ -427,11 +427,14 @@ def cmd_eval_flow(args: argparse.Namespace) -> int:
     pass_ = args.pass_ or "clean"
     import algorithms.pipeline  # noqa: F401  (importing it registers every flow method)
     from algorithms.registry import get_flow_method
+    from harness.suites import import_modules
 
+    import_modules(args.imports, source="--import")  # your own flow method's module (the working folder too)
     try:
         method = get_flow_method(args.method)
     except KeyError as exc:
-        raise UsageError(f"--method: {exc.args[0]}") from None
+        hint = "" if args.imports else " (your own method: --import the module that registers it)"
+        raise UsageError(f"--method: {exc.args[0]}{hint}") from None
     params = _parse_set(args.param, option="--param", example="levels=4")
     knobs = [p.name for p in inspect.signature(method).parameters.values() if p.kind is p.KEYWORD_ONLY]
     unknown = sorted(set(params) - set(knobs))
@@ -448,8 +451,9 @@ def cmd_eval_flow(args: argparse.Namespace) -> int:
     pairs = table["scene"].nunique()
     float_format = lambda v: f"{v:.4f}"  # noqa: E731
     setting = ", ".join(f"{k}={v}" for k, v in params.items()) or "default parameters"
-    kind = f"sintel ({pass_} pass)" if fmt == "sintel" else fmt
-    print(f"{args.method} ({setting}) on {pairs} {kind} pair(s) in {args.dir}:")
+    kind = {"sintel": f"{pairs} sintel ({pass_} pass) pair(s)", "pair": "the pair of a pair folder"}.get(
+        fmt, f"{pairs} {fmt} pair(s)")
+    print(f"{args.method} ({setting}) on {kind} in {args.dir}:")
     per_pair = aggregate(table[table["metric"] == "epe_mean"], by=["scene"])
     print(per_pair[["scene", "metric", "value", "unit", "count"]].astype({"count": "int64"})
           .to_string(index=False, float_format=float_format))
@@ -582,6 +586,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pass", dest="pass_", default=None, choices=("clean", "final"),
                    help="Sintel's rendering pass (default clean); only with the sintel layout")
     s.add_argument("--method", required=True, help="flow method name (see aerobench list)")
+    s.add_argument("--import", dest="imports", action="append", default=[], metavar="MODULE",
+                   help="import a module first, e.g. one that registers your own flow method (looked up after the "
+                        "installed packages in the working folder; repeatable)")
     s.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")
     s.set_defaults(fn=cmd_eval_flow)

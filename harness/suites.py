@@ -373,8 +373,10 @@ def load_suite(name_or_path: str | os.PathLike) -> Suite:
     else:
         path = Path(name_or_path)
         if not path.is_file():
+            near = [str(c) for c in (Path(f"{text_name}.yaml"), Path(f"{text_name}.yml")) if c.is_file()]
+            hint = f"; did you mean {near[0]}?" if near else ""
             raise SuiteError(
-                f"{text_name}: no such suite file, and not a built-in suite ({', '.join(builtins)})"
+                f"{text_name}: no such suite file, and not a built-in suite ({', '.join(builtins)}){hint}"
             )
     try:
         data = yaml.load(path.read_text(), Loader=_UniqueKeyLoader)

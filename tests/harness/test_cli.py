@@ -336,9 +336,30 @@ def test_eval_flow_takes_a_plain_pair_folder(tmp_path, capsys, names, reversed_)
     for fmt in (["--format", "pair"], []):
         code, out, err = _eval(capsys, folder, *fmt, "--method", "dis")
         assert code == 0, err
-        assert "on 1 pair pair(s)" in out
+        assert "on the pair of a pair folder in" in out
         epe = float(next(line for line in out.splitlines() if line.startswith("pair:mine epe_mean")).split()[2])
         assert epe < 0.2, out
+
+
+def test_eval_flow_imports_your_own_method(tmp_path, capsys, monkeypatch):
+    root = _middlebury_pair(tmp_path / "data")
+    (tmp_path / "own_eval_flow_xyz.py").write_text(
+        "import numpy as np\n"
+        "from algorithms.registry import register_flow\n\n\n"
+        "@register_flow\n"
+        "def own_eval_one_px(frame0, frame1, *, u_px: float = 1.0):\n"
+        "    h, w = frame0.shape[:2]\n"
+        "    flow = np.zeros((h, w, 2), np.float32)\n"
+        "    flow[..., 0] = u_px\n"
+        "    return flow, np.ones((h, w), bool)\n")
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _eval(capsys, root, "--method", "own_eval_one_px")
+    assert code == 2 and "--import the module that registers it" in err
+    code, out, err = _eval(capsys, root, "--method", "own_eval_one_px", "--import", "own_eval_flow_xyz",
+                           "--param", "u_px=1")
+    assert code == 0, err
+    assert "own_eval_one_px (u_px=1.0) on 1 middlebury pair(s)" in out
+    assert "middlebury:pair epe_mean 0.0000" in out
 
 
 def test_eval_flow_a_folder_that_is_no_pair_says_the_rule(tmp_path, capsys):

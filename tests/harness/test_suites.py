@@ -255,3 +255,11 @@ def test_an_unknown_key_suggests_the_right_one(data, message):
         parse_suite(suite, source="s.yaml")
     assert message in str(exc.value)
     assert "Extra inputs are not permitted" not in str(exc.value)
+
+
+def test_a_suite_name_without_its_yaml_suffix_is_pointed_at_the_file(tmp_path, monkeypatch):
+    (tmp_path / "my-suite.yaml").write_text("name: x\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SuiteError, match=r"my-suite: no such suite file, and not a built-in suite .*; "
+                                         r"did you mean my-suite\.yaml\?"):
+        load_suite("my-suite")
