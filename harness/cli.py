@@ -322,6 +322,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers: expected at least 1, got {args.workers}")
+    _check_out(run_dir, "RUN_DIR")  # the report is written into it
     for option, value in (("--baseline", args.baseline), ("--gate", args.gate), ("--rules", args.rules)):
         if value is not None and not Path(value).is_file():
             raise UsageError(f"{option}: {value}: no such file")
@@ -577,10 +578,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(fn=cmd_report)
 
     s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder or one pair",
-                       description="Score a flow method on a data set with ground-truth flow: per pair and "
+                       description="Score a flow method on a data set with ground-truth flow: per pair and\n"
                                    "pooled over every pair.",
                        epilog=EVAL_FLOW_LAYOUTS, formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("dir", help="the data set folder (see the layouts below)")
+    s.add_argument("dir", metavar="DIR", help="the data set folder (ROOT in the layouts below)")
     s.add_argument("--format", default=None, choices=("middlebury", "sintel", "kitti", "pair"),
                    help="the folder layout (default: found from what the folder holds)")
     s.add_argument("--pass", dest="pass_", default=None, choices=("clean", "final"),

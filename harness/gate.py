@@ -477,7 +477,9 @@ def _is_failed_cell(c: Check) -> bool:
 
 
 def _describe(c: Check) -> str:
-    return (f"{c.group} {c.name}: baseline {c.baseline:.6g} {c.unit}, current {c.current:.6g} {c.unit} "
+    if _is_failed_cell(c):
+        return f"{c.group}: {c.reason}"
+    return (f"{c.group} {c.name}: baseline {_value(c.baseline)} {c.unit}, current {_value(c.current)} {c.unit} "
             f"({'higher' if c.higher_is_better else 'lower'} is better): {c.reason}")
 
 

@@ -447,9 +447,10 @@ def test_baseline_of_a_run_with_a_failed_cell_is_refused_unless_allowed(tmp_path
     assert [(c["scene"], c["pipeline"], c["error"]) for c in recorded] == [
         (f"{FAILED[0]}[noise_sigma=10]", FAILED[2], FAILED_ERROR)]
     # the gate of the same run on it: the failed cell fails the gate, in words, never as nan
-    summary = tmp_path / "gate.md"
-    assert main(["gate", str(run), "--baseline", str(out), "--summary", str(summary)]) == 1
+    summary, junit = tmp_path / "gate.md", tmp_path / "gate.xml"
+    assert main(["gate", str(run), "--baseline", str(out), "--summary", str(summary), "--junit", str(junit)]) == 1
     printed = capsys.readouterr().out
+    assert "nan" not in junit.read_text().lower() and "diverged" in junit.read_text()
     for text in (printed, summary.read_text()):
         assert "nan" not in text.lower(), text
         assert "cell failed" in text and "diverged" in text
