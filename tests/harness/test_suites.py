@@ -263,3 +263,10 @@ def test_a_suite_name_without_its_yaml_suffix_is_pointed_at_the_file(tmp_path, m
     with pytest.raises(SuiteError, match=r"my-suite: no such suite file, and not a built-in suite .*; "
                                          r"did you mean my-suite\.yaml\?"):
         load_suite("my-suite")
+
+
+def test_an_unknown_key_of_a_real_scene_suggests_the_right_one():
+    suite = {"name": "x", "scenes": [{"real": "clip.mp4", "frame": 60}], "seeds": [1], "pipelines": ["thesis-lk"]}
+    with pytest.raises(SuiteError, match=r"s\.yaml: scenes\[0\]\.frame: unknown key; did you mean 'frames'\? "
+                                         r"\(valid: real, label, start, stop, frames,"):
+        parse_suite(suite, source="s.yaml")
