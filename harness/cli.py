@@ -5,21 +5,22 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 
 ::
 
-    aerobench list
+    aerobench list [--full]
     aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
-    aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
+    aerobench eval-flow DIR [--format middlebury|sintel|kitti|pair] [--pass clean|final] --method NAME
+                        [--param KEY=VALUE ...] [--import MODULE ...]
     aerobench eval-video VIDEO --out DIR [--gt FILE] [--gt-format mot|visdrone|uavdt] [--pipelines a,b]
                          [--scale S] [--fps F] [--frames A:B] [--workers N] [--cache DIR] [--no-report] [--quiet]
     aerobench export SEQ_DIR --out DIR [--video NAME.mkv]
-    aerobench baseline RUN_DIR --out FILE
+    aerobench baseline RUN_DIR --out FILE [--allow-failed]
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
 
 Your own flow method: a module that registers it (``algorithms.registry.register_flow``),
-listed under ``imports:`` of a suite; modules in the working folder are importable
-(README, "Benchmark your own method").
+listed under ``imports:`` of a suite; modules beside the suite file, then in the working folder, are
+importable (README, "Benchmark your own method").
 """
 
 from __future__ import annotations
@@ -59,10 +60,13 @@ def _user_errors() -> tuple[type[BaseException], ...]:
             SceneSpecError, OSError)
 
 
-def _one_line(text: str, width: int = 100) -> str:
-    """``text`` on one line (lines joined by "; "), shortened to ``width`` characters."""
+def _one_line(text: str, width: int | None = 100) -> str:
+    """``text`` on one line (lines joined by "; "), shortened to ``width`` characters (None: whole)."""
     lines = [line.strip() for line in (text or "").strip().splitlines() if line.strip()]
-    return textwrap.shorten("; ".join(lines), width, placeholder=" ...") if lines else ""
+    if not lines:
+        return ""
+    joined = "; ".join(lines)
+    return " ".join(joined.split()) if width is None else textwrap.shorten(joined, width, placeholder=" ...")
 
 
 def _error_text(exc: BaseException) -> str:
@@ -73,6 +77,47 @@ def _error_text(exc: BaseException) -> str:
     return _one_line(str(exc), 2000)
 
 
+# --------------------------------------------------------------------------- output paths
+
+
+def _why_not_writable(exc: OSError) -> str:
+    import errno
+
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return "permission denied"
+    if exc.errno == errno.EROFS:
+        return "read-only file system"
+    if exc.errno == errno.ENOSPC:
+        return "no space left on the device"
+    return f"the file system refuses it ({exc.strerror or exc})"
+
+
+def _check_out(path: str | os.PathLike, option: str = "--out", *, file: bool = False) -> None:
+    """Refuse an output path that cannot be made or written, before any work: one UsageError line
+    saying what is wrong with it. ``file``: the path is a file to write (its folder is checked).
+
+    The nearest existing folder on the path is probed by making (and removing) a temporary folder in
+    it, so a read-only mount, a pseudo file system (``/proc``) or a folder of another user is found as
+    the write would find it, whoever runs the command.
+    """
+    import tempfile
+
+    path = Path(path)
+    if path.is_dir() if file else (path.exists() and not path.is_dir()):
+        raise UsageError(f"{option} {path}: is a {'folder' if file else 'file'}; expected a "
+                         f"{'file to write' if file else 'folder'}")
+    probe = path.parent if file else path
+    while not probe.exists() and not probe.is_symlink() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise UsageError(f"{option} {path}: {probe} is a file, not a folder")
+    try:
+        made = tempfile.mkdtemp(prefix=".aerobench-write-check-", dir=probe)
+    except OSError as exc:
+        raise UsageError(f"{option} {path}: cannot create anything in {probe}: {_why_not_writable(exc)}") from None
+    os.rmdir(made)
+
+
 # --------------------------------------------------------------------------- list
 
 
@@ -81,7 +126,7 @@ def _list_presets() -> dict[str, str]:
 
     presets = list_presets()
     if isinstance(presets, dict):
-        return {k: _one_line(str(v)) for k, v in presets.items()}
+        return {k: _one_line(str(v), None) for k, v in presets.items()}
     out = {}
     for name in presets:
         desc = ""
@@ -92,7 +137,20 @@ def _list_presets() -> dict[str, str]:
             desc = getattr(spec, "description", "") or ""
         except Exception:  # a broken preset still lists, without its description
             desc = "(cannot be loaded)"
-        out[name] = _one_line(desc)
+        out[name] = _one_line(desc, None)
+    return out
+
+
+def _list_suites() -> dict[str, str]:
+    """Built-in suite name -> its whole description on one line."""
+    from harness.suites import SuiteError, builtin_suites, load_suite
+
+    out = {}
+    for name, path in builtin_suites().items():
+        try:
+            out[name] = " ".join(load_suite(path).description.split()) or "(undescribed)"
+        except SuiteError:
+            out[name] = "(invalid)"
     return out
 
 
@@ -101,14 +159,14 @@ def _list_pipelines() -> dict[str, str]:
 
     out = {}
     for name, p in pipeline_names().items():
-        out[name] = _one_line(p.get("description") or "")
+        out[name] = _one_line(p.get("description") or "", None)
     return out
 
 
 def _list_metrics() -> dict[str, str]:
     from harness.metrics import METRICS
 
-    return {n: f"[{d.unit}, {'higher' if d.higher_is_better else 'lower'} is better] {_one_line(d.description)}"
+    return {n: f"[{d.unit}, {'higher' if d.higher_is_better else 'lower'} is better] {_one_line(d.description, None)}"
             for n, d in sorted(METRICS.items())}
 
 
@@ -120,7 +178,7 @@ def _list_flow_methods() -> dict[str, str]:
     for name, doc in describe()["flow"].items():
         knobs = [p.name for p in inspect.signature(FLOW_METHODS[name]).parameters.values()
                  if p.kind is p.KEYWORD_ONLY]
-        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc)}"
+        out[name] = f"params: {', '.join(knobs) or 'none'}. {_one_line(doc, None)}"
     return out
 
 
@@ -137,7 +195,7 @@ def _list_stage_keys() -> dict[str, str]:
 def cmd_list(args: argparse.Namespace) -> int:
     from harness.suites import describe_suites
 
-    sections = [("scene presets", _list_presets), ("suites", describe_suites),
+    sections = [("scene presets", _list_presets), ("suites", _list_suites if args.full else describe_suites),
                 ("pipelines", _list_pipelines), ("flow methods", _list_flow_methods),
                 ("pipeline stage keys (the flow key names a flow method)", _list_stage_keys),
                 ("metrics", _list_metrics)]
@@ -147,7 +205,7 @@ def cmd_list(args: argparse.Namespace) -> int:
         width = max((len(k) for k in items), default=0)
         keep_order = title.startswith("pipeline stage keys")  # in the order the stages run
         for name, desc in (items.items() if keep_order else sorted(items.items())):
-            print(f"  {name:<{width}}  {_one_line(desc, 110)}".rstrip())
+            print(f"  {name:<{width}}  {_one_line(desc, None if args.full else 110)}".rstrip())
         print()
     return EXIT_OK
 
@@ -174,10 +232,11 @@ def _parse_set(items: Sequence[str], *, option: str = "--set",
 def cmd_render(args: argparse.Namespace) -> int:
     from scenes import load_scene_spec, render_sequence
 
-    spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: is a file; expected a folder to write the sequence into")
+    _check_out(out)
+    spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     if out.exists() and any(out.iterdir()):
         raise UsageError(f"{out}: the output folder is not empty")
     render_sequence(spec, out, flow_format=args.flow_format)
@@ -230,6 +289,10 @@ def _run(suite: Any, args: argparse.Namespace) -> int:
     """Run ``suite`` (a name, a path or a Suite) as ``aerobench run`` does, report and pick the exit code."""
     from harness.runner import run_suite
 
+    _check_out(args.out)
+    if args.cache is not None:
+        _check_out(args.cache, "--cache")
+
     with ExitStack() as stack:  # the report's figure processes, if started early
         early: dict[str, Any] = {}
 
@@ -268,9 +331,19 @@ def cmd_report(args: argparse.Namespace) -> int:
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers: expected at least 1, got {args.workers}")
+    _check_out(run_dir, "RUN_DIR")  # the report is written into it
     for option, value in (("--baseline", args.baseline), ("--gate", args.gate), ("--rules", args.rules)):
         if value is not None and not Path(value).is_file():
             raise UsageError(f"{option}: {value}: no such file")
+    from harness import gate
+
+    # a file the gate refuses (GateError, exit 2) is refused here too, before the old report is touched
+    if args.baseline is not None:
+        gate.read_baseline(args.baseline)
+    if args.gate is not None:
+        gate.read_verdict(args.gate)
+    if args.rules is not None:
+        gate.load_rules(args.rules)
     report = _write_report(run_dir, args.baseline, args.gate, args.rules, workers=args.workers,
                            progress=not args.quiet)
     print(f"report: {_paths(report)}")
@@ -339,6 +412,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UsageError(f"--out {out}: exists and is not an empty folder")
+    _check_out(out)
     seq = open_sequence(args.seq_dir)
     if args.video is not None and Path(args.video).suffix.lower() not in (".mkv", ".avi", ".mp4", ".mov"):
         raise UsageError(f"--video: expected a .mkv, .avi (FFV1), .mp4 or .mov (H.264 RGB, crf 0) name, "
@@ -356,34 +430,117 @@ def cmd_export(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- datasets, gate
 
 
+_KIND_WORDS = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
+
+
+def _param_kinds(method: Any) -> dict[str, tuple[type, ...]]:
+    """Keyword parameter -> the accepted value types, from the method's annotations (else its default's
+    type); ``type(None)`` among them when it may be null; an empty tuple when nothing is known."""
+    import typing
+
+    try:
+        hints = typing.get_type_hints(method)
+    except Exception:  # an annotation that cannot be evaluated: fall back on the defaults
+        hints = {}
+    out = {}
+    for p in inspect.signature(method).parameters.values():
+        if p.kind is not p.KEYWORD_ONLY:
+            continue
+        hint = hints.get(p.name)
+        kinds = tuple(a for a in (typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, _union_type())
+                                  else (hint,)) if isinstance(a, type))
+        if not kinds and p.default is not p.empty and p.default is not None:
+            kinds = (type(p.default),)
+        out[p.name] = kinds if any(k in _KIND_WORDS for k in kinds) else ()
+    return out
+
+
+def _union_type() -> Any:
+    import types
+
+    return types.UnionType
+
+
+def _coerce_params(params: dict[str, Any], kinds: dict[str, tuple[type, ...]]) -> dict[str, Any]:
+    """``params`` (values as YAML read them) checked against the types of the method's parameters:
+    an int where a float is expected becomes a float; anything else raises UsageError naming the key."""
+    out = {}
+    for key, value in params.items():
+        accepted = kinds.get(key, ())
+        if not accepted or (value is None and type(None) in accepted):
+            out[key] = value
+            continue
+        if bool in accepted and isinstance(value, bool):
+            out[key] = value
+        elif int in accepted and isinstance(value, int) and not isinstance(value, bool):
+            out[key] = value
+        elif float in accepted and isinstance(value, (int, float)) and not isinstance(value, bool):
+            out[key] = float(value)
+        elif str in accepted and isinstance(value, str):
+            out[key] = value
+        else:
+            words = [_KIND_WORDS[k] for k in accepted if k in _KIND_WORDS]
+            if type(None) in accepted:
+                words.append("null")
+            raise UsageError(f"--param {key}: expected {' or '.join(words)}, got {value!r}")
+    return out
+
+
+EVAL_FLOW_LAYOUTS = """\
+folder layouts (--format; without it, found from what the folder holds):
+  sintel      the training folder: ROOT/clean/<scene>/frame_NNNN.png (or ROOT/final/..., --pass final)
+              and ROOT/flow/<scene>/frame_NNNN.flo; ROOT/invalid/<scene>/frame_NNNN.png used when present
+  kitti       ROOT/image_2/NNNNNN_10.png, NNNNNN_11.png and ROOT/flow_occ/NNNNNN_10.png: a 16-bit RGB PNG
+              (u, v, valid), u = (R - 2^15) / 64 px
+  middlebury  every folder under ROOT holding one .flo and two PNG frames numbered in a row with the same
+              prefix: frame10.png frame11.png flow10.flo; yos9.png yos10.png correct_yos.flo (Yosemite's sky
+              masked)
+  pair        ROOT itself holds two frame images (.png .jpg .ppm .pgm .bmp .tif) and one truth file: a .flo,
+              or else the one 16-bit RGB PNG (KITTI encoding); the frames in name order, numbers compared
+              as numbers (img9.png before img10.png); other files are ignored
+"""
+
+
 def cmd_eval_flow(args: argparse.Namespace) -> int:
-    from harness.datasets import evaluate_flow_dataset
+    from harness.datasets import FlowMethodError, detect_format, evaluate_flow_dataset
 
     from harness.metrics import aggregate
 
     if not Path(args.dir).is_dir():
         raise UsageError(f"{args.dir}: no such folder")
+    fmt = args.format or detect_format(args.dir)
+    if args.pass_ is not None and fmt != "sintel":
+        raise UsageError(f"--pass: only for --format sintel, got --format {fmt}")
+    pass_ = args.pass_ or "clean"
     import algorithms.pipeline  # noqa: F401  (importing it registers every flow method)
     from algorithms.registry import get_flow_method
+    from harness.suites import import_modules
 
+    import_modules(args.imports, source="--import")  # your own flow method's module (the working folder too)
     try:
         method = get_flow_method(args.method)
     except KeyError as exc:
-        raise UsageError(f"--method: {exc.args[0]}") from None
+        hint = "" if args.imports else " (your own method: --import the module that registers it)"
+        raise UsageError(f"--method: {exc.args[0]}{hint}") from None
     params = _parse_set(args.param, option="--param", example="levels=4")
     knobs = [p.name for p in inspect.signature(method).parameters.values() if p.kind is p.KEYWORD_ONLY]
     unknown = sorted(set(params) - set(knobs))
     if unknown:
         raise UsageError(f"--param: {args.method} has no parameter {', '.join(unknown)}; "
                          f"valid: {', '.join(knobs)}")
-    try:
-        table = evaluate_flow_dataset(args.dir, format=args.format, method=args.method, params=params)
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"--param: {args.method} rejected {params}: {exc}") from None
+    params = _coerce_params(params, _param_kinds(method))
+    try:  # a data problem (missing file, truncated .flo, 8-bit KITTI PNG) propagates naming its file
+        table = evaluate_flow_dataset(args.dir, format=fmt, method=args.method, params=params, pass_=pass_)
+    except FlowMethodError as exc:
+        if params:
+            raise UsageError(f"--param: {args.method} rejected {params} on pair {exc.pair}: {exc.cause}") from None
+        raise UsageError(f"--method {args.method} failed on pair {exc.pair}: {exc.cause}") from None
     pairs = table["scene"].nunique()
     float_format = lambda v: f"{v:.4f}"  # noqa: E731
     setting = ", ".join(f"{k}={v}" for k, v in params.items()) or "default parameters"
-    print(f"{args.method} ({setting}) on {pairs} {args.format} pair(s) in {args.dir}:")
+    kind = {"sintel": f"{pairs} sintel ({pass_} pass) pair(s)", "pair": "the pair of a pair folder"}.get(
+        fmt, f"{pairs} {fmt} pair(s)")
+    print(f"{args.method} ({setting}) on {kind} in {args.dir}:")
     per_pair = aggregate(table[table["metric"] == "epe_mean"], by=["scene"])
     print(per_pair[["scene", "metric", "value", "unit", "count"]].astype({"count": "int64"})
           .to_string(index=False, float_format=float_format))
@@ -400,7 +557,12 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not (run_dir / "results.parquet").is_file():
         raise UsageError(f"{run_dir}: not a finished run folder (no results.parquet)")
-    path = gate.baseline_from_run(run_dir, args.out)
+    _check_out(args.out, file=True)
+    path = gate.baseline_from_run(run_dir, args.out, allow_failed=args.allow_failed)
+    failed = gate.read_baseline(path).get("failed_cells") or []
+    if failed:
+        print(f"aerobench: warning: {len(failed)} cell(s) failed; their metrics are not in the baseline "
+              f"(recorded under failed_cells; a gate on it says so)", file=sys.stderr)
     print(f"baseline: {path}")
     return EXIT_OK
 
@@ -417,6 +579,9 @@ def cmd_gate(args: argparse.Namespace) -> int:
     if args.rules is None and not gate.DEFAULT_RULES.is_file():  # an install without the package data
         print(f"aerobench: warning: {gate.DEFAULT_RULES} is missing; gating with the built-in defaults",
               file=sys.stderr)
+    for option, value in (("--junit", args.junit), ("--summary", args.summary), ("--json", args.json)):
+        if value is not None:
+            _check_out(value, option, file=True)
     rules = gate.load_rules(args.rules or (gate.DEFAULT_RULES if gate.DEFAULT_RULES.is_file() else None))
     outcome = gate.compare(run_dir, gate.read_baseline(args.baseline), rules)
     markdown = gate.to_markdown(outcome)
@@ -441,16 +606,25 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Your own flow method: write a module that registers it with "
                "algorithms.registry.register_flow, list the module under `imports:` in a suite YAML and use "
                "the method in an inline pipeline ({name: mine, base: thesis-lk, spec: {flow: {method: NAME}}}); "
-               "modules in the working folder are importable. `aerobench list` shows the flow methods and "
+               "modules beside the suite file, then in the working folder, are importable. `aerobench list` shows the flow methods and "
                "the pipeline stage keys; README.md, 'Benchmark your own method', has a complete example.")
+    p.add_argument("--version", action="version", version=f"aerobench {_version()}",
+                   help="print aerobench's version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics")
+    s = sub.add_parser("list", help="scene presets, suites, pipelines and metrics",
+                       description="List every name a suite or command takes: scene presets, suites, pipelines, "
+                                   "flow methods with their parameters, pipeline stage keys and metrics, one line "
+                                   "each.")
+    s.add_argument("-v", "--full", action="store_true",
+                   help="show each description whole instead of cutting it at the line's end")
     s.set_defaults(fn=cmd_list)
 
-    s = sub.add_parser("render", help="render one scene into a sequence folder")
+    s = sub.add_parser("render", help="render one scene into a sequence folder",
+                       description="Render one scene (a preset or a scene YAML) into a sequence folder: frames, "
+                                   "ground-truth flow, valid masks, instances, camera path, tracks and a preview.")
     s.add_argument("scene", help="preset name or scene YAML")
-    s.add_argument("--out", required=True, help="the sequence folder to write")
+    s.add_argument("--out", required=True, help="the sequence folder to write (absent or empty)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter by dotted key (repeatable)")
     s.add_argument("--flow-format", choices=("npz", "flo"), default="npz",
@@ -458,20 +632,26 @@ def build_parser() -> argparse.ArgumentParser:
                         ".flo in flow/ and flow_camera/ (about 10x larger)")
     s.set_defaults(fn=cmd_render)
 
-    s = sub.add_parser("run", help="run a suite into a run folder")
+    s = sub.add_parser("run", help="run a suite into a run folder",
+                       description="Run a suite: render (or reuse from the cache) its scenes, run every pipeline on "
+                                   "them, score them and write results.parquet and the report into the run folder.")
     s.add_argument("suite", help="built-in suite name or suite YAML")
     s.add_argument("--out", required=True, help="the run folder (must be empty unless --resume)")
     s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
-    s.add_argument("--executor", choices=EXECUTORS, default="process")
+    s.add_argument("--executor", choices=EXECUTORS, default="process",
+                   help="where the cells run: local worker processes (default), a dask cluster at --scheduler, "
+                        "or a local dask cluster")
     s.add_argument("--scheduler", default=None, help="dask scheduler address (with --executor dask)")
     s.add_argument("--cache", default=None, help="render cache (default: $AEROBENCH_CACHE or ~/.cache/aerobench)")
     s.add_argument("--no-report", action="store_true", help="do not write report.html / report.md")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_run)
 
-    s = sub.add_parser("report", help="(re)write report.html and report.md of a run")
-    s.add_argument("run_dir")
+    s = sub.add_parser("report", help="(re)write report.html and report.md of a run",
+                       description="Rewrite report.html and report.md of a finished run from its results table, "
+                                   "optionally compared with a baseline and headed by a gate verdict.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
     s.add_argument("--baseline", default=None,
                    help="a baseline JSON to compare against (directions and tolerances from the gate rules)")
     s.add_argument("--gate", default=None, metavar="VERDICT_JSON",
@@ -483,16 +663,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_report)
 
-    s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder")
-    s.add_argument("dir")
-    s.add_argument("--format", required=True, choices=("middlebury", "sintel", "kitti"))
+    s = sub.add_parser("eval-flow", help="score a flow method on a Middlebury / Sintel / KITTI folder or one pair",
+                       description="Score a flow method on a data set with ground-truth flow: per pair and\n"
+                                   "pooled over every pair.",
+                       epilog=EVAL_FLOW_LAYOUTS, formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("dir", metavar="DIR", help="the data set folder (ROOT in the layouts below)")
+    s.add_argument("--format", default=None, choices=("middlebury", "sintel", "kitti", "pair"),
+                   help="the folder layout (default: found from what the folder holds)")
+    s.add_argument("--pass", dest="pass_", default=None, choices=("clean", "final"),
+                   help="Sintel's rendering pass (default clean); only with the sintel layout")
     s.add_argument("--method", required=True, help="flow method name (see aerobench list)")
+    s.add_argument("--import", dest="imports", action="append", default=[], metavar="MODULE",
+                   help="import a module first, e.g. one that registers your own flow method (looked up after the "
+                        "installed packages in the working folder; repeatable)")
     s.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")
     s.set_defaults(fn=cmd_eval_flow)
 
     s = sub.add_parser("eval-video", help="run the pipelines on one real clip (a video or a frames folder) "
-                                          "and score them against its annotations")
+                                          "and score them against its annotations",
+                       description="Run the pipelines on one real clip (a video or a folder of frames) and score "
+                                   "them against its annotations: a run folder and a report as `aerobench run` "
+                                   "writes.")
     s.add_argument("video", help="a video (.mp4 .mov .avi .mkv) or a folder of frames (.png .jpg)")
     s.add_argument("--out", required=True, help="the run folder (must be empty)")
     s.add_argument("--gt", default=None, help="MOTChallenge-style ground truth (gt.txt); without it only the "
@@ -510,27 +702,46 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(fn=cmd_eval_video)
 
     s = sub.add_parser("export", help="write a sequence folder as MOTChallenge files (img1/ frames, gt/gt.txt) "
-                                      "and optionally a lossless video")
+                                      "and optionally a lossless video",
+                       description="Write a sequence folder as MOTChallenge files (img1/ frames, gt/gt.txt) and "
+                                   "optionally as a lossless video.")
     s.add_argument("seq_dir", help="a sequence folder (aerobench render, or an entry of the render cache)")
     s.add_argument("--out", required=True, help="the folder to write (must be empty)")
     s.add_argument("--video", default=None, help="also write the frames as this lossless video (NAME.mkv or .avi: "
                                                   "FFV1; NAME.mp4 or .mov: H.264 in RGB at crf 0)")
     s.set_defaults(fn=cmd_export)
 
-    s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")
-    s.add_argument("run_dir")
+    s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)",
+                       description="Write the baseline of a finished run: its aggregated metrics, for `aerobench "
+                                   "gate` to compare later runs with.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
     s.add_argument("--out", required=True, help="the baseline JSON to write")
+    s.add_argument("--allow-failed", action="store_true",
+                   help="write the baseline although cells failed (they are recorded in it; their metrics are "
+                        "missing); without it, a run with a failed cell is refused")
     s.set_defaults(fn=cmd_baseline)
 
-    s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression")
-    s.add_argument("run_dir")
-    s.add_argument("--baseline", required=True)
+    s = sub.add_parser("gate", help="compare a run with a baseline: exit 1 on a regression",
+                       description="Compare a finished run with a baseline by tolerance rules: exit 0 pass, 1 a "
+                                   "regression or a failed cell, 2 bad usage or input.")
+    s.add_argument("run_dir", help="a finished run folder (holds results.parquet)")
+    s.add_argument("--baseline", required=True,
+                   help="the baseline JSON written by `aerobench baseline` (a missing one is an error, not a pass)")
     s.add_argument("--rules", default=None, help="gate rules YAML (default: gate_rules.yaml of aerobench)")
     s.add_argument("--junit", default=None, help="write a JUnit XML report here")
     s.add_argument("--summary", default=None, help="write the Markdown summary here (e.g. $GITHUB_STEP_SUMMARY)")
     s.add_argument("--json", default=None, help="write the machine-readable verdict here (for `aerobench report --gate`)")
     s.set_defaults(fn=cmd_gate)
     return p
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("aerobench")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "(not installed)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

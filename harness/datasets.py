@@ -1,7 +1,8 @@
 """Readers for external optical-flow data sets with ground truth, and their evaluation.
 
-Three layouts, each read into :class:`FlowPair` (frames as stored, ground-truth
-flow in our layout with NaN where unknown, and a ``valid`` mask):
+Four layouts, each read into :class:`FlowPair` (frames as stored, ground-truth
+flow in our layout with NaN where unknown, and a ``valid`` mask);
+:func:`detect_format` tells them apart by the folders and files present:
 
 * ``middlebury``: any folder under ``root`` holding one ``.flo`` file and two
   PNG frames whose names end in consecutive numbers with the same prefix
@@ -18,15 +19,22 @@ flow in our layout with NaN where unknown, and a ``valid`` mask):
   ``root/flow_occ/NNNNNN_10.png`` (or ``flow_noc``): a 16-bit RGB PNG whose
   channels are u, v, valid; ``u = (R - 2**15) / 64`` px, valid where B > 0.
   A PNG of another bit depth is refused.
+* ``pair``: one folder holding exactly two frame images (``.png``, ``.jpg``,
+  ``.ppm``, ``.pgm``, ``.bmp``, ``.tif``) and one ground-truth file: a ``.flo``,
+  or, without one, the only 16-bit RGB PNG among the images (KITTI encoding).
+  The frames are taken in name order, numbers compared as numbers
+  (``img9.png`` before ``img10.png``); other files are ignored.
 
 Public functions
 ----------------
 FlowPair                                      name, frame0, frame1, flow (H, W, 2), valid (H, W)
-read_middlebury(root), read_sintel(root, *, pass_="clean"), read_kitti(root, *, occ=True)
+read_middlebury(root), read_sintel(root, *, pass_="clean"), read_kitti(root, *, occ=True), read_pair(root)
 read_kitti_flow(path), write_kitti_flow(path, flow, valid)
 FORMATS                                       format name -> reader
-iter_pairs(root, *, format)                   the pairs of a data set
-evaluate_flow_dataset(root, *, format, method, params=None) -> DataFrame of results-schema rows
+detect_format(root) -> str                    the layout of a folder (sintel, kitti, pair or middlebury)
+iter_pairs(root, *, format, pass_="clean")    the pairs of a data set
+evaluate_flow_dataset(root, *, format, method, params=None, pass_="clean") -> DataFrame of results-schema rows
+    a data problem raises FormatError (naming the file), the method's own error FlowMethodError
 """
 
 from __future__ import annotations
@@ -46,8 +54,20 @@ from harness.results import rows_to_frame
 from scenes.formats import (KITTI_OFFSET, KITTI_SCALE, FormatError, read_flo, read_kitti_flow, read_png,
                             write_kitti_flow)
 
-__all__ = ["FlowPair", "FORMATS", "read_middlebury", "read_sintel", "read_kitti", "read_kitti_flow",
-           "write_kitti_flow", "iter_pairs", "evaluate_flow_dataset", "KITTI_SCALE", "KITTI_OFFSET"]
+__all__ = ["FlowPair", "FORMATS", "FlowMethodError", "read_middlebury", "read_sintel", "read_kitti", "read_pair",
+           "read_kitti_flow", "write_kitti_flow", "detect_format", "iter_pairs", "evaluate_flow_dataset",
+           "KITTI_SCALE", "KITTI_OFFSET", "IMAGE_SUFFIXES"]
+
+# frame images of a pair folder (read by OpenCV as stored)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".bmp", ".tif", ".tiff")
+
+
+class FlowMethodError(ValueError):
+    """The flow method itself raised on a pair (not the data): ``method``, ``pair``, ``params``, ``cause``."""
+
+    def __init__(self, method: str, pair: str, params: Mapping, cause: BaseException):
+        super().__init__(f"{method} failed on pair {pair}: {cause}")
+        self.method, self.pair, self.params, self.cause = method, pair, dict(params), cause
 
 
 @dataclass
@@ -95,11 +115,17 @@ def _middlebury_folder(folder: Path) -> FlowPair | None:
     flow = read_flo(flos[0])
     valid = np.isfinite(flow).all(-1)
     if folder.name.lower().startswith("yos") or prefix.lower().startswith("yos"):
-        black = (frame0 == 0) if frame0.ndim == 2 else (frame0 == 0).all(-1)
-        sky = np.cumprod(black, axis=0).astype(bool)  # black pixels connected to the top edge in their column
-        placeholder = (flow[..., 0] == 1.0) & (flow[..., 1] == 0.0)
-        valid &= ~(sky | placeholder)
+        valid &= ~_yosemite_sky(frame0, flow)
     return _check_pair(FlowPair(folder.name, frame0, frame1, flow, valid), str(folder))
+
+
+def _yosemite_sky(frame0: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """Yosemite's unknown pixels, (H, W) bool: the black sky (black pixels connected to the top edge in
+    their column) and the placeholder truth (1, 0)."""
+    black = (frame0 == 0) if frame0.ndim == 2 else (frame0 == 0).all(-1)
+    sky = np.cumprod(black, axis=0).astype(bool)
+    placeholder = (flow[..., 0] == 1.0) & (flow[..., 1] == 0.0)
+    return sky | placeholder
 
 
 def read_middlebury(root: str | os.PathLike) -> list[FlowPair]:
@@ -126,7 +152,9 @@ def read_sintel(root: str | os.PathLike, *, pass_: str = "clean") -> list[FlowPa
     if pass_ not in ("clean", "final"):
         raise ValueError(f"pass_: expected 'clean' or 'final', got {pass_!r}")
     if not (root / pass_).is_dir() or not (root / "flow").is_dir():
-        raise FormatError(f"{root}: not a Sintel layout: expected folders {pass_}/ and flow/")
+        raise FormatError(f"{root}: not a Sintel layout: expected folders {pass_}/ and flow/ "
+                          f"(ROOT/{pass_}/<scene>/frame_NNNN.png, ROOT/flow/<scene>/frame_NNNN.flo: give the "
+                          f"training folder, not a scene folder)")
     out = []
     for flo in sorted((root / "flow").glob("*/*.flo")):
         scene, stem = flo.parent.name, flo.stem
@@ -147,7 +175,7 @@ def read_sintel(root: str | os.PathLike, *, pass_: str = "clean") -> list[FlowPa
             valid &= (mask == 0) if mask.ndim == 2 else (mask == 0).all(-1)
         out.append(_check_pair(FlowPair(f"{scene}/{stem}", read_png(f0), read_png(f1), flow, valid), str(flo)))
     if not out:
-        raise FormatError(f"{root}: no flow/<scene>/frame_NNNN.flo files")
+        raise FormatError(f"{root / 'flow'}: no <scene>/frame_NNNN.flo files")
     return out
 
 
@@ -172,22 +200,93 @@ def read_kitti(root: str | os.PathLike, *, occ: bool = True) -> list[FlowPair]:
     return out
 
 
+# --------------------------------------------------------------------------- a plain pair folder
+
+_PAIR_RULE = ("expected two frame images and one ground-truth file (a .flo, or a 16-bit RGB KITTI flow PNG)")
+
+
+def _natural_key(name: str) -> list:
+    """Sort key comparing the digits of a name as numbers: ``img9`` before ``img10``."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+
+
+def _is_rgb16_png(path: Path) -> bool:
+    """Whether ``path`` is a 16-bit RGB(A) PNG, from its IHDR chunk (bit depth, colour type)."""
+    with open(path, "rb") as fh:
+        head = fh.read(26)
+    return (len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR"
+            and head[24] == 16 and head[25] in (2, 6))
+
+
+def _pair_files(folder: Path) -> tuple[Path, Path, Path] | str:
+    """``(frame0, frame1, truth)`` of a pair folder, or what is wrong with it (one line)."""
+    files = [p for p in folder.iterdir() if p.is_file()]
+    flos = [p for p in files if p.suffix.lower() == ".flo"]
+    images = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    rgb16 = [p for p in images if p.suffix.lower() == ".png" and _is_rgb16_png(p)]
+    found = f"found {len(images)} image(s), {len(flos)} .flo, {len(rgb16)} 16-bit PNG"
+    if len(flos) == 1:
+        truth, frames = flos[0], images
+    elif not flos and len(rgb16) == 1:
+        truth, frames = rgb16[0], [p for p in images if p != rgb16[0]]
+    else:
+        return f"{_PAIR_RULE}; {found}"
+    if len(frames) != 2:
+        return f"{_PAIR_RULE}; {found}"
+    frame0, frame1 = sorted(frames, key=lambda p: _natural_key(p.name))
+    return frame0, frame1, truth
+
+
+def read_pair(root: str | os.PathLike) -> list[FlowPair]:
+    """The one pair of a plain pair folder (see the module docstring for the rule), as a list."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such folder")
+    files = _pair_files(root)
+    if isinstance(files, str):
+        raise FormatError(f"{root}: not a pair folder: {files}")
+    f0, f1, truth = files
+    if truth.suffix.lower() == ".flo":
+        flow = read_flo(truth)
+        valid = np.isfinite(flow).all(-1)
+    else:
+        flow, valid = read_kitti_flow(truth)
+    frame0, frame1 = read_png(f0), read_png(f1)
+    if root.name.lower().startswith("yos") or f0.name.lower().startswith("yos"):
+        valid &= ~_yosemite_sky(frame0, flow)
+    return [_check_pair(FlowPair(root.name, frame0, frame1, flow, valid), str(truth))]
+
+
 FORMATS: dict[str, Callable[..., list[FlowPair]]] = {
-    "middlebury": read_middlebury, "sintel": read_sintel, "kitti": read_kitti,
+    "middlebury": read_middlebury, "sintel": read_sintel, "kitti": read_kitti, "pair": read_pair,
 }
 
 
-def iter_pairs(root: str | os.PathLike, *, format: str) -> Iterator[FlowPair]:
-    """The pairs of the data set at ``root`` in ``format`` (one of :data:`FORMATS`)."""
+def detect_format(root: str | os.PathLike) -> str:
+    """The layout of the folder ``root``: ``sintel`` (``clean/`` or ``final/`` beside ``flow/``),
+    ``kitti`` (``image_2/``), ``pair`` (two frames and one truth file in it), else ``middlebury``."""
+    root = Path(root)
+    if (root / "flow").is_dir() and ((root / "clean").is_dir() or (root / "final").is_dir()):
+        return "sintel"
+    if (root / "image_2").is_dir():
+        return "kitti"
+    if root.is_dir() and not isinstance(_pair_files(root), str):
+        return "pair"
+    return "middlebury"
+
+
+def iter_pairs(root: str | os.PathLike, *, format: str, pass_: str = "clean") -> Iterator[FlowPair]:
+    """The pairs of the data set at ``root`` in ``format`` (one of :data:`FORMATS`); ``pass_`` is
+    Sintel's pass ("clean" or "final")."""
     try:
         reader = FORMATS[format]
     except KeyError:
         raise KeyError(f"unknown data set format {format!r}; valid: {', '.join(FORMATS)}") from None
-    yield from reader(root)
+    yield from (reader(root, pass_=pass_) if format == "sintel" else reader(root))
 
 
 def evaluate_flow_dataset(root: str | os.PathLike, *, format: str, method: str | Callable,
-                          params: Mapping | None = None) -> pd.DataFrame:
+                          params: Mapping | None = None, pass_: str = "clean") -> pd.DataFrame:
     """Run a flow method on every pair of a data set and score it (region "all", motion "total").
 
     Returns a results-schema table (:func:`harness.results.rows_to_frame`):
@@ -196,6 +295,12 @@ def evaluate_flow_dataset(root: str | os.PathLike, *, format: str, method: str |
     name of ``algorithms.registry.FLOW_METHODS`` or a callable of the same
     signature ``(frame0, frame1, **params) -> (flow, valid)``, so
     ``summarize`` / ``aggregate`` work on it as on synthetic results.
+    ``pass_`` is Sintel's pass ("clean" or "final").
+
+    Every pair is read before the method runs: a data problem raises
+    :class:`~scenes.formats.FormatError` (or ``OSError``) naming the file; a
+    ``TypeError`` or ``ValueError`` of the method raises :class:`FlowMethodError`
+    naming the method and the pair.
     """
     if isinstance(method, str):
         import algorithms.pipeline  # noqa: F401  (its imports fill the flow method registry)
@@ -206,8 +311,11 @@ def evaluate_flow_dataset(root: str | os.PathLike, *, format: str, method: str |
     name = method if isinstance(method, str) else getattr(method, "__name__", "method")
     params = dict(params or {})
     parts = []
-    for pair in iter_pairs(root, format=format):
-        flow, valid = fn(pair.frame0, pair.frame1, **params)
+    for pair in list(iter_pairs(root, format=format, pass_=pass_)):
+        try:
+            flow, valid = fn(pair.frame0, pair.frame1, **params)
+        except (TypeError, ValueError) as exc:
+            raise FlowMethodError(name, pair.name, params, exc) from exc
         rows = score_flow(flow, pair.flow, pair.valid, valid_est=valid, regions=("all",), motion="total", frame=0)
         parts.append(rows_to_frame(rows, cell_id=f"{format}:{pair.name}:{name}", scene=f"{format}:{pair.name}",
                                    pipeline=name))

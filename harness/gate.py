@@ -26,7 +26,8 @@ even when the other seeds fill in its aggregates.
 
 Public functions
 ----------------
-make_baseline(results_df, run_meta) -> dict, baseline_from_run(run_dir, out_path) -> Path
+make_baseline(results_df, run_meta) -> dict, baseline_from_run(run_dir, out_path, *, allow_failed=False) -> Path
+failed_cells(results_df) -> list[dict]     the failed cells of a results table (a baseline records them)
 write_baseline(baseline, path), read_baseline(path)
 parse_rule(text) -> Rule, load_rules(path=None) -> dict[str, Rule], rules_from_mapping(mapping)
 compare(current, baseline, rules=None, *, suite=None, machine=None) -> GateResult
@@ -60,7 +61,7 @@ from scenes.formats import atomic_write_bytes
 
 __all__ = ["GateError", "Rule", "Check", "GateResult", "BASELINE_FORMAT", "VERDICT_FORMAT", "DEFAULT_RULES",
            "DEFAULT_ABS", "DEFAULT_REL", "change", "verdict_dict", "write_verdict", "read_verdict",
-           "make_baseline", "baseline_from_run", "write_baseline", "read_baseline", "parse_rule", "load_rules",
+           "make_baseline", "baseline_from_run", "failed_cells", "write_baseline", "read_baseline", "parse_rule", "load_rules",
            "rules_from_mapping", "compare", "to_junit_xml", "to_markdown"]
 
 BASELINE_FORMAT = "aerobench-baseline/1"
@@ -178,12 +179,37 @@ def _meta_suite(run_meta: Mapping) -> str:
     return str(s.get("name", "")) if isinstance(s, Mapping) else str(s)
 
 
+def failed_cells(results_df: pd.DataFrame) -> list[dict]:
+    """The failed cells of a results table, one dict each: ``cell_id, scene, seed, pipeline, sweep_param,
+    sweep_value, error`` (strings; seed an int), in table order; empty for a summary table."""
+    if "status" not in results_df.columns:
+        return []
+    bad = results_df[results_df["status"] != "ok"]
+    if "cell_id" in bad.columns:
+        bad = bad.drop_duplicates("cell_id")
+    out = []
+    for r in bad.to_dict("records"):
+        seed = r.get("seed")
+        out.append({"cell_id": str(r.get("cell_id", "")), "scene": str(r.get("scene", "")),
+                    "seed": int(seed) if seed is not None and not pd.isna(seed) else None,
+                    "pipeline": str(r.get("pipeline", "")), "sweep_param": str(r.get("sweep_param") or ""),
+                    "sweep_value": str(r.get("sweep_value") or ""), "error": str(r.get("error") or "no result")})
+    return out
+
+
+def _cell_words(cell: Mapping) -> str:
+    sweep = f" {cell['sweep_param']}={cell['sweep_value']}" if cell.get("sweep_param") and \
+        f"{cell['sweep_param']}=" not in cell["scene"] else ""
+    return f"{cell['scene']}{sweep} seed {cell['seed']} x {cell['pipeline']}: {cell['error']}"
+
+
 def make_baseline(results_df: pd.DataFrame, run_meta: Mapping) -> dict:
     """A baseline from a run's results (or summary) and its run.json contents.
 
     ``run_meta`` keys used: ``suite`` (name), ``config_hash``, ``provenance.machine``
     (or ``machine``), ``provenance.git_commit``. For a run folder, see
-    :func:`baseline_from_run`.
+    :func:`baseline_from_run`. The run's failed cells (:func:`failed_cells`) are recorded
+    under ``failed_cells``: their metrics are not in the baseline.
     """
     if not isinstance(run_meta, Mapping):
         raise TypeError(f"make_baseline(results_df, run_meta): run_meta must be the run.json dict, got "
@@ -204,13 +230,24 @@ def make_baseline(results_df: pd.DataFrame, run_meta: Mapping) -> dict:
     return {"format": BASELINE_FORMAT, "suite": suite, "config_hash": str(run_meta.get("config_hash", "")),
             "machine": _meta_machine(run_meta),
             "git_commit": str((run_meta.get("provenance") or {}).get("git_commit", "")),
-            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), "metrics": entries}
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), "metrics": entries,
+            "failed_cells": failed_cells(results_df)}
 
 
-def baseline_from_run(run_dir: str | os.PathLike, out_path: str | os.PathLike) -> Path:
-    """Read a run folder (results.parquet + run.json), make its baseline and write it to ``out_path``."""
-    baseline = make_baseline(read_results(run_dir), read_run_json(run_dir))
-    return write_baseline(baseline, out_path)
+def baseline_from_run(run_dir: str | os.PathLike, out_path: str | os.PathLike, *,
+                      allow_failed: bool = False) -> Path:
+    """Read a run folder (results.parquet + run.json), make its baseline and write it to ``out_path``.
+
+    A run with a failed cell is refused (:class:`GateError` naming the cells): its baseline would
+    silently lack that cell's metrics. ``allow_failed`` writes it anyway, the cells recorded in it.
+    """
+    results = read_results(run_dir)
+    failed = failed_cells(results)
+    if failed and not allow_failed:
+        raise GateError(f"{run_dir}: {len(failed)} cell(s) failed, so the baseline would lack their metrics: "
+                        + "; ".join(_cell_words(c) for c in failed[:5]) + (" ..." if len(failed) > 5 else "")
+                        + "; re-run them (aerobench run SUITE --out RUN --resume), or pass --allow-failed")
+    return write_baseline(make_baseline(results, read_run_json(run_dir)), out_path)
 
 
 def _num(x) -> float | None:
@@ -372,6 +409,8 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
             bad = current[current["status"] != "ok"].drop_duplicates("cell_id")
             msg.append(f"{len(bad)} cell(s) failed: " + "; ".join(
                 f"{r.scene}/{r.pipeline}: {r.error}" for r in bad.head(5).itertuples()))
+        if baseline.get("failed_cells"):
+            msg.append(_allow_failed_note(baseline))
         raise GateError("metrics on one side only (re-make the baseline if the suite changed): " + " | ".join(msg))
     if not base and not cur:
         raise GateError("nothing to compare: neither the baseline nor the results hold a metric")
@@ -381,6 +420,8 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
                             f"current machine {machine!r}")
     if suite is None:
         result.notes.append("suite name not given: not checked against the baseline's")
+    if baseline.get("failed_cells"):
+        result.notes.append(_allow_failed_note(baseline))
     for k in sorted(base):
         b, c = base[k], cur[k]
         key = dict(zip(KEY, k))
@@ -418,10 +459,27 @@ def compare(current: pd.DataFrame | str | os.PathLike, baseline: Mapping | str |
     return result
 
 
+def _allow_failed_note(baseline: Mapping) -> str:
+    cells = baseline.get("failed_cells") or []
+    return (f"the baseline was made with --allow-failed from a run with {len(cells)} failed cell(s), whose metrics "
+            "are not in it: " + "; ".join(_cell_words(c) for c in cells[:5]) + (" ..." if len(cells) > 5 else ""))
+
+
 # --------------------------------------------------------------------------- reports
 
+def _value(x: float) -> str:
+    """A compared value for a table: ``n/a`` where there is none (never ``nan``)."""
+    return "n/a" if math.isnan(x) else f"{x:.6g}"
+
+
+def _is_failed_cell(c: Check) -> bool:
+    return c.key.get("metric") == "cell_failed"
+
+
 def _describe(c: Check) -> str:
-    return (f"{c.group} {c.name}: baseline {c.baseline:.6g} {c.unit}, current {c.current:.6g} {c.unit} "
+    if _is_failed_cell(c):
+        return f"{c.group}: {c.reason}"
+    return (f"{c.group} {c.name}: baseline {_value(c.baseline)} {c.unit}, current {_value(c.current)} {c.unit} "
             f"({'higher' if c.higher_is_better else 'lower'} is better): {c.reason}")
 
 
@@ -452,12 +510,20 @@ def to_markdown(result: GateResult) -> str:
     lines += [f"- {note}" for note in result.notes]
     if result.notes:
         lines.append("")
-    if result.failures:
+    cells = [c for c in result.failures if _is_failed_cell(c)]
+    values = [c for c in result.failures if not _is_failed_cell(c)]
+    if cells:
+        lines += ["Failed cells (a failed cell is never a pass):", ""]
+        lines += [f"- {c.key['scene']} / {c.key['pipeline']}: cell failed: {c.reason.partition(' failed: ')[2]}"
+                  for c in cells]
+        lines.append("")
+    if values:
         lines += ["| scene | pipeline | metric | baseline | current | change | allowed | unit |",
                   "|---|---|---|---:|---:|---:|---|---|"]
-        for c in result.failures:
-            lines.append(f"| {c.key['scene']} | {c.key['pipeline']} | {c.name} | {c.baseline:.6g} | "
-                         f"{c.current:.6g} | {c.delta:+.6g} | {c.rule} | {c.unit} |")
+        for c in values:
+            change = "n/a" if math.isnan(c.delta) else f"{c.delta:+.6g}"
+            lines.append(f"| {c.key['scene']} | {c.key['pipeline']} | {c.name} | {_value(c.baseline)} | "
+                         f"{_value(c.current)} | {change} | {c.rule} | {c.unit} |")
         lines.append("")
     return "\n".join(lines)
 

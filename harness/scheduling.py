@@ -122,6 +122,8 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
 
     if not todo:
         return 0, 0, 0
+    from harness.suites import import_paths
+
     imports = list(getattr(suite, "imports", None) or [])
     by_scene: dict[str, list[Cell]] = {}
     variants: dict[str, SceneVariant] = {}
@@ -133,6 +135,7 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
     bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
     ctx = {"cells_dir": cells_dir, "cache": cache, "provenance": provenance, "imports": imports,
+           "import_paths": import_paths(suite),
            "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress, "read": read}
     work = _Work(renders=list(variants), cells=[])
     for mode in RETRY_ROUNDS:
@@ -172,7 +175,7 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
 
 
 def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
-    payload = cell_payload(c, ctx["cells_dir"], ctx["provenance"], ctx["imports"])
+    payload = cell_payload(c, ctx["cells_dir"], ctx["provenance"], ctx["imports"], ctx["import_paths"])
     payload["sequence"] = render["path"]
     if render.get("error"):
         payload["render_error"] = render["error"]
@@ -245,7 +248,8 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
             try:
                 if kind == "render":
                     v = ctx["variants"][item]
-                    fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"])
+                    fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"],
+                                      ctx["import_paths"])
                 else:
                     fut = pool.submit(cells_task, [_cell_payload(c, r, ctx) for c, r in item])
             except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor

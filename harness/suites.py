@@ -41,8 +41,9 @@ A real scene is decoded once into the render cache (:mod:`scenes.footage`) and r
 with seed 0, whatever ``seeds`` says (it has nothing random to vary).
 
 ``imports:`` names
-modules to import first, e.g. one that registers your own flow method; modules in the
-working folder are importable (:func:`import_modules`).
+modules to import first, e.g. one that registers your own flow method; modules beside the
+suite file, then in the working folder, are importable (:func:`import_modules`,
+:func:`import_paths`).
 
 Errors raise :class:`SuiteError` naming the file and the field
 (``suite.yaml: scenes[0].sweep: an empty sweep ...``); YAML syntax errors give the line.
@@ -61,8 +62,8 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import (BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator,
-                      model_validator)
+from pydantic import (BaseModel, ConfigDict, Discriminator, Field, PrivateAttr, Tag, ValidationError,
+                      field_validator, model_validator)
 
 __all__ = [
     "SuiteError",
@@ -80,6 +81,7 @@ __all__ = [
     "pipeline_names",
     "metric_names",
     "import_modules",
+    "import_paths",
 ]
 
 # A scene override or pipeline parameter as YAML gives it (checked finite below; the scene
@@ -223,6 +225,8 @@ class Suite(_Model):
         default_factory=list,
         description="modules every worker imports first (plugins that register flow methods or stages)",
     )
+    # the folder of the suite file (set by load_suite): its `imports:` are looked up there first
+    _folder: str | None = PrivateAttr(default=None)
 
     @field_validator("seeds")
     @classmethod
@@ -335,10 +339,42 @@ def _field_path(loc: tuple) -> str:
     return s or "(top level)"
 
 
+# words a user may write for a key (the CLI's `--set`, a flow method's `params`), and the key meant
+_KEY_ALIASES = {"set": "overrides", "override": "overrides", "params": "spec", "parameters": "spec",
+                "import": "imports", "plugins": "imports"}
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The model whose field ``loc`` (a pydantic error location) names, e.g. SceneEntry for
+    ``('scenes', 0, 'set')``; None where no suite model is."""
+    if "real-scene" in loc[:-1]:
+        return RealEntry
+    parents = tuple(p for p in loc[:-1] if isinstance(p, str) and p not in ("pipeline-name", "inline-pipeline",
+                                                                          "function-after", "preset-scene"))
+    return {(): Suite, ("scenes",): SceneEntry, ("pipelines",): InlinePipeline}.get(parents)
+
+
+def _unknown_key(loc: tuple) -> str:
+    """The message for a key the model forbids: the closest valid key (an alias first, then difflib)."""
+    import difflib
+
+    model, key = _model_at(loc), str(loc[-1])
+    if model is None:
+        return "unknown key"
+    valid = list(model.model_fields)
+    alias = _KEY_ALIASES.get(key.lower())
+    close = [alias] if alias in valid else difflib.get_close_matches(key, valid, n=1, cutoff=0.6)
+    if close:
+        return f"unknown key; did you mean {close[0]!r}? (valid: {', '.join(valid)})"
+    return f"unknown key; valid: {', '.join(valid)}"
+
+
 def _format_validation(err: ValidationError, source: str) -> str:
     lines = []
     for e in err.errors():
         msg = e["msg"].removeprefix("Value error, ")
+        if e["type"] == "extra_forbidden":
+            msg = _unknown_key(tuple(e["loc"]))
         lines.append(f"{source}: {_field_path(tuple(e['loc']))}: {msg}")
     # one clear line first; union branches repeat the same field, keep distinct messages
     return "; ".join(dict.fromkeys(lines))
@@ -427,8 +463,10 @@ def load_suite(name_or_path: str | os.PathLike) -> Suite:
     else:
         path = Path(name_or_path)
         if not path.is_file():
+            near = [str(c) for c in (Path(f"{text_name}.yaml"), Path(f"{text_name}.yml")) if c.is_file()]
+            hint = f"; did you mean {near[0]}?" if near else ""
             raise SuiteError(
-                f"{text_name}: no such suite file, and not a built-in suite ({', '.join(builtins)})"
+                f"{text_name}: no such suite file, and not a built-in suite ({', '.join(builtins)}){hint}"
             )
     try:
         data = yaml.load(path.read_text(), Loader=_UniqueKeyLoader)
@@ -438,7 +476,9 @@ def load_suite(name_or_path: str | os.PathLike) -> Suite:
         raise SuiteError(f"{path}: YAML syntax error at {line}{exc.problem or exc}") from None
     except yaml.YAMLError as exc:
         raise SuiteError(f"{path}: not valid YAML: {exc}") from None
-    return parse_suite(data, source=str(path), base_dir=path.resolve().parent)
+    suite = parse_suite(data, source=str(path), base_dir=path.resolve().parent)
+    suite._folder = str(path.resolve().parent)
+    return suite
 
 
 # --------------------------------------------------------------------------- expansion
@@ -481,11 +521,22 @@ class Cell:
         }
 
 
-def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>") -> None:
+def import_paths(suite: Suite) -> list[str]:
+    """The folders a suite's ``imports:`` are looked up in after the installed packages, in order: the
+    suite file's folder (a suite loaded from a file), then the working folder; absolute paths, so that
+    workers (spawned, or on other machines) search the same folders."""
+    folders = [suite._folder] if suite._folder else []
+    return list(dict.fromkeys([*folders, os.getcwd()]))
+
+
+def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>",
+                   folders: list[str] | tuple[str, ...] | None = None) -> None:
     """Import each module of a suite's ``imports:`` (plugins that register flow methods or stages).
 
-    The working folder is searched too (after everything else, so a local file never shadows an
-    installed package): ``aerobench`` is a console script, whose ``sys.path`` does not hold it.
+    ``folders`` (default: the working folder; :func:`import_paths` gives a suite's) are searched after
+    the installed packages, in order, so a local file never shadows an installed package; a folder
+    goes just before the working folder where that is on ``sys.path`` already (``python -m``).
+    ``aerobench`` is a console script, whose ``sys.path`` holds neither.
 
     Raises
     ------
@@ -496,14 +547,22 @@ def import_modules(names: list[str] | tuple[str, ...], *, source: str = "<suite>
     import sys
 
     cwd = os.getcwd()
-    if cwd not in sys.path:
-        sys.path.append(cwd)
+    folders = list(dict.fromkeys(folders if folders is not None else [cwd]))
+    for folder in folders:
+        if folder in sys.path:
+            continue
+        at = next((i for i, p in enumerate(sys.path) if p in ("", cwd)), None)
+        if at is not None and folder != cwd:
+            sys.path.insert(at, folder)
+        else:
+            sys.path.append(folder)
+    where = [f"the suite's folder {f}" for f in folders[:-1]] + [f"the working folder {folders[-1]}"] if folders else []
+    searched = ", ".join(["the installed packages", *where[:-1]]) + (f" and {where[-1]}" if where else "")
     for i, module in enumerate(names):
         try:
             importlib.import_module(module)
         except ImportError as exc:
-            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r} (searched the installed packages "
-                             f"and the working folder {cwd}): {exc}") from None
+            raise SuiteError(f"{source}: imports[{i}]: cannot import {module!r} (searched {searched}): {exc}") from None
 
 
 def _format_value(v: Any) -> str:
@@ -513,7 +572,7 @@ def _format_value(v: Any) -> str:
 def _resolve_pipelines(suite: Suite, source: str) -> list[tuple[str, dict]]:
     from algorithms.pipeline import Pipeline
 
-    import_modules(suite.imports, source=source)
+    import_modules(suite.imports, source=source, folders=import_paths(suite))
     builtins = pipeline_names()
     out = []
     for i, p in enumerate(suite.pipelines):

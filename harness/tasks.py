@@ -39,18 +39,22 @@ def _prepare_worker() -> None:
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
-def _import_plugins(modules: Iterable[str]) -> None:
+def _import_plugins(modules: Iterable[str], folders: Iterable[str] | None = None) -> None:
     from harness.suites import import_modules
 
-    import_modules(list(modules), source="worker")
+    import_modules(list(modules), source="worker", folders=None if folders is None else list(folders))
 
 
-def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = ()) -> dict:
-    """Render one scene variant into the cache (or find it there); returns where and whether reused."""
+def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = (),
+                import_paths: Iterable[str] | None = None) -> dict:
+    """Render one scene variant into the cache (or find it there); returns where and whether reused.
+
+    ``imports`` are looked up in ``import_paths`` after the installed packages
+    (:func:`harness.suites.import_paths`; default: the worker's working folder)."""
     _prepare_worker()
     t0 = time.perf_counter()
     try:
-        _import_plugins(imports)
+        _import_plugins(imports, import_paths)
         from scenes import cached_sequence_result
 
         result = cached_sequence_result(spec, cache_dir)
@@ -62,8 +66,10 @@ def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[s
             "render_s": time.perf_counter() - t0}
 
 
-def cell_payload(cell: Cell, cells_dir: Path, provenance: dict, imports: list[str]) -> dict:
-    """The plain-data input of :func:`cell_task` (the caller adds ``sequence``, the rendered folder)."""
+def cell_payload(cell: Cell, cells_dir: Path, provenance: dict, imports: list[str],
+                 import_paths: list[str] | None = None) -> dict:
+    """The plain-data input of :func:`cell_task` (the caller adds ``sequence``, the rendered folder);
+    ``import_paths``: where ``imports`` are looked up (:func:`harness.suites.import_paths`)."""
     v = cell.variant
     return {
         "cell_id": cell.cell_id,
@@ -81,6 +87,7 @@ def cell_payload(cell: Cell, cells_dir: Path, provenance: dict, imports: list[st
         "cells_dir": str(cells_dir),
         "provenance": provenance,
         "imports": imports,
+        "import_paths": import_paths,
     }
 
 
@@ -125,7 +132,7 @@ def cells_task(payloads: list[Mapping]) -> list[dict]:
         tmp.mkdir(parents=True)
         tmps[payload["cell_id"]] = tmp
         try:
-            _import_plugins(payload.get("imports", ()))
+            _import_plugins(payload.get("imports", ()), payload.get("import_paths"))
             if payload.get("render_error"):
                 raise RuntimeError(payload["render_error"])
             todo.append((payload, tmp))

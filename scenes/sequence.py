@@ -381,7 +381,7 @@ def _write_into(spec: SceneSpec, folder: Path, progress: Progress | None, timing
                 "n_buildings": len(gen.world.buildings), "flow_format": flow_format,
                 "layout": SEQUENCE_LAYOUT, "sensor": gen.sensor_meta(), **gl_info()}
         out.write("meta.json", json.dumps(meta, indent=1, sort_keys=True).encode())
-        sheet = preview.sheet(tracks)
+        sheet = preview.sheet(tracks, global_shift_px=gen.global_shift_px)
         if sheet is not None:
             out.write("preview.png", encode_png(sheet))
         out.write_manifest({"spec_hash": spec_hash(spec), "layout": SEQUENCE_LAYOUT, "flow_format": flow_format})

@@ -98,13 +98,13 @@ def test_yaml_syntax_error_gives_the_line(write_suite):
 
 def test_unknown_key_is_named(write_suite):
     path = write_suite(_suite(scenes=[{"preset": "tiny", "overides": {"seed": 1}}]))
-    with pytest.raises(SuiteError, match=rf"{path}: scenes\[0\]\.overides: Extra inputs are not permitted"):
+    with pytest.raises(SuiteError, match=rf"{path}: scenes\[0\]\.overides: unknown key; did you mean 'overrides'\?"):
         load_suite(path)
 
 
 def test_unknown_top_level_key_is_named(write_suite):
     path = write_suite(_suite(workers=4))
-    with pytest.raises(SuiteError, match=r"workers: Extra inputs"):
+    with pytest.raises(SuiteError, match=r"workers: unknown key; valid: name, description, scenes"):
         load_suite(path)
 
 
@@ -202,3 +202,71 @@ def test_imports_find_a_module_in_the_working_folder(tmp_path, monkeypatch):
     assert sys.modules["my_local_plugin_xyz"].LOADED
     with pytest.raises(SuiteError, match=r"imports\[0\]: cannot import 'no_such_plugin_xyz' .*working folder"):
         import_modules(["no_such_plugin_xyz"])
+
+
+def test_imports_are_looked_up_beside_the_suite_file_first(tmp_path, monkeypatch):
+    """`cd elsewhere; aerobench run own/my-suite.yaml` imports own/my_flow.py (then the working folder)."""
+    import sys
+
+    from harness.suites import SuiteError, import_paths, load_suite
+
+    own, elsewhere = tmp_path / "own", tmp_path / "elsewhere"
+    own.mkdir()
+    elsewhere.mkdir()
+    (own / "beside_suite_plugin_xyz.py").write_text("WHERE = 'beside the suite'\n")
+    (elsewhere / "beside_suite_plugin_xyz.py").write_text("WHERE = 'working folder'\n")
+    (elsewhere / "cwd_only_plugin_xyz.py").write_text("WHERE = 'working folder'\n")
+    (own / "my-suite.yaml").write_text(
+        "name: mine\nimports: [beside_suite_plugin_xyz, cwd_only_plugin_xyz]\nscenes: [{preset: tiny}]\n"
+        "seeds: [1]\npipelines: [thesis-lk]\n")
+    monkeypatch.chdir(elsewhere)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(own), str(elsewhere))])
+    for name in ("beside_suite_plugin_xyz", "cwd_only_plugin_xyz"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    suite = load_suite("../own/my-suite.yaml")
+    assert import_paths(suite) == [str(own), str(elsewhere)]
+    expand(suite)
+    assert sys.modules["beside_suite_plugin_xyz"].WHERE == "beside the suite"
+    assert sys.modules["cwd_only_plugin_xyz"].WHERE == "working folder"
+    (own / "bad.yaml").write_text("name: bad\nimports: [no_such_plugin_xyz]\nscenes: [{preset: tiny}]\n"
+                                  "seeds: [1]\npipelines: [thesis-lk]\n")
+    with pytest.raises(SuiteError, match=rf"imports\[0\]: cannot import 'no_such_plugin_xyz' \(searched the installed "
+                                         rf"packages, the suite's folder {own} and the working folder {elsewhere}\)"):
+        expand(load_suite(own / "bad.yaml"))
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"scenes": [{"preset": "tiny", "set": {"image.n_frames": 3}}]},
+     "s.yaml: scenes[0].set: unknown key; did you mean 'overrides'? (valid: preset, label, overrides, sweep)"),
+    ({"seed": [1]}, "s.yaml: seed: unknown key; did you mean 'seeds'?"),
+    ({"pipelines": [{"name": "x", "base": "thesis-lk", "params": {}}]},
+     "s.yaml: pipelines[0].params: unknown key; did you mean 'spec'? (valid: name, base, spec)"),
+    ({"scenes": [{"preset": "tiny", "zzz": 1}]},
+     "s.yaml: scenes[0].zzz: unknown key; valid: preset, label, overrides, sweep"),
+])
+def test_an_unknown_key_suggests_the_right_one(data, message):
+    from harness.suites import SuiteError
+
+    suite = {"name": "x", "scenes": [{"preset": "tiny"}], "seeds": [1], "pipelines": ["thesis-lk"]}
+    suite.update(data)
+    if "seed" in data:
+        del suite["seeds"]
+    with pytest.raises(SuiteError) as exc:
+        parse_suite(suite, source="s.yaml")
+    assert message in str(exc.value)
+    assert "Extra inputs are not permitted" not in str(exc.value)
+
+
+def test_a_suite_name_without_its_yaml_suffix_is_pointed_at_the_file(tmp_path, monkeypatch):
+    (tmp_path / "my-suite.yaml").write_text("name: x\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SuiteError, match=r"my-suite: no such suite file, and not a built-in suite .*; "
+                                         r"did you mean my-suite\.yaml\?"):
+        load_suite("my-suite")
+
+
+def test_an_unknown_key_of_a_real_scene_suggests_the_right_one():
+    suite = {"name": "x", "scenes": [{"real": "clip.mp4", "frame": 60}], "seeds": [1], "pipelines": ["thesis-lk"]}
+    with pytest.raises(SuiteError, match=r"s\.yaml: scenes\[0\]\.frame: unknown key; did you mean 'frames'\? "
+                                         r"\(valid: real, label, start, stop, frames,"):
+        parse_suite(suite, source="s.yaml")

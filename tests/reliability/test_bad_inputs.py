@@ -218,6 +218,31 @@ def run_into_locked(tmp: Path, ctx) -> tuple[int, str]:
         ctx["lock"].close()
 
 
+def middlebury_pair(tmp: Path) -> Path:
+    d = tmp / "mb" / "Pair"
+    d.mkdir(parents=True)
+    f = np.dstack([frames()] * 3)
+    write_png(d / "frame10.png", f)
+    write_png(d / "frame11.png", f)
+    write_flo(d / "flow10.flo", np.zeros((24, 32, 2), np.float32))
+    return tmp / "mb"
+
+
+def middlebury_with_truncated_flo(tmp: Path) -> Path:
+    root = middlebury_pair(tmp)
+    flo = root / "Pair" / "flow10.flo"
+    flo.write_bytes(flo.read_bytes()[:112])
+    return root
+
+
+def run_with_a_failed_cell(tmp: Path) -> Path:
+    run = tmp / "run"
+    failed = _results_table(("cell_failed",), status="failed").assign(error="RuntimeError: boom")
+    R.write_table(failed, run / R.RESULTS_FILE)
+    R.write_run_json(run, {"suite": "reliability", "config_hash": "h", "provenance": {"machine": "box"}})
+    return run
+
+
 def out_under_a_file(tmp: Path) -> Path:
     (tmp / "blocker").write_text("a regular file where the run folder's parent should be")
     return suite_file(suite())(tmp)
@@ -329,7 +354,25 @@ ROWS = [
     # ---- runs
     Row("run-out-under-a-file", out_under_a_file,
         lambda tmp, s: cli("run", s, "--out", tmp / "blocker" / "out", "--quiet", "--no-report"), 2,
-        r"blocker/out"),
+        r"--out .*blocker/out: .*blocker is a file, not a folder$"),
+    Row("run-out-in-proc", suite_file(suite()),
+        lambda tmp, s: cli("run", s, "--out", "/proc/aerobench_out", "--quiet", "--no-report"), 2,
+        r"--out /proc/aerobench_out: cannot create anything in /proc: "),
+    Row("suite-set-for-overrides", suite_file(suite(scenes=[{"preset": "tiny", "set": {"image.n_frames": 3}}])),
+        run_suite_cli, 2, r"scenes\[0\]\.set: unknown key; did you mean 'overrides'\?"),
+    Row("eval-flow-param-type", middlebury_pair,
+        lambda tmp, d: cli("eval-flow", d, "--method", "lucas_kanade", "--param", "window=abc"), 2,
+        r"^aerobench: error: --param window: expected an integer, got 'abc'$"),
+    Row("eval-flow-truncated-flo-is-no-param-error", middlebury_with_truncated_flo,
+        lambda tmp, d: cli("eval-flow", d, "--method", "lucas_kanade"), 2,
+        r"^aerobench: error: \S*Pair/flow10\.flo: 112 bytes, expected 6156 for a 32x24 \.flo file$"),
+    Row("report-corrupt-baseline", lambda tmp: make_gate_run(tmp, baseline_text="{not json"),
+        lambda tmp, ctx: cli("report", tmp / "run", "--baseline", tmp / "baseline.json", "--quiet"), 2,
+        r"baseline\.json: baseline is not valid JSON"),
+    Row("baseline-of-a-failed-run", run_with_a_failed_cell,
+        lambda tmp, run: cli("baseline", run, "--out", tmp / "b.json"), 2,
+        r"run: 1 cell\(s\) failed, so the baseline would lack their metrics: tiny seed 1 x thesis-lk: "
+        r"RuntimeError: boom; .*--allow-failed"),
     Row("run-two-at-once", locked_run_dir, run_into_locked, 2,
         r"out: another aerobench run is writing into this folder"),
     Row("results-older-schema", old_schema_run, gate_cli, 2, r"results\.parquet: results schema v0, this aerobench reads v2"),
@@ -509,7 +552,8 @@ def test_a_failed_cell_never_passes_the_gate_even_when_other_seeds_fill_its_aggr
     assert not result.passed and result.exit_code == 1
     (f,) = result.failures
     assert "cell c2 seed 2 failed: RuntimeError: boom" in f.reason
-    assert "cell_failed" in G.to_markdown(result) and "boom" in G.to_junit_xml(result)
+    assert "tiny / thesis-lk: cell failed: RuntimeError: boom" in G.to_markdown(result) and "boom" in G.to_junit_xml(result)
+    assert "nan" not in G.to_markdown(result)
 
 
 def test_an_empty_comparison_is_an_error_not_a_pass():
