@@ -216,3 +216,11 @@ def build_run(root: Path) -> Path:
 @pytest.fixture(scope="session")
 def run_dir(tmp_path_factory) -> Path:
     return build_run(tmp_path_factory.mktemp("reports_fixture"))
+
+
+@pytest.fixture(scope="session")
+def fixture_report(run_dir, tmp_path_factory) -> dict[str, Path]:
+    """``write_report`` of :func:`run_dir`, written once per session for every test that only reads it."""
+    from reports import write_report
+
+    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("report"))

@@ -24,8 +24,8 @@ def _picture(html_text: str, alt: str) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def html_text(run_dir, tmp_path_factory) -> str:
-    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("pictures"))["html"].read_text()
+def html_text(fixture_report) -> str:
+    return fixture_report["html"].read_text()
 
 
 def test_true_local_motion_is_flow_minus_camera_flow(html_text):

@@ -8,7 +8,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from reports import write_report
 from reports.load import read_tracks
 from reports.plots import track_polylines
 
@@ -19,9 +18,8 @@ def section(html_text: str, sid: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def tracking(run_dir, tmp_path_factory) -> str:
-    out = write_report(run_dir, out_dir=tmp_path_factory.mktemp("tracking"))
-    return section(out["html"].read_text(), "tracking")
+def tracking(fixture_report) -> str:
+    return section(fixture_report["html"].read_text(), "tracking")
 
 
 def test_point_and_multi_tracks_with_the_same_id_are_separate_lines(run_dir):
