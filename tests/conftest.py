@@ -1,17 +1,17 @@
 """Root fixtures and hooks of the whole test suite.
 
-The suite runs on two pytest-xdist workers (``-n 2 --dist loadgroup`` in pyproject's
-``addopts``). A module- or session-scoped fixture is built once per worker that needs it,
+The suite runs on pytest-xdist workers, one per core (``-n auto --dist loadgroup`` in
+pyproject's ``addopts``; :func:`pytest_xdist_auto_num_workers`). A module- or session-scoped fixture is built once per worker that needs it,
 so the tests that share an expensive one are kept on one worker here, by an
 ``xdist_group`` mark added at collection (no test file needs to know about xdist):
 
 * every test of a module that uses a module-scoped fixture: one group per module;
 * every test that uses a session-scoped fixture named in :data:`SHARED_SESSION_FIXTURES`
-  (a run of a suite, a rendered scene): one group per fixture definition, so
+  (a run of a suite, a rendered scene, a written report): one group per fixture definition, so
   ``tests/harness``'s and ``tests/reliability``'s ``reference_run`` are separate groups.
 
-A test that would land in two groups joins both names into one (xdist's rule), which
-is still one worker for all of them.
+A test that uses both kinds of fixture goes with the session fixture's group.
+Under xdist, tests marked ``slow`` are handed out first.
 """
 
 from __future__ import annotations
@@ -50,6 +50,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         group = _group(item)
         if group is not None:
             item.add_marker(pytest.mark.xdist_group(group))
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # xdist hands out the groups first (largest first), then single tests in this order: the
+        # slow ones (end-to-end runs, renders) first, so that no long test is left to run alone at the end
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
