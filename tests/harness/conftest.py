@@ -15,9 +15,9 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
 @pytest.fixture(scope="session")
-def render_cache(tmp_path_factory) -> Path:
+def render_cache(shared_render_cache) -> Path:
     """A render cache shared by every harness test, so each scene is rendered once per session."""
-    return tmp_path_factory.mktemp("aerobench-cache")
+    return shared_render_cache
 
 
 @pytest.fixture

@@ -246,3 +246,11 @@ def tiny_run(tmp_path_factory) -> Path:
                        progress=False)
     assert result.ok, result.failed_cells
     return root / "run"
+
+
+@pytest.fixture(scope="session")
+def fixture_report(run_dir, tmp_path_factory) -> dict[str, Path]:
+    """``write_report`` of :func:`run_dir`, written once per session for every test that only reads it."""
+    from reports import write_report
+
+    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("report"))

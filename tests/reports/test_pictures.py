@@ -28,8 +28,8 @@ def _picture(html_path: Path, alt: str) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def report_html(run_dir, tmp_path_factory) -> Path:
-    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("pictures"))["html"]
+def report_html(fixture_report) -> Path:
+    return fixture_report["html"]
 
 
 @pytest.fixture(scope="module")

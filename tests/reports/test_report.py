@@ -28,8 +28,8 @@ def pooled_table(run_dir: Path) -> pd.DataFrame:
 
 
 @pytest.fixture(scope="module")
-def report(run_dir, tmp_path_factory) -> dict[str, Path]:
-    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("report"))
+def report(fixture_report) -> dict[str, Path]:
+    return fixture_report
 
 
 @pytest.fixture(scope="module")

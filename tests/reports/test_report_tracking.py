@@ -8,7 +8,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from reports import write_report
 from reports.load import read_tracks
 from reports.plots import track_polylines
 
@@ -19,12 +18,11 @@ def section(html_text: str, sid: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def tracking(run_dir, tmp_path_factory) -> str:
+def tracking(fixture_report) -> str:
     """The tracking section, each figure it shows from a file (the trajectories) put in its place."""
-    out = write_report(run_dir, out_dir=tmp_path_factory.mktemp("tracking"))
-    text = section(out["html"].read_text(), "tracking")
+    text = section(fixture_report["html"].read_text(), "tracking")
     return re.sub(r'<img class="svg" src="([^"]+)"[^>]*>',
-                  lambda m: (out["html"].parent / m.group(1)).read_text(), text)
+                  lambda m: (fixture_report["html"].parent / m.group(1)).read_text(), text)
 
 
 def test_point_and_multi_tracks_with_the_same_id_are_separate_lines(run_dir):
