@@ -154,7 +154,8 @@ def summary_parts(pairs: list[LkHsPair], headline: MetricTable, columns: list[Co
         if best:
             value = format_value(headline.values.get((best[0], c.metric), float("nan")))
             unit = f" {c.unit}" if c.unit else ""
-            parts.append(f"best: {best[0]} ({c.metric} {value}{unit})")
+            name = "EPE" if c.metric == "epe_mean" else c.metric
+            parts.append(f"best: {best[0]} ({name} {value}{unit})")
     if gate is None:
         parts.append("gate: not run")
     else:

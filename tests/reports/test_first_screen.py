@@ -44,7 +44,7 @@ def test_the_page_opens_with_a_one_line_verdict_then_lk_vs_hs(fixture_report, mo
     assert c.better == "LK"
     assert line.startswith(f"LK vs HS: LK better by {abs(c.diff):.3f} px EPE (95 % CI {c.lo:+.3f} to {c.hi:+.3f}; "
                            "lk_thesis vs hs_thesis, all pixels)"), line
-    assert " \u00b7 best: dis (epe_mean " in line and line.endswith(" \u00b7 gate: not run")
+    assert " \u00b7 best: dis (EPE " in line and line.endswith(" \u00b7 gate: not run")
     # no gate, no baseline: nothing about them and no grey prose before the LK vs HS table
     top = body[:body.index('<table class="lkhs"')]
     for text in ("No gate verdict", "No baseline", 'class="missing"', '<p class="note"'):
