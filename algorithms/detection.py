@@ -88,6 +88,10 @@ class Detection(NamedTuple):
 # merge_gap_px, merge_px, merge_rel: regions this close whose velocities agree this well are one mover;
 # parallax_max_ratio, parallax_perp_px, parallax_perp_rel: residuals along the global motion up to this
 #   fraction of it are parallax (0 turns the test off);
+# parallax_min_fraction, parallax_angle_deg, parallax_speed_rel: a direction shared by regions covering this
+#   fraction of the image (and half the moving area) is a parallax field's (frames registered before they
+#   came, see _common_parallax); its regions up to this many times their median speed are rejected
+#   (parallax_min_fraction 0 turns it off);
 # min_explained: the fraction of the grey-value change in a region that warping by its motion must remove,
 #   and half of it the margin over warping by the opposite motion (interpolation alone smooths noise either
 #   way; 0 turns the test off; needs the frames);
@@ -96,6 +100,8 @@ class Detection(NamedTuple):
 #   speed: that halo is left out of the box);
 # refine_px: the region's motion is refined by block matching within this radius of the flow's (needs the
 #   frames; 0: the flow's median as it is);
+# nms_iou: of two regions whose boxes overlap this much, the one whose motion explains the change better
+#   stays (a vehicle moving more than its size leaves a second region where the flow failed; 1 keeps all);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
@@ -110,7 +116,8 @@ DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
-    "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12,
+    "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
+    "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1,
 }
 
 
@@ -360,6 +367,71 @@ def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine
     return out
 
 
+def _box_iou(a: Detection, b: Detection) -> float:
+    """IoU of two detections' inclusive pixel boxes."""
+    iw = min(a.x1_px, b.x1_px) - max(a.x0_px, b.x0_px) + 1
+    ih = min(a.y1_px, b.y1_px) - max(a.y0_px, b.y0_px) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    area = lambda d: (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1)  # noqa: E731
+    return inter / (area(a) + area(b) - inter)
+
+
+def _along(d: Detection, gv, bound: float, p: dict) -> bool:
+    """Whether the motion of ``d`` lies along ``gv`` in its sense, up to ``bound`` px, within the tolerance."""
+    gn = math.hypot(*gv)
+    if not gn > 0:
+        return False
+    along = (d.u_px * gv[0] + d.v_px * gv[1]) / gn
+    perp = abs(-d.u_px * gv[1] + d.v_px * gv[0]) / gn
+    return 0 <= along <= bound and perp <= p["parallax_perp_px"] + p["parallax_perp_rel"] * math.hypot(d.u_px, d.v_px)
+
+
+def _parallax(d: Detection, g, p: dict, h: int, w: int) -> bool:
+    """The residual of ``d`` is the parallax of a static point under the global motion ``g``."""
+    if g is None or not p["parallax_max_ratio"] > 0:
+        return False
+    gv = g if g.ndim == 1 else g[min(h - 1, round(d.y_px)), min(w - 1, round(d.x_px))]
+    return _along(d, gv, p["parallax_max_ratio"] * math.hypot(*gv), p)
+
+
+def _common_parallax(dets: list[Detection], p: dict, image_area: int):
+    """The direction shared by most of the moving area, when that area is a parallax field's and not traffic's.
+
+    Where the frames were registered before they came (an orthophoto sequence, a stabilised
+    video) the global motion left is not the camera's translation, and the parallax of roofs and
+    tree crowns points along the translation that was removed. The static structures of a pair all
+    share that direction and sense (the epipole's, far off for a nadir view); traffic does not. A
+    direction within ``parallax_angle_deg`` of which lie at least three regions covering at least
+    ``parallax_min_fraction`` of the image and half of all moving area is taken as parallax (vehicles
+    cover a few per cent of a frame: 26 cars of 300 px are 1.5 % of 960 x 540), and the
+    regions along it no faster than ``parallax_speed_rel`` times their area-weighted median speed
+    are rejected. Returns ``(direction, speed bound)`` or None.
+    """
+    if p["parallax_min_fraction"] <= 0 or len(dets) < 3:
+        return None
+    v = np.array([[d.u_px, d.v_px] for d in dets])
+    a = np.array([d.area_px for d in dets], dtype=np.float64)
+    speed = np.hypot(v[:, 0], v[:, 1])
+    ok = speed > 0
+    if ok.sum() < 3:
+        return None
+    unit = v[ok] / speed[ok, None]
+    cos = unit @ unit.T
+    close = cos >= math.cos(math.radians(p["parallax_angle_deg"]))
+    support = close @ a[ok]
+    i = int(np.argmax(support))
+    if support[i] < max(p["parallax_min_fraction"] * image_area, 0.5 * a.sum()) or close[i].sum() < 3:
+        return None
+    members = close[i]
+    e = (unit[members] * a[ok][members, None]).sum(axis=0)
+    order = np.argsort(speed[ok][members])
+    cum = np.cumsum(a[ok][members][order])
+    median_speed = float(speed[ok][members][order][np.searchsorted(cum, cum[-1] / 2)])
+    return e / np.hypot(*e), p["parallax_speed_rel"] * median_speed
+
+
 @register_stage("detection")
 def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None, frames=None,
                     gsd_m_per_px: float | None = None, **params) -> list[Detection]:
@@ -433,7 +505,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         raise ValueError(f"global_flow_px: expected (2,) or {(h, w, 2)}, got {tuple(g.shape)}")
     if frames is not None and (len(frames) != 2 or any(np.shape(a) != (h, w) for a in frames)):
         raise ValueError(f"frames: expected two gray frames of shape {(h, w)}")
-    out = []
+    out, evidence_of = [], []
     cores = [c for r in regions if len(r.ys) >= p["min_area_px"] for c in r.cores(p["core_rel"], p["min_area_px"])]
     for c in _merge(cores, p) if len(cores) > len(regions) else cores:
         area = len(c.ys)
@@ -462,16 +534,21 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             # (half as much margin: a uniform roof moved less than its size matches itself either way)
             if p["min_explained"] > 0 and (gain < p["min_explained"] or margin < p["min_explained"] / 2):
                 continue
-        speed = math.hypot(u, v)
-        if g is not None and p["parallax_max_ratio"] > 0:
-            gv = g if g.ndim == 1 else g[min(h - 1, round(cy)), min(w - 1, round(cx))]
-            gn = math.hypot(*gv)
-            if gn > 0:
-                along = (u * gv[0] + v * gv[1]) / gn
-                perp = abs(-u * gv[1] + v * gv[0]) / gn
-                if 0 <= along <= p["parallax_max_ratio"] * gn and perp <= p["parallax_perp_px"] + \
-                        p["parallax_perp_rel"] * speed:
-                    continue
         x0, y0, x1, y1 = c.box()
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
+        evidence_of.append(margin if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0)
+                           else float(area))
+    # one detection per mover: a vehicle that moves more than its size leaves a second region where the
+    # flow method failed (the ground it uncovered or covered); of regions whose boxes overlap by nms_iou,
+    # the one whose motion explains the change best stays
+    kept: list[Detection] = []
+    for i in np.argsort(-np.asarray(evidence_of, dtype=np.float64), kind="stable"):
+        d = out[i]
+        if not any(_box_iou(d, k) >= p["nms_iou"] for k in kept):
+            kept.append(d)
+    out = [d for d in kept if not _parallax(d, g, p, h, w)]
+    parallax_dir = _common_parallax(out, p, h * w)
+    if parallax_dir is not None:
+        e, bound = parallax_dir
+        out = [d for d in out if not _along(d, e, bound, p)]
     return sorted(out, key=lambda d: -d.area_px)
