@@ -296,6 +296,7 @@ class DetectionSpec(_Section):
     border_px: StrictInt = DETECTION_DEFAULTS["border_px"]
     refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
     nms_iou: float = DETECTION_DEFAULTS["nms_iou"]
+    box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")

@@ -94,6 +94,8 @@ def test_a_region_whose_flow_does_not_move_the_texture_is_rejected():
     moved[40:60, 62:92] = g0[40:60, 60:90]
     (d,) = detect_vehicles(flow, valid, frames=(g0, moved))
     assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.25)
+    # its box from the frames: the block in frame t (not the place it moves to), within 2 px
+    assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx((60, 40, 89, 59), abs=2)
     # block matching recovers a motion the flow saw only in part (a fast vehicle)
     fast = g0.copy()
     fast[40:60, 69:99] = g0[40:60, 60:90]
