@@ -195,16 +195,26 @@ def _split(region: _Region, p: dict, depth: int = 0) -> list[_Region]:
     if depth >= 3 or n < 2 * p["min_area_px"]:
         return [region]
     w = region.w.astype(np.float64)
-    # 2-means started from the two vectors farthest apart along the principal direction of the spread
-    d = w - w.mean(axis=0)
-    _, _, vt = np.linalg.svd(d[:: max(1, n // 500)], full_matrices=False)
+    # coherent already (most regions): every velocity within the split distance of the median, no 2-means
+    med = np.median(w[:: max(1, n // 2000)], axis=0)
+    spread = float(np.percentile(np.hypot(*(w - med).T), 95))
+    if spread <= 0.5 * (p["split_px"] + p["split_rel"] * math.hypot(*med)):
+        return [region]
+    # 2-means (on at most ~2000 of the vectors) started from the two farthest apart along the principal
+    # direction of the spread
+    sub = w[:: max(1, n // 2000)]
+    d = sub - sub.mean(axis=0)
+    _, _, vt = np.linalg.svd(d, full_matrices=False)
     proj = d @ vt[0]
-    c = np.stack([w[np.argmin(proj)], w[np.argmax(proj)]])
-    for _ in range(8):
-        lab = (np.sum((w - c[1]) ** 2, axis=1) < np.sum((w - c[0]) ** 2, axis=1))
-        if lab.all() or not lab.any():
+    c = np.stack([sub[np.argmin(proj)], sub[np.argmax(proj)]])
+    for _ in range(6):
+        lab_s = np.sum((sub - c[1]) ** 2, axis=1) < np.sum((sub - c[0]) ** 2, axis=1)
+        if lab_s.all() or not lab_s.any():
             return [region]
-        c = np.stack([np.median(w[~lab], axis=0), np.median(w[lab], axis=0)])
+        c = np.stack([sub[~lab_s].mean(axis=0), sub[lab_s].mean(axis=0)])
+    lab = np.sum((w - c[1]) ** 2, axis=1) < np.sum((w - c[0]) ** 2, axis=1)
+    if lab.all() or not lab.any():
+        return [region]
     speed = max(float(np.hypot(*c[0])), float(np.hypot(*c[1])))
     if not float(np.hypot(*(c[0] - c[1]))) > p["split_px"] + p["split_rel"] * speed:
         return [region]
@@ -347,7 +357,8 @@ def _explained(region: _Region, frames, u: float, v: float) -> float:
     M = np.float32([[1, 0, u], [0, 1, v]])  # sample I1'(x + w)
     bw = cv2.warpAffine(b, M, (b.shape[1], b.shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                         borderMode=cv2.BORDER_REPLICATE)
-    ys, xs = region.ys - ya, region.xs - xa
+    step = max(1, len(region.ys) // 1500)  # a large region is judged on a sample of its pixels
+    ys, xs = region.ys[::step] - ya, region.xs[::step] - xa
     # a change of brightness over the region (light, a cloud's shadow) is no motion: each difference is
     # taken about its median over the region
     d0, d1 = b[ys, xs] - a[ys, xs], bw[ys, xs] - a[ys, xs]
@@ -564,22 +575,29 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         cx, cy = float(c.xs.mean()), float(c.ys.mean())
         u, v = (float(a) for a in c.velocity)
         speed = math.hypot(u, v)
+        margin = float(area)  # what ranks overlapping regions without frames
         if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0):
-            # evidence that the region's texture moved by (u, v): the change it explains, and its margin over
-            # the opposite motion
-            def evidence(a, b):
-                gain = _explained(c, frames, a, b)
-                return gain, gain - _explained(c, frames, -a, -b)
-
-            gain, margin = evidence(u, v)
-            if p["refine_px"] > 0:  # the block matching's motion where it explains the change better
+            # evidence that the region's texture moved by (u, v): the change it explains, then its margin over
+            # the opposite motion (half min_explained: a uniform roof moved less than its size matches itself
+            # either way); the block matching's motion where it explains the change better than the flow's
+            options = [(_explained(c, frames, u, v), u, v)]
+            if p["refine_px"] > 0:
                 ur, vr = _refine_velocity(c, frames, u, v, p["refine_px"])
-                gain_r, margin_r = evidence(ur, vr)
-                if margin_r > margin:
-                    u, v, gain, margin = ur, vr, gain_r, margin_r
-            # (half as much margin: a uniform roof moved less than its size matches itself either way)
-            if p["min_explained"] > 0 and (gain < p["min_explained"] or margin < p["min_explained"] / 2):
-                continue
+                if math.hypot(ur - u, vr - v) > 0.25:
+                    options.append((_explained(c, frames, ur, vr), ur, vr))
+            chosen = None
+            for gain, a, b in sorted(options, reverse=True):
+                if p["min_explained"] > 0 and gain < p["min_explained"]:
+                    break
+                margin = gain - _explained(c, frames, -a, -b)
+                if p["min_explained"] <= 0 or margin >= p["min_explained"] / 2:
+                    chosen = (a, b)
+                    break
+            if chosen is None:
+                if p["min_explained"] > 0:
+                    continue
+                chosen = max(options)[1:]
+            u, v = chosen
         x0, y0, x1, y1 = c.box()
         if frames is not None and p["box_from_frames"]:
             box = _moved_box(c, frames, u, v, 4)
@@ -587,8 +605,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
                 x0, y0, x1, y1 = box
                 cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
-        evidence_of.append(margin if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0)
-                           else float(area))
+        evidence_of.append(margin)
     # one detection per mover: a vehicle that moves more than its size leaves a second region where the
     # flow method failed (the ground it uncovered or covered); of regions whose boxes overlap by nms_iou,
     # the one whose motion explains the change best stays
