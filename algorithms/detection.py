@@ -545,9 +545,13 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if p["close_px"]:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disk(p["close_px"]))
     n, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
+    # a region under the smallest detection's area in m^2 gives none (its parts are smaller still): not split
+    min_px = p["min_area_px"]
+    if gsd_m_per_px is not None and p["min_area_m2"] is not None:
+        min_px = max(min_px, int(p["min_area_m2"] / gsd_m_per_px**2))
     regions = []
     for i in range(1, n):
-        if stats[i, cv2.CC_STAT_AREA] < p["min_area_px"]:
+        if stats[i, cv2.CC_STAT_AREA] < min_px:
             continue
         x0, y0 = stats[i, cv2.CC_STAT_LEFT], stats[i, cv2.CC_STAT_TOP]
         sub = labels[y0:y0 + stats[i, cv2.CC_STAT_HEIGHT], x0:x0 + stats[i, cv2.CC_STAT_WIDTH]] == i
