@@ -88,6 +88,10 @@ class Detection(NamedTuple):
 # merge_gap_px, merge_px, merge_rel: regions this close whose velocities agree this well are one mover;
 # parallax_max_ratio, parallax_perp_px, parallax_perp_rel: residuals along the global motion up to this
 #   fraction of it are parallax (0 turns the test off);
+# parallax_min_fraction, parallax_angle_deg, parallax_speed_rel: a direction shared by regions covering this
+#   fraction of the image (and half the moving area) is a parallax field's (frames registered before they
+#   came, see _common_parallax); its regions up to this many times their median speed are rejected
+#   (parallax_min_fraction 0 turns it off);
 # min_explained: the fraction of the grey-value change in a region that warping by its motion must remove,
 #   and half of it the margin over warping by the opposite motion (interpolation alone smooths noise either
 #   way; 0 turns the test off; needs the frames);
@@ -96,6 +100,10 @@ class Detection(NamedTuple):
 #   speed: that halo is left out of the box);
 # refine_px: the region's motion is refined by block matching within this radius of the flow's (needs the
 #   frames; 0: the flow's median as it is);
+# nms_iou: of two regions whose boxes overlap this much, the one whose motion explains the change better
+#   stays (a vehicle moving more than its size leaves a second region where the flow failed; 1 keeps all);
+# box_from_frames: the box is that of the pixels the region's motion explains better than standing still
+#   (_moved_box: the vehicle without the flow's halo; needs the frames), else of the region's fast core;
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
@@ -110,7 +118,8 @@ DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
-    "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12,
+    "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
+    "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
 }
 
 
@@ -166,6 +175,10 @@ def _check_keys(params: dict) -> dict:
     for k, v in p.items():
         if k == "ground_model" or (v is None and k in ("max_area_px", "min_area_m2", "max_area_m2")):
             continue
+        if k == "box_from_frames":
+            if not isinstance(v, bool):
+                raise ValueError(f"box_from_frames: expected true/false, got {v!r}")
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise ValueError(f"{k}: expected a finite number >= 0, got {v!r}")
     for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px"):
@@ -182,16 +195,26 @@ def _split(region: _Region, p: dict, depth: int = 0) -> list[_Region]:
     if depth >= 3 or n < 2 * p["min_area_px"]:
         return [region]
     w = region.w.astype(np.float64)
-    # 2-means started from the two vectors farthest apart along the principal direction of the spread
-    d = w - w.mean(axis=0)
-    _, _, vt = np.linalg.svd(d[:: max(1, n // 500)], full_matrices=False)
+    # coherent already (most regions): every velocity within the split distance of the median, no 2-means
+    med = np.median(w[:: max(1, n // 2000)], axis=0)
+    spread = float(np.percentile(np.hypot(*(w - med).T), 95))
+    if spread <= 0.5 * (p["split_px"] + p["split_rel"] * math.hypot(*med)):
+        return [region]
+    # 2-means (on at most ~2000 of the vectors) started from the two farthest apart along the principal
+    # direction of the spread
+    sub = w[:: max(1, n // 2000)]
+    d = sub - sub.mean(axis=0)
+    _, _, vt = np.linalg.svd(d, full_matrices=False)
     proj = d @ vt[0]
-    c = np.stack([w[np.argmin(proj)], w[np.argmax(proj)]])
-    for _ in range(8):
-        lab = (np.sum((w - c[1]) ** 2, axis=1) < np.sum((w - c[0]) ** 2, axis=1))
-        if lab.all() or not lab.any():
+    c = np.stack([sub[np.argmin(proj)], sub[np.argmax(proj)]])
+    for _ in range(6):
+        lab_s = np.sum((sub - c[1]) ** 2, axis=1) < np.sum((sub - c[0]) ** 2, axis=1)
+        if lab_s.all() or not lab_s.any():
             return [region]
-        c = np.stack([np.median(w[~lab], axis=0), np.median(w[lab], axis=0)])
+        c = np.stack([sub[~lab_s].mean(axis=0), sub[lab_s].mean(axis=0)])
+    lab = np.sum((w - c[1]) ** 2, axis=1) < np.sum((w - c[0]) ** 2, axis=1)
+    if lab.all() or not lab.any():
+        return [region]
     speed = max(float(np.hypot(*c[0])), float(np.hypot(*c[1])))
     if not float(np.hypot(*(c[0] - c[1]))) > p["split_px"] + p["split_rel"] * speed:
         return [region]
@@ -282,6 +305,46 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
     return float(dx[iy, ix] + ox), float(dy[iy, ix] + oy)
 
 
+def _moved_box(region: _Region, frames, u: float, v: float, margin_px: int) -> tuple[int, int, int, int] | None:
+    """The box of the pixels around the region that its motion explains better than standing still.
+
+    A flow region is larger than its vehicle: the flow window carries the vehicle's motion onto the
+    ground around it. A pixel of the vehicle is where frame t+1 warped by the vehicle's motion
+    matches frame t better than frame t+1 unwarped does (the ground matches unwarped); the
+    difference, averaged over 3 x 3 px, above 2 grey levels, closed over 2 px, and its 8-connected
+    part that holds most of the region's pixels, within ``margin_px`` of the region's box.
+    None when no pixel qualifies.
+    """
+    g0, g1 = frames
+    h, w = g0.shape
+    x0, y0, x1, y1 = region.box()
+    xa, ya, xb, yb = max(0, x0 - margin_px), max(0, y0 - margin_px), min(w - 1, x1 + margin_px), min(h - 1, y1 + margin_px)
+    a = np.ascontiguousarray(g0[ya:yb + 1, xa:xb + 1], dtype=np.float32)
+    b = np.ascontiguousarray(g1[ya:yb + 1, xa:xb + 1], dtype=np.float32)
+    bw = cv2.warpAffine(b, np.float32([[1, 0, u], [0, 1, v]]), (b.shape[1], b.shape[0]),
+                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    gain = cv2.blur(np.abs(b - a) - np.abs(bw - a), (3, 3))
+    moved = cv2.morphologyEx((gain > 2.0).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2))
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(moved, connectivity=8)
+    if n < 2:
+        return None
+    votes = np.bincount(labels[region.ys - ya, region.xs - xa], minlength=n)
+    votes[0] = 0
+    k = int(np.argmax(votes))
+    if votes[k] == 0:
+        return None
+    s = stats[k]
+    bx0, by0 = xa + s[cv2.CC_STAT_LEFT], ya + s[cv2.CC_STAT_TOP]
+    bx1, by1 = bx0 + s[cv2.CC_STAT_WIDTH] - 1, by0 + s[cv2.CC_STAT_HEIGHT] - 1
+    # those pixels are the vehicle in frame t and the ground it covers in frame t+1: the box reaches one
+    # motion ahead, taken off here; and the 3 x 3 average widened it by a pixel a side
+    bx0, bx1 = bx0 - min(u, 0.0) + 1, bx1 - max(u, 0.0) - 1
+    by0, by1 = by0 - min(v, 0.0) + 1, by1 - max(v, 0.0) - 1
+    if bx1 < bx0 or by1 < by0:
+        return None
+    return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1))
+
+
 def _explained(region: _Region, frames, u: float, v: float) -> float:
     """The fraction of the region's grey-value change ``|I1' - I0|`` that warping ``I1'`` by (u, v) removes."""
     g0, g1 = frames
@@ -294,7 +357,8 @@ def _explained(region: _Region, frames, u: float, v: float) -> float:
     M = np.float32([[1, 0, u], [0, 1, v]])  # sample I1'(x + w)
     bw = cv2.warpAffine(b, M, (b.shape[1], b.shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                         borderMode=cv2.BORDER_REPLICATE)
-    ys, xs = region.ys - ya, region.xs - xa
+    step = max(1, len(region.ys) // 1500)  # a large region is judged on a sample of its pixels
+    ys, xs = region.ys[::step] - ya, region.xs[::step] - xa
     # a change of brightness over the region (light, a cloud's shadow) is no motion: each difference is
     # taken about its median over the region
     d0, d1 = b[ys, xs] - a[ys, xs], bw[ys, xs] - a[ys, xs]
@@ -360,6 +424,71 @@ def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine
     return out
 
 
+def _box_iou(a: Detection, b: Detection) -> float:
+    """IoU of two detections' inclusive pixel boxes."""
+    iw = min(a.x1_px, b.x1_px) - max(a.x0_px, b.x0_px) + 1
+    ih = min(a.y1_px, b.y1_px) - max(a.y0_px, b.y0_px) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    area = lambda d: (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1)  # noqa: E731
+    return inter / (area(a) + area(b) - inter)
+
+
+def _along(d: Detection, gv, bound: float, p: dict) -> bool:
+    """Whether the motion of ``d`` lies along ``gv`` in its sense, up to ``bound`` px, within the tolerance."""
+    gn = math.hypot(*gv)
+    if not gn > 0:
+        return False
+    along = (d.u_px * gv[0] + d.v_px * gv[1]) / gn
+    perp = abs(-d.u_px * gv[1] + d.v_px * gv[0]) / gn
+    return 0 <= along <= bound and perp <= p["parallax_perp_px"] + p["parallax_perp_rel"] * math.hypot(d.u_px, d.v_px)
+
+
+def _parallax(d: Detection, g, p: dict, h: int, w: int) -> bool:
+    """The residual of ``d`` is the parallax of a static point under the global motion ``g``."""
+    if g is None or not p["parallax_max_ratio"] > 0:
+        return False
+    gv = g if g.ndim == 1 else g[min(h - 1, round(d.y_px)), min(w - 1, round(d.x_px))]
+    return _along(d, gv, p["parallax_max_ratio"] * math.hypot(*gv), p)
+
+
+def _common_parallax(dets: list[Detection], p: dict, image_area: int):
+    """The direction shared by most of the moving area, when that area is a parallax field's and not traffic's.
+
+    Where the frames were registered before they came (an orthophoto sequence, a stabilised
+    video) the global motion left is not the camera's translation, and the parallax of roofs and
+    tree crowns points along the translation that was removed. The static structures of a pair all
+    share that direction and sense (the epipole's, far off for a nadir view); traffic does not. A
+    direction within ``parallax_angle_deg`` of which lie at least three regions covering at least
+    ``parallax_min_fraction`` of the image and half of all moving area is taken as parallax (vehicles
+    cover a few per cent of a frame: 26 cars of 300 px are 1.5 % of 960 x 540), and the
+    regions along it no faster than ``parallax_speed_rel`` times their area-weighted median speed
+    are rejected. Returns ``(direction, speed bound)`` or None.
+    """
+    if p["parallax_min_fraction"] <= 0 or len(dets) < 3:
+        return None
+    v = np.array([[d.u_px, d.v_px] for d in dets])
+    a = np.array([d.area_px for d in dets], dtype=np.float64)
+    speed = np.hypot(v[:, 0], v[:, 1])
+    ok = speed > 0
+    if ok.sum() < 3:
+        return None
+    unit = v[ok] / speed[ok, None]
+    cos = unit @ unit.T
+    close = cos >= math.cos(math.radians(p["parallax_angle_deg"]))
+    support = close @ a[ok]
+    i = int(np.argmax(support))
+    if support[i] < max(p["parallax_min_fraction"] * image_area, 0.5 * a.sum()) or close[i].sum() < 3:
+        return None
+    members = close[i]
+    e = (unit[members] * a[ok][members, None]).sum(axis=0)
+    order = np.argsort(speed[ok][members])
+    cum = np.cumsum(a[ok][members][order])
+    median_speed = float(speed[ok][members][order][np.searchsorted(cum, cum[-1] / 2)])
+    return e / np.hypot(*e), p["parallax_speed_rel"] * median_speed
+
+
 @register_stage("detection")
 def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None, frames=None,
                     gsd_m_per_px: float | None = None, **params) -> list[Detection]:
@@ -416,9 +545,13 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if p["close_px"]:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, _disk(p["close_px"]))
     n, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
+    # a region under the smallest detection's area in m^2 gives none (its parts are smaller still): not split
+    min_px = p["min_area_px"]
+    if gsd_m_per_px is not None and p["min_area_m2"] is not None:
+        min_px = max(min_px, int(p["min_area_m2"] / gsd_m_per_px**2))
     regions = []
     for i in range(1, n):
-        if stats[i, cv2.CC_STAT_AREA] < p["min_area_px"]:
+        if stats[i, cv2.CC_STAT_AREA] < min_px:
             continue
         x0, y0 = stats[i, cv2.CC_STAT_LEFT], stats[i, cv2.CC_STAT_TOP]
         sub = labels[y0:y0 + stats[i, cv2.CC_STAT_HEIGHT], x0:x0 + stats[i, cv2.CC_STAT_WIDTH]] == i
@@ -433,7 +566,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         raise ValueError(f"global_flow_px: expected (2,) or {(h, w, 2)}, got {tuple(g.shape)}")
     if frames is not None and (len(frames) != 2 or any(np.shape(a) != (h, w) for a in frames)):
         raise ValueError(f"frames: expected two gray frames of shape {(h, w)}")
-    out = []
+    out, evidence_of = [], []
     cores = [c for r in regions if len(r.ys) >= p["min_area_px"] for c in r.cores(p["core_rel"], p["min_area_px"])]
     for c in _merge(cores, p) if len(cores) > len(regions) else cores:
         area = len(c.ys)
@@ -446,32 +579,48 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         cx, cy = float(c.xs.mean()), float(c.ys.mean())
         u, v = (float(a) for a in c.velocity)
         speed = math.hypot(u, v)
+        margin = float(area)  # what ranks overlapping regions without frames
         if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0):
-            # evidence that the region's texture moved by (u, v): the change it explains, and its margin over
-            # the opposite motion
-            def evidence(a, b):
-                gain = _explained(c, frames, a, b)
-                return gain, gain - _explained(c, frames, -a, -b)
-
-            gain, margin = evidence(u, v)
-            if p["refine_px"] > 0:  # the block matching's motion where it explains the change better
+            # evidence that the region's texture moved by (u, v): the change it explains, then its margin over
+            # the opposite motion (half min_explained: a uniform roof moved less than its size matches itself
+            # either way); the block matching's motion where it explains the change better than the flow's
+            options = [(_explained(c, frames, u, v), u, v)]
+            if p["refine_px"] > 0:
                 ur, vr = _refine_velocity(c, frames, u, v, p["refine_px"])
-                gain_r, margin_r = evidence(ur, vr)
-                if margin_r > margin:
-                    u, v, gain, margin = ur, vr, gain_r, margin_r
-            # (half as much margin: a uniform roof moved less than its size matches itself either way)
-            if p["min_explained"] > 0 and (gain < p["min_explained"] or margin < p["min_explained"] / 2):
-                continue
-        speed = math.hypot(u, v)
-        if g is not None and p["parallax_max_ratio"] > 0:
-            gv = g if g.ndim == 1 else g[min(h - 1, round(cy)), min(w - 1, round(cx))]
-            gn = math.hypot(*gv)
-            if gn > 0:
-                along = (u * gv[0] + v * gv[1]) / gn
-                perp = abs(-u * gv[1] + v * gv[0]) / gn
-                if 0 <= along <= p["parallax_max_ratio"] * gn and perp <= p["parallax_perp_px"] + \
-                        p["parallax_perp_rel"] * speed:
+                if math.hypot(ur - u, vr - v) > 0.25:
+                    options.append((_explained(c, frames, ur, vr), ur, vr))
+            chosen = None
+            for gain, a, b in sorted(options, reverse=True):
+                if p["min_explained"] > 0 and gain < p["min_explained"]:
+                    break
+                margin = gain - _explained(c, frames, -a, -b)
+                if p["min_explained"] <= 0 or margin >= p["min_explained"] / 2:
+                    chosen = (a, b)
+                    break
+            if chosen is None:
+                if p["min_explained"] > 0:
                     continue
+                chosen = max(options)[1:]
+            u, v = chosen
         x0, y0, x1, y1 = c.box()
+        if frames is not None and p["box_from_frames"]:
+            box = _moved_box(c, frames, u, v, 4)
+            if box is not None:
+                x0, y0, x1, y1 = box
+                cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
+        evidence_of.append(margin)
+    # one detection per mover: a vehicle that moves more than its size leaves a second region where the
+    # flow method failed (the ground it uncovered or covered); of regions whose boxes overlap by nms_iou,
+    # the one whose motion explains the change best stays
+    kept: list[Detection] = []
+    for i in np.argsort(-np.asarray(evidence_of, dtype=np.float64), kind="stable"):
+        d = out[i]
+        if not any(_box_iou(d, k) >= p["nms_iou"] for k in kept):
+            kept.append(d)
+    out = [d for d in kept if not _parallax(d, g, p, h, w)]
+    parallax_dir = _common_parallax(out, p, h * w)
+    if parallax_dir is not None:
+        e, bound = parallax_dir
+        out = [d for d in out if not _along(d, e, bound, p)]
     return sorted(out, key=lambda d: -d.area_px)

@@ -284,6 +284,9 @@ class DetectionSpec(_Section):
     parallax_max_ratio: float = DETECTION_DEFAULTS["parallax_max_ratio"]
     parallax_perp_px: float = DETECTION_DEFAULTS["parallax_perp_px"]
     parallax_perp_rel: float = DETECTION_DEFAULTS["parallax_perp_rel"]
+    parallax_min_fraction: float = DETECTION_DEFAULTS["parallax_min_fraction"]
+    parallax_angle_deg: float = DETECTION_DEFAULTS["parallax_angle_deg"]
+    parallax_speed_rel: float = DETECTION_DEFAULTS["parallax_speed_rel"]
     min_explained: float = DETECTION_DEFAULTS["min_explained"]
     min_area_m2: Any = DETECTION_DEFAULTS["min_area_m2"]
     max_area_m2: Any = DETECTION_DEFAULTS["max_area_m2"]
@@ -292,6 +295,8 @@ class DetectionSpec(_Section):
     noise_k: float = DETECTION_DEFAULTS["noise_k"]
     border_px: StrictInt = DETECTION_DEFAULTS["border_px"]
     refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
+    nms_iou: float = DETECTION_DEFAULTS["nms_iou"]
+    box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")

@@ -94,6 +94,8 @@ def test_a_region_whose_flow_does_not_move_the_texture_is_rejected():
     moved[40:60, 62:92] = g0[40:60, 60:90]
     (d,) = detect_vehicles(flow, valid, frames=(g0, moved))
     assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.25)
+    # its box from the frames: the block in frame t (not the place it moves to), within 2 px
+    assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx((60, 40, 89, 59), abs=2)
     # block matching recovers a motion the flow saw only in part (a fast vehicle)
     fast = g0.copy()
     fast[40:60, 69:99] = g0[40:60, 60:90]
@@ -189,3 +191,17 @@ def test_every_detection_key_is_a_pipeline_key_and_unknown_function_keys_fail():
         detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), bogus=1)
     with pytest.raises(ValueError, match=r"valid: expected \(4, 4\) bool"):
         detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 5), bool))
+
+
+def test_a_parallax_field_of_registered_frames_is_rejected_and_traffic_across_it_is_not():
+    # frames registered before they came: no global motion to compare with, but the crowns of trees all
+    # keep the parallax of the translation that was removed, one direction and sense
+    rng = np.random.default_rng(5)
+    crowns = [(y, y + 25, x, x + 25, (1.5 + 0.2 * k, 0.1)) for k, (y, x) in enumerate([(10, 10), (10, 70), (70, 20),
+                                                                                         (75, 110)])]
+    cars = [(50, 58, 60, 80, (0.0, 3.0)), (95, 103, 40, 60, (-3.0, 0.0))]
+    flow = _field(rng, crowns + cars)
+    dets = detect_vehicles(flow, np.ones((H, W), bool))
+    assert sorted((round(d.u_px), round(d.v_px)) for d in dets) == [(-3, 0), (0, 3)]
+    # off, the crowns are moving regions too
+    assert len(detect_vehicles(flow, np.ones((H, W), bool), parallax_min_fraction=0.0)) == 6
