@@ -12,7 +12,7 @@ from harness.metrics.objects import counted_objects, distractor_table, keep_esti
 from harness.metrics.registry import _row, register_metric
 
 
-_TRK = "per vehicle and frame where visible and tracked, pooled"
+_TRK = "per counted vehicle (visible and moving, as for mota) and frame where tracked, pooled"
 register_metric("track_error", "px", higher_is_better=False, weighting=_TRK,
                 description="|filtered track position - true vehicle centre|")
 register_metric("track_raw_error", "px", higher_is_better=False, weighting=_TRK,
@@ -21,13 +21,14 @@ register_metric("track_pred_error", "px", higher_is_better=False, weighting=_TRK
                 description="|one-step Kalman prediction for the frame - true vehicle centre|")
 register_metric("track_ate_rmse", "px", higher_is_better=False, weighting=_TRK + " (RMS)", reduce="rms",
                 description="absolute trajectory error: RMS of filtered position error")
-register_metric("track_fde", "px", higher_is_better=False, weighting="per vehicle, mean over vehicles",
+register_metric("track_fde", "px", higher_is_better=False, weighting="per counted vehicle, mean over vehicles",
                 description="final displacement error: filtered position error on the last tracked frame")
 register_metric("track_completeness", "%", higher_is_better=True,
-                weighting="per vehicle-frame where visible, pooled", reduce="rate",
-                description="share of frames where a vehicle is visible and a track is assigned to it")
+                weighting="per counted vehicle-frame, pooled", reduce="rate",
+                description="share of frames where a counted vehicle (visible, moving: no parked car, pedestrian "
+                "or cyclist) has a track assigned")
 register_metric("id_switches", "count", higher_is_better=False, weighting="summed over vehicles",
-                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT)")
+                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT), per counted vehicle")
 
 
 def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
