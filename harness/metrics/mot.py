@@ -29,8 +29,9 @@ _OBJ = (" (objects: visible vehicles that move, by `moving`, else `parked` == 0,
 _MOT = "per sequence and tracker, from summed counts (never an average of per-sequence scores)"
 register_metric("mota", "ratio", higher_is_better=True, weighting=_MOT + "; 1 - (FN + FP + IDSW) / objects",
                 reduce="complement", description="CLEAR-MOT accuracy 1 - (misses + false positives + ID switches) "
-                "/ counted vehicle-frames (Bernardin 2008)" + _OBJ + "; a track matches a boxed vehicle at IoU >= 0.5 (boxed "
-                "tracks) or with its point inside the box (point tracks), an unboxed one within the 20 px gate")
+                "/ counted vehicle-frames (Bernardin 2008)" + _OBJ + "; a track matches a boxed vehicle at IoU >= "
+                "0.5 (boxed tracks) or with its point inside the box (point tracks), an unboxed one within the 20 px "
+                "gate")
 register_metric("motp", "px", higher_is_better=False, weighting=_MOT + "; per matched vehicle-frame",
                 description="CLEAR-MOT precision: mean centre distance of matched track-vehicle pairs (Bernardin 2008), "
                 "whichever rule matched them")
@@ -41,15 +42,15 @@ register_metric("idf1", "ratio", higher_is_better=True, weighting=_MOT + "; 2 ID
 register_metric("mot_misses", "count", higher_is_better=False, weighting=_MOT, reduce="total",
                 description="CLEAR-MOT misses (FN): counted vehicle-frames no track matches (mota's rule)" + _OBJ)
 register_metric("mot_false_positives", "count", higher_is_better=False, weighting=_MOT, reduce="total",
-                description="CLEAR-MOT false positives (FP): track-frames matched to no counted vehicle (one on a parked car "
-                "is one; one on a distractor is removed)")
+                description="CLEAR-MOT false positives (FP): track-frames matched to no counted vehicle (one on a "
+                "parked car is one; one on a distractor is removed)")
 
 
 @dataclass(frozen=True)
 class MOTCounts:
     """Summed CLEAR-MOT and identity counts of one tracker on one sequence (or summed over many).
 
-    objects: visible vehicle-frames (GT); predictions: estimated track-frames;
+    objects: counted vehicle-frames (GT); predictions: estimated track-frames;
     matches: corresponding pairs, switches included (py-motmetrics' num_detections); misses (FN), false_positives (FP), switches (IDSW); dist_sum_px: sum
     of the matched distances; idtp, idfn, idfp: identity true positives, false
     negatives, false positives of the best one-to-one vehicle-track assignment

@@ -28,7 +28,8 @@ register_metric("track_completeness", "%", higher_is_better=True,
                 description="share of frames where a counted vehicle (visible, moving: no parked car, pedestrian "
                 "or cyclist) has a track assigned")
 register_metric("id_switches", "count", higher_is_better=False, weighting="summed over vehicles",
-                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT), per counted vehicle")
+                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT), per counted "
+                "vehicle")
 
 
 def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:

@@ -144,7 +144,8 @@ def test_a_track_on_a_parked_car_is_a_false_positive_and_the_parked_car_no_miss(
     # two frames: car 1 moves, car 2 is parked; one point track inside each box
     truth = _boxed([(f, v, x + (3.0 * f if v == 1 else 0.0), 20.0, 6.0, {"parked": p, "class": "car"})
                     for f in (0, 1) for v, x, p in ((1, 20.0, 0), (2, 80.0, 1))])
-    est = _points([(f, t, x + (3.0 * f if t == 10 else 0.0), 21.0) for f in (0, 1) for t, x in ((10, 20.0), (11, 80.0))])
+    est = _points([(f, t, x + (3.0 * f if t == 10 else 0.0), 21.0)
+                   for f in (0, 1) for t, x in ((10, 20.0), (11, 80.0))])
     c = M.mot_counts(est, truth, gate_px=5.0)
     assert (c.objects, c.predictions, c.matches, c.misses, c.false_positives) == (2, 4, 2, 0, 2)
     assert c.mota == pytest.approx(1 - 2 / 2)
@@ -152,7 +153,7 @@ def test_a_track_on_a_parked_car_is_a_false_positive_and_the_parked_car_no_miss(
     rows = [r for r in M.track_rows(est, truth, gate_px=5.0) if r["metric"] == "track_completeness"]
     assert [(r["track_id"], r["value"]) for r in rows] == [(1, 100.0)]
     # a car queued at a light (not parked, speed 0 in a frame) stays an object in that frame
-    queued = truth.assign(speed_mps=np.where(truth["vehicle_id"] == 1, 0.0, 0.0))
+    queued = truth.assign(speed_mps=0.0)
     assert M.mot_counts(est, queued, gate_px=5.0).objects == 2
     # a moving column, where present, decides over parked
     moving = truth.assign(moving=1)
@@ -201,8 +202,8 @@ def _with_distractors(rng: np.random.Generator):
     est, truth = _scenario(rng)
     truth["class"], truth["parked"] = "car", 0
     n = truth["frame"].max() + 1
-    extra = [{"frame": f, "vehicle_id": 50, "x_px": 300.0, "y_px": 300.0, "visible": 1, "class": "car", "parked": 1}
-             for f in range(n)]
+    extra = [{"frame": f, "vehicle_id": 50, "x_px": 300.0, "y_px": 300.0, "visible": 1, "class": "car",
+              "parked": 1} for f in range(n)]
     extra += [{"frame": f, "vehicle_id": 60, "x_px": 400.0 + f, "y_px": 50.0, "visible": 1, "class": "pedestrian",
                "parked": 0} for f in range(n)]
     est_extra = [{"frame": f, "track_id": 500, "x_filt_px": 301.0, "y_filt_px": 300.0, "source": "multi"}
