@@ -233,3 +233,18 @@ def test_clear_mot_with_distractors_equals_py_motmetrics_after_removal_by_hand(s
     assert c.mota == pytest.approx(s.mota, abs=1e-12) and c.idf1 == pytest.approx(s.idf1, abs=1e-12)
     n_parked_track = int((est["track_id"] == 500).sum())
     assert c.false_positives >= n_parked_track > 0   # the track on the parked car counts against MOTA
+
+
+def test_score_sequence_passes_real_footages_ignore_regions_to_every_tracking_metric():
+    from types import SimpleNamespace
+
+    truth = _boxed([(f, 1, 20.0, 20.0, 6.0, {}) for f in (0, 1)])
+    ignore = pd.DataFrame({"frame": [0, 1], "bbox_x0_px": 50.0, "bbox_y0_px": 0.0, "bbox_x1_px": 150.0,
+                           "bbox_y1_px": 60.0, "class": "car"})
+    est = _points([(f, t, x, 20.0) for f in (0, 1) for t, x in ((10, 20.0), (11, 90.0))])
+    seq = SimpleNamespace(tracks=est)
+    plain = {(r["metric"], r["region"]): r["value"] for r in M.score_sequence(seq, None, truth)}
+    kept = {(r["metric"], r["region"]): r["value"] for r in M.score_sequence(seq, None, truth, ignore_df=ignore)}
+    assert plain[("mot_false_positives", "multi")] == 2 and kept[("mot_false_positives", "multi")] == 0
+    assert kept[("mota", "multi")] == 1.0 and kept[("idf1", "multi")] == 1.0 and kept[("hota", "multi")] > plain[
+        ("hota", "multi")]
