@@ -41,13 +41,18 @@ class _Frames:
 
 
 def point_seeds(tracks: pd.DataFrame | None) -> list[tuple[int, float, float]]:
-    """Seeds for the point tracker: ground-truth centres of the vehicles visible in frame 0.
+    """Seeds for the point tracker: ground-truth centres of the counted vehicles visible in frame 0.
+
+    Counted: :func:`harness.metrics.objects.counted_objects` (vehicles that move; no parked
+    car, pedestrian or cyclist), the objects the track metrics score.
 
     None (real footage without identities: no tracks.csv) gives no seed, so no point tracking.
     """
     if tracks is None or len(tracks) == 0:
         return []
-    first = tracks[(tracks["frame"] == 0) & (tracks["visible"].astype(int) == 1)]
+    from harness.metrics.objects import counted_objects
+
+    first = tracks[(tracks["frame"] == 0).to_numpy() & counted_objects(tracks)]
     first = first.sort_values("vehicle_id")
     return [(int(r.vehicle_id), float(r.x_px), float(r.y_px)) for r in first.itertuples()]
 
@@ -286,7 +291,8 @@ def _finish(run: _CellRun, seq: Any) -> list[dict]:
     if run.seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
     # real footage: camera.csv and tracks.csv may be absent (None): their metrics give no rows
-    rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks)  # fresh dicts: no copy
+    rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks,  # fresh dicts: no copy
+                                     ignore_df=getattr(seq, "ignore_regions", None))
     artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
     artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))
     artifacts.write_mot_tracks(run.tmp, getattr(run.seq_est, "tracks", None))

@@ -16,6 +16,7 @@ module             what
 ``sequence``       score_sequence: every sequence-level row
 ``aggregate``      reduce_totals, aggregate
 ``matching``       when an estimate corresponds to a vehicle: IoU, point in box, distance gate
+``objects``        which truth rows are counted (vehicles that move) and which are distractors
 ``detection``      per-frame detection precision and recall against moving vehicles' boxes
 ``photometric``    truth-free: photometric residual of the total flow, stabilisation ITF
 =================  ==========================================================
@@ -82,6 +83,7 @@ position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID 
 MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
 HOTACounts, hota_counts, hota_rows, alpha_mean_value  HOTA, DetA, AssA, LocA (Luiten 2021) from per-alpha counts
 correspondence, box_iou, box_offset                    when a track or detection matches a vehicle (box-aware)
+counted_objects, distractor_table, keep_estimates      counted vehicles, distractors (MOT16) and their removal
 detection_rows, detection_counts, moving_vehicles      detection precision and recall per pair
 prepare_photometric, photometric_rows                  photometric residual of the total flow (no truth)
 psnr_shifted, itf_rows                                 stabilisation ITF (no truth)
@@ -110,8 +112,13 @@ from harness.metrics.flow import (  # noqa: F401
 from harness.metrics.stabilisation import (  # noqa: F401
     detrend, jitter_rows, shift_rows, stabilisation_rows, stabilisation_scores,
 )
+from harness.metrics.matching import _linear_sum_assignment  # noqa: F401
+from harness.metrics.objects import (  # noqa: F401
+    DISTRACTOR_CLASSES, VEHICLE_CLASSES, counted_objects, distractor_objects, distractor_table, keep_estimates,
+    truth_classes,
+)
 from harness.metrics.trajectories import (  # noqa: F401
-    _linear_sum_assignment, _mot_frames, _points_by_frame, associate_tracks, position_error_px, track_rows,
+    _mot_frames, _points_by_frame, associate_tracks, position_error_px, track_rows,
 )
 from harness.metrics.mot import (  # noqa: F401
     HOTA_ALPHAS, HOTACounts, MOTCounts, alpha_mean_value, hota_counts, hota_rows, mot_counts, mot_rows,
@@ -136,6 +143,8 @@ __all__ = [
     "HOTA_ALPHAS", "HOTACounts", "hota_counts", "hota_rows", "alpha_mean_value",
     "encode_alpha_totals", "decode_alpha_totals",
     "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
+    "VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "truth_classes", "counted_objects", "distractor_objects",
+    "distractor_table", "keep_estimates",
     "detection_rows", "detection_counts", "moving_vehicles",
     "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",
     "score_sequence",

@@ -8,14 +8,17 @@ method, maximising the number of matches, on the rules of
 area_px``, an inclusive pixel range) matches at IoU >= 0.5; a detection without one
 (the tuple ``(x_px, y_px, area_px)``) when its centre lies inside the box.
 
-Which vehicles count: those that move, where that is known. A ``moving`` column (0/1)
-of tracks.csv says it; else ``parked`` (0/1), and a vehicle that is not parked but
-slower than :data:`MOVING_MIN_MPS` (``speed_mps``, a car waiting at a light) does not
-move either: a motion detector cannot see it. Rows are ``region`` "moving" then. Where
-neither column exists (real footage whose boxes do not say) every visible vehicle counts
-and rows are ``region`` "all". A detection on a vehicle that does not count is a false
-positive. Only vehicles with a finite box are truth; without any box column there are
-no rows.
+Which vehicles count: the tracking metrics' counted objects
+(:func:`harness.metrics.objects.counted_objects`: visible rows of a vehicle class that a
+``moving`` column, else ``parked`` == 0, says move), and for detection one rule more: a
+vehicle that is not parked but slower than :data:`MOVING_MIN_MPS` in that frame
+(``speed_mps``, a car waiting at a light; only where no ``moving`` column exists) does
+not move either: a motion detector cannot see it in that pair. Rows are ``region``
+"moving" then. Where neither column exists (real footage whose boxes do not say) every
+visible vehicle counts and rows are ``region`` "all". A detection on a vehicle that does
+not count is a false positive (pedestrians and cyclists too: the detection scores have
+no distractors). Only vehicles with a finite box are truth; without any box column
+there are no rows.
 """
 
 from __future__ import annotations
@@ -24,8 +27,9 @@ import numpy as np
 import pandas as pd
 
 from harness.metrics.matching import BOX_COLUMNS, correspondence
+from harness.metrics.objects import counted_objects
 from harness.metrics.registry import _row, register_metric
-from harness.metrics.trajectories import _linear_sum_assignment
+from harness.metrics.matching import _linear_sum_assignment
 
 MOVING_MIN_MPS = 0.5
 
@@ -64,15 +68,14 @@ def moving_vehicles(truth: pd.DataFrame) -> tuple[np.ndarray, str]:
     """
     if not all(c in truth.columns for c in BOX_COLUMNS):
         return np.zeros(len(truth), bool), "all"
-    keep = truth["visible"].astype(bool).to_numpy() & np.isfinite(
+    keep = counted_objects(truth) & np.isfinite(
         np.stack([truth[c].to_numpy(np.float64) for c in BOX_COLUMNS], 1)).all(axis=1)
     if "moving" in truth.columns:
-        return keep & (pd.to_numeric(truth["moving"], errors="coerce").to_numpy() == 1), "moving"
+        return keep, "moving"
     if "parked" in truth.columns:
-        moving = pd.to_numeric(truth["parked"], errors="coerce").to_numpy() == 0
         if "speed_mps" in truth.columns:
-            moving &= pd.to_numeric(truth["speed_mps"], errors="coerce").to_numpy() >= MOVING_MIN_MPS
-        return keep & moving, "moving"
+            keep &= pd.to_numeric(truth["speed_mps"], errors="coerce").to_numpy() >= MOVING_MIN_MPS
+        return keep, "moving"
     return keep, "all"
 
 

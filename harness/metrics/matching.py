@@ -34,6 +34,14 @@ IOU_MIN = 0.5
 __all__ = ["BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence", "boxes_of"]
 
 
+def _linear_sum_assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scipy.optimize.linear_sum_assignment`, imported on first use (scipy.optimize takes 0.7 s
+    to import, and most processes that import this module never match tracks)."""
+    from scipy.optimize import linear_sum_assignment as lsa
+
+    return lsa(cost)
+
+
 def boxes_of(df, mask=None) -> np.ndarray:
     """``(N, 4)`` float64 ``x0, y0, x1, y1`` of the rows of ``df`` (NaN where it has no box columns)."""
     n = len(df) if mask is None else int(np.count_nonzero(mask))

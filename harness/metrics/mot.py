@@ -3,6 +3,12 @@
 A vehicle and a track correspond by the box-aware rules of :mod:`harness.metrics.matching`:
 where the truth has a box, IoU >= 0.5 for a track that carries a box and the point inside
 the box for a point track; the distance gate (``gate_px``, 20 px) where the truth has none.
+
+What is truth, :mod:`harness.metrics.objects`: the objects are the visible vehicles that
+move (``moving``, else ``parked`` == 0; a vehicle class; every row of real footage
+without those columns); a track on a parked car is a false positive. Pedestrians,
+cyclists and real footage's ignore regions are distractors (MOT16): an estimate on one
+is removed from that frame before any count, and a distractor is never a miss.
 """
 
 from __future__ import annotations
@@ -15,13 +21,17 @@ import pandas as pd
 
 from harness.metrics.matching import correspondence
 from harness.metrics.registry import _row, register_metric
-from harness.metrics.trajectories import _linear_sum_assignment, _mot_frames, _points_by_frame
+from harness.metrics.matching import _linear_sum_assignment
+from harness.metrics.trajectories import _mot_frames, _points_by_frame
 
+_OBJ = (" (objects: visible vehicles that move, by `moving`, else `parked` == 0, any speed; parked cars are "
+        "not objects; pedestrians, cyclists and ignore regions are distractors: a track on one is dropped)")
 _MOT = "per sequence and tracker, from summed counts (never an average of per-sequence scores)"
 register_metric("mota", "ratio", higher_is_better=True, weighting=_MOT + "; 1 - (FN + FP + IDSW) / objects",
                 reduce="complement", description="CLEAR-MOT accuracy 1 - (misses + false positives + ID switches) "
-                "/ visible vehicle-frames (Bernardin 2008); a track matches a boxed vehicle at IoU >= 0.5 (boxed "
-                "tracks) or with its point inside the box (point tracks), an unboxed one within the 20 px gate")
+                "/ counted vehicle-frames (Bernardin 2008)" + _OBJ + "; a track matches a boxed vehicle at IoU >= "
+                "0.5 (boxed tracks) or with its point inside the box (point tracks), an unboxed one within the 20 px "
+                "gate")
 register_metric("motp", "px", higher_is_better=False, weighting=_MOT + "; per matched vehicle-frame",
                 description="CLEAR-MOT precision: mean centre distance of matched track-vehicle pairs (Bernardin 2008), "
                 "whichever rule matched them")
@@ -30,16 +40,17 @@ register_metric("idf1", "ratio", higher_is_better=True, weighting=_MOT + "; 2 ID
                 "vehicle-track assignment (Ristani 2016); a pair counts where it matches by mota's rule (IoU, "
                 "point in box, or the gate)")
 register_metric("mot_misses", "count", higher_is_better=False, weighting=_MOT, reduce="total",
-                description="CLEAR-MOT misses (FN): visible vehicle-frames no track matches (mota's rule)")
+                description="CLEAR-MOT misses (FN): counted vehicle-frames no track matches (mota's rule)" + _OBJ)
 register_metric("mot_false_positives", "count", higher_is_better=False, weighting=_MOT, reduce="total",
-                description="CLEAR-MOT false positives (FP): track-frames matched to no vehicle")
+                description="CLEAR-MOT false positives (FP): track-frames matched to no counted vehicle (one on a "
+                "parked car is one; one on a distractor is removed)")
 
 
 @dataclass(frozen=True)
 class MOTCounts:
     """Summed CLEAR-MOT and identity counts of one tracker on one sequence (or summed over many).
 
-    objects: visible vehicle-frames (GT); predictions: estimated track-frames;
+    objects: counted vehicle-frames (GT); predictions: estimated track-frames;
     matches: corresponding pairs, switches included (py-motmetrics' num_detections); misses (FN), false_positives (FP), switches (IDSW); dist_sum_px: sum
     of the matched distances; idtp, idfn, idfp: identity true positives, false
     negatives, false positives of the best one-to-one vehicle-track assignment
@@ -74,7 +85,8 @@ class MOTCounts:
         return 2 * self.idtp / den if den else math.nan
 
 
-def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> MOTCounts:
+def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0,
+               ignore: pd.DataFrame | None = None) -> MOTCounts:
     """CLEAR-MOT (Bernardin and Stiefelhagen 2008) and identity (Ristani et al. 2016) counts.
 
     Parameters
@@ -83,12 +95,16 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0)
         One tracker's rows (``frame, track_id, x_filt_px, y_filt_px``); rows with
         a NaN position are not predictions.
     truth : DataFrame
-        tracks.csv (``frame, vehicle_id, x_px, y_px, visible``); visible rows are objects.
+        tracks.csv (``frame, vehicle_id, x_px, y_px, visible``, optional ``class``, ``parked``,
+        ``moving``); the objects are its counted rows, estimates on its pedestrians and
+        cyclists are removed (:mod:`harness.metrics.objects`).
         With ``bbox_x0_px .. bbox_y1_px`` on either side, the box-aware rules apply
         (:mod:`harness.metrics.matching`).
     gate_px : float
         A vehicle without a box and a track correspond only within this distance.
         The same rules decide both the frame matching and the identity matching.
+    ignore : DataFrame or None
+        ignore.csv of real footage (``frame, bbox_x0_px .. bbox_y1_px``): distractors too.
 
     The identity assignment pairs each vehicle with at most one track over the
     whole sequence so as to maximise IDTP, the number of frames where the pair
@@ -98,7 +114,7 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0)
     objects = predictions = matches = switches = 0
     dist_sum = 0.0
     overlap: dict[tuple[int, int], int] = {}
-    for _f, vids, tids, D, match, switch, ok in _mot_frames(est, truth, gate_px=gate_px):
+    for _f, vids, tids, D, match, switch, ok in _mot_frames(est, truth, gate_px=gate_px, ignore=ignore):
         objects += len(vids)
         predictions += len(tids)
         matches += len(match)
@@ -121,7 +137,8 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0)
                      idtp=idtp, idfn=objects - idtp, idfp=predictions - idtp)
 
 
-def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
+def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
+             ignore: pd.DataFrame | None = None) -> list[dict]:
     """MOTA, MOTP, IDF1 and the FN / FP counts per tracker (``region`` = ``source``), as summable totals.
 
     One row per metric and tracker, no frame or track id. Each carries the
@@ -136,7 +153,7 @@ def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: f
     if est_tracks is None or est_tracks.empty:
         return rows
     for source, est in est_tracks.groupby("source"):
-        c = mot_counts(est, truth_tracks, gate_px=gate_px)
+        c = mot_counts(est, truth_tracks, gate_px=gate_px, ignore=ignore)
         kw = {"region": str(source), "motion": "track"}
         errors = c.misses + c.false_positives + c.switches
         rows += [
@@ -213,8 +230,11 @@ class HOTACounts:
         return float(np.mean(self.hota_alpha))
 
 
-def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> HOTACounts:
-    """HOTA totals (Luiten et al. 2021) of one tracker's points against the visible vehicles.
+def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0,
+                ignore: pd.DataFrame | None = None) -> HOTACounts:
+    """HOTA totals (Luiten et al. 2021) of one tracker's points against the counted vehicles.
+
+    Objects and distractors as :func:`mot_counts` (:mod:`harness.metrics.objects`).
 
     Similarity of a vehicle and a track in a frame (HOTA is defined for any similarity
     in [0, 1]), by :func:`harness.metrics.matching.correspondence`: the IoU of a boxed
@@ -241,7 +261,7 @@ def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0
     """
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
-    by_frame = list(_points_by_frame(est, truth, boxes=True))
+    by_frame = list(_points_by_frame(est, truth, boxes=True, ignore=ignore, gate_px=gate_px))
     vids = np.unique(np.concatenate([f[1] for f in by_frame] + [np.zeros(0, np.int64)]))
     tids = np.unique(np.concatenate([f[3] for f in by_frame] + [np.zeros(0, np.int64)]))
     na = len(HOTA_ALPHAS)
@@ -297,7 +317,7 @@ _HOTA_MATCH = ("; similarity IoU (boxed track on a boxed vehicle), 1 - the point
                "half-extents (point track), or 1 - d / 20 px (vehicle without a box)")
 register_metric("hota", "ratio", higher_is_better=True, weighting=_HOTA_W, reduce="alpha_mean",
                 description="HOTA, sqrt(DetA AssA) averaged over the localisation thresholds (Luiten 2021)"
-                + _HOTA_MATCH)
+                + _HOTA_MATCH + "; objects and distractors as mota")
 register_metric("deta", "ratio", higher_is_better=True, weighting=_HOTA_W, reduce="alpha_mean",
                 description="HOTA detection accuracy TP / (TP + FN + FP), mean over alphas (Luiten 2021)")
 register_metric("assa", "ratio", higher_is_better=True, weighting=_HOTA_W + "; each alpha TP-weighted",
@@ -325,7 +345,8 @@ def alpha_mean_value(metric: str, num: np.ndarray, den: np.ndarray) -> float:
     return float(r.mean() if zero else r[den > 0].mean())
 
 
-def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
+def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
+              ignore: pd.DataFrame | None = None) -> list[dict]:
     """HOTA, DetA, AssA and LocA per tracker (``region`` = ``source``, motion "track"), poolable.
 
     One row per metric and tracker. HOTA is a mean over 19 alphas of per-alpha ratios, so a
@@ -333,7 +354,7 @@ def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: 
     and DetA over TP + FN + FP, AssA over TP with ``ass_sum``, LocA over TP with
     ``loc_sum``), stored in ``hist`` (:func:`harness.metrics.histogram.encode_alpha_totals`);
     :func:`harness.metrics.aggregate` sums them and takes :func:`alpha_mean_value`. ``sum``
-    is NaN, ``count`` the visible vehicle-frames.
+    is NaN, ``count`` the counted vehicle-frames.
     """
     from harness.metrics.histogram import encode_alpha_totals
 
@@ -341,7 +362,7 @@ def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: 
     if est_tracks is None or est_tracks.empty:
         return rows
     for source, est in est_tracks.groupby("source"):
-        c = hota_counts(est, truth_tracks, gate_px=gate_px)
+        c = hota_counts(est, truth_tracks, gate_px=gate_px, ignore=ignore)
         objects = float(c.tp[0] + c.fn[0])
         for metric, (num_name, den_names, _, _) in _ALPHA_RULES.items():
             num = getattr(c, num_name)

@@ -10,7 +10,7 @@ from harness.metrics.trajectories import track_rows
 
 
 def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.DataFrame | None, *,
-                   gate_px: float = 20.0) -> list[dict]:
+                   gate_px: float = 20.0, ignore_df: pd.DataFrame | None = None) -> list[dict]:
     """Rows of a whole sequence: global shift errors, residual jitter, trajectories.
 
     Parameters
@@ -20,6 +20,9 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.D
     camera_df, tracks_df : DataFrame or None
         camera.csv and tracks.csv of the sequence; None where the sequence has no such truth
         (real footage): the metrics that need it give no rows.
+    ignore_df : DataFrame or None
+        ignore.csv of real footage (:attr:`scenes.sequence.Sequence.ignore_regions`): distractor
+        regions for the tracking metrics (:mod:`harness.metrics.objects`).
     """
     rows = []
     if camera_df is not None and getattr(seq_estimate, "shifts_px", None) is not None:
@@ -31,7 +34,7 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.D
         rows += stabilisation_rows(seq_estimate.correction_px, camera_df, shape)
     tracks = getattr(seq_estimate, "tracks", None)
     if tracks is not None and tracks_df is not None and len(tracks):
-        rows += track_rows(tracks, tracks_df, gate_px=gate_px)
-        rows += mot_rows(tracks, tracks_df, gate_px=gate_px)
-        rows += hota_rows(tracks, tracks_df, gate_px=gate_px)
+        rows += track_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
+        rows += mot_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
+        rows += hota_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
     return rows

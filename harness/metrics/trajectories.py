@@ -7,19 +7,12 @@ import math
 import numpy as np
 import pandas as pd
 
-from harness.metrics.matching import boxes_of, correspondence
+from harness.metrics.matching import _linear_sum_assignment, boxes_of, correspondence
+from harness.metrics.objects import counted_objects, distractor_table, keep_estimates
 from harness.metrics.registry import _row, register_metric
 
 
-def _linear_sum_assignment(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`scipy.optimize.linear_sum_assignment`, imported on first use (scipy.optimize takes 0.7 s
-    to import, and most processes that import this module never match tracks)."""
-    from scipy.optimize import linear_sum_assignment as lsa
-
-    return lsa(cost)
-
-
-_TRK = "per vehicle and frame where visible and tracked, pooled"
+_TRK = "per counted vehicle (visible and moving, as for mota) and frame where tracked, pooled"
 register_metric("track_error", "px", higher_is_better=False, weighting=_TRK,
                 description="|filtered track position - true vehicle centre|")
 register_metric("track_raw_error", "px", higher_is_better=False, weighting=_TRK,
@@ -28,13 +21,15 @@ register_metric("track_pred_error", "px", higher_is_better=False, weighting=_TRK
                 description="|one-step Kalman prediction for the frame - true vehicle centre|")
 register_metric("track_ate_rmse", "px", higher_is_better=False, weighting=_TRK + " (RMS)", reduce="rms",
                 description="absolute trajectory error: RMS of filtered position error")
-register_metric("track_fde", "px", higher_is_better=False, weighting="per vehicle, mean over vehicles",
+register_metric("track_fde", "px", higher_is_better=False, weighting="per counted vehicle, mean over vehicles",
                 description="final displacement error: filtered position error on the last tracked frame")
 register_metric("track_completeness", "%", higher_is_better=True,
-                weighting="per vehicle-frame where visible, pooled", reduce="rate",
-                description="share of frames where a vehicle is visible and a track is assigned to it")
+                weighting="per counted vehicle-frame, pooled", reduce="rate",
+                description="share of frames where a counted vehicle (visible, moving: no parked car, pedestrian "
+                "or cyclist) has a track assigned")
 register_metric("id_switches", "count", higher_is_better=False, weighting="summed over vehicles",
-                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT)")
+                reduce="total", description="identity switches of the multi-target tracker (CLEAR-MOT), per counted "
+                "vehicle")
 
 
 def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
@@ -50,18 +45,22 @@ def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
 _ASSOC_COLUMNS = ["frame", "vehicle_id", "track_id", "dist_px", "switch"]
 
 
-def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame, *, boxes: bool = False):
-    """Per frame with a visible vehicle or a finite estimate, ascending: ``(frame, vehicle_ids, P, track_ids, Q)``.
+def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame, *, boxes: bool = False,
+                     ignore: pd.DataFrame | None = None, gate_px: float = 20.0):
+    """Per frame with a counted vehicle or a finite estimate, ascending: ``(frame, vehicle_ids, P, track_ids, Q)``.
 
-    vehicle_ids (V,) int64 and P (V, 2) ``x_px, y_px`` of the visible rows of ``truth``;
+    vehicle_ids (V,) int64 and P (V, 2) ``x_px, y_px`` of the counted rows of ``truth``
+    (:func:`harness.metrics.objects.counted_objects`: visible vehicles that move);
     track_ids (T,) int64 and Q (T, 2) ``x_filt_px, y_filt_px`` of the rows of ``est`` with a
-    finite position; each in table order (as ``groupby("frame")`` gives them), from numpy
-    arrays taken once (a per-frame DataFrame selection costs ~1 ms each). With ``boxes``
-    each tuple also carries the true boxes (V, 4) and the estimated boxes (T, 4)
-    (``bbox_x0_px .. bbox_y1_px``; NaN where a side has none):
-    ``(frame, vehicle_ids, P, track_ids, Q, true_boxes, est_boxes)``.
+    finite position that do not fall on a distractor (a pedestrian or cyclist of ``truth``,
+    a row of ``ignore``: :func:`harness.metrics.objects.keep_estimates`, by the rules of
+    :func:`harness.metrics.matching.correspondence` with ``gate_px``); each in table order
+    (as ``groupby("frame")`` gives them), from numpy arrays taken once (a per-frame
+    DataFrame selection costs ~1 ms each). With ``boxes`` each tuple also carries the
+    true boxes (V, 4) and the estimated boxes (T, 4) (``bbox_x0_px .. bbox_y1_px``; NaN
+    where a side has none): ``(frame, vehicle_ids, P, track_ids, Q, true_boxes, est_boxes)``.
     """
-    vis = np.asarray(truth["visible"].to_numpy(), bool)
+    vis = counted_objects(truth)
     vf = truth["frame"].to_numpy()[vis]
     vv = truth["vehicle_id"].to_numpy(np.int64)[vis]
     vp = np.stack([truth["x_px"].to_numpy(np.float64)[vis], truth["y_px"].to_numpy(np.float64)[vis]], 1)
@@ -70,24 +69,30 @@ def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame, *, boxes: bool = Fa
     ef = est["frame"].to_numpy()[ok]
     et = est["track_id"].to_numpy(np.int64)[ok]
     eq = np.stack([ex[ok], ey[ok]], 1)
-    if boxes:
-        vb, eb = boxes_of(truth, vis), boxes_of(est, ok)
-    ov, oe = np.argsort(vf, kind="stable"), np.argsort(ef, kind="stable")
-    vf_s, ef_s = vf[ov], ef[oe]
+    vb, eb = boxes_of(truth, vis), boxes_of(est, ok)
+    dist = distractor_table(truth, ignore)
+    df_ = dist["frame"].to_numpy(np.int64)
+    dp, db, dr = dist[["x_px", "y_px"]].to_numpy(np.float64), boxes_of(dist), dist["region"].to_numpy(bool)
+    ov, oe, od = (np.argsort(x, kind="stable") for x in (vf, ef, df_))
+    vf_s, ef_s, df_s = vf[ov], ef[oe], df_[od]
     for f in np.union1d(vf, ef):
         iv = ov[np.searchsorted(vf_s, f, "left"):np.searchsorted(vf_s, f, "right")]
         ie = oe[np.searchsorted(ef_s, f, "left"):np.searchsorted(ef_s, f, "right")]
+        idd = od[np.searchsorted(df_s, f, "left"):np.searchsorted(df_s, f, "right")]
+        if len(idd) and len(ie):
+            ie = ie[keep_estimates(vp[iv], vb[iv], eq[ie], eb[ie], dp[idd], db[idd], dr[idd], gate_px=gate_px)]
         if boxes:
             yield f, vv[iv], vp[iv], et[ie], eq[ie], vb[iv], eb[ie]
         else:
             yield f, vv[iv], vp[iv], et[ie], eq[ie]
 
 
-def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
+def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float, ignore: pd.DataFrame | None = None):
     """Frame by frame CLEAR-MOT correspondences (Bernardin and Stiefelhagen 2008, sec. 2.1.1).
 
     Yields ``(frame, vehicle_ids, track_ids, D, match, switch, feasible)`` for every frame
-    that has a visible vehicle or a finite estimate: ``D`` (V, T) Euclidean distances
+    that has a counted vehicle or a finite estimate (after distractor removal, see
+    :func:`_points_by_frame`; ``ignore``: ignore.csv rows or None): ``D`` (V, T) Euclidean distances
     between true centres ``x_px, y_px`` and filtered estimates ``x_filt_px, y_filt_px``;
     ``feasible`` (V, T) where a pair may correspond, by the box-aware rules of
     :func:`harness.metrics.matching.correspondence` (IoU >= 0.5 for a boxed track on a
@@ -100,7 +105,7 @@ def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
     last: dict[int, int] = {}   # vehicle -> last matched track ever (Bernardin's M_{t-1}, carried on)
-    for f, vids, P, tids, Q, TB, EB in _points_by_frame(est, truth, boxes=True):
+    for f, vids, P, tids, Q, TB, EB in _points_by_frame(est, truth, boxes=True, ignore=ignore, gate_px=gate_px):
         D, ok, C, _ = correspondence(P, TB, Q, EB, gate_px=gate_px)
         match: dict[int, int] = {}
         switch: dict[int, bool] = {}
@@ -126,8 +131,12 @@ def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
         yield f, vids, tids, D, match, switch, ok
 
 
-def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> pd.DataFrame:
-    """Match estimated tracks to visible vehicles frame by frame (CLEAR-MOT, Bernardin 2008).
+def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0,
+                     ignore: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Match estimated tracks to the counted vehicles frame by frame (CLEAR-MOT, Bernardin 2008).
+
+    Counted vehicles and distractors (``truth``'s pedestrians and cyclists, ``ignore``'s
+    rows) as :mod:`harness.metrics.objects` says.
 
     In each frame a vehicle's last correspondence is kept while that track is
     present and may still correspond; the remaining tracks and vehicles are
@@ -144,15 +153,19 @@ def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float =
     the vehicle's track differs from its last matched track).
     """
     out = []
-    for f, vids, tids, D, match, switch, _ in _mot_frames(est, truth, gate_px=gate_px):
+    for f, vids, tids, D, match, switch, _ in _mot_frames(est, truth, gate_px=gate_px, ignore=ignore):
         for a, b in sorted(match.items()):
             out.append({"frame": int(f), "vehicle_id": int(vids[a]), "track_id": int(tids[b]),
                         "dist_px": float(D[a, b]), "switch": bool(switch[a])})
     return pd.DataFrame(out, columns=_ASSOC_COLUMNS)
 
 
-def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
-    """Trajectory rows per vehicle; ``region`` is the tracker (``source``: "point" or "multi").
+def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
+               ignore: pd.DataFrame | None = None) -> list[dict]:
+    """Trajectory rows per counted vehicle; ``region`` is the tracker (``source``: "point" or "multi").
+
+    Counted vehicles: :func:`harness.metrics.objects.counted_objects` (visible vehicles that
+    move; parked cars, pedestrians and cyclists have no rows); ``ignore``: ignore.csv rows.
 
     Point-tracker rows map to vehicles by ``seed_vehicle_id``; multi-target rows
     through :func:`associate_tracks`. Errors count the frames where the vehicle
@@ -161,9 +174,8 @@ def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px:
     vehicle id; per-frame rows (track_error, track_raw_error, track_pred_error)
     carry the frame, per-vehicle rows (ate, fde, completeness, id_switches) not.
     """
-    truth = truth_tracks.copy()
-    truth["visible"] = truth["visible"].astype(bool)
-    vis_n = truth[truth["visible"]].groupby("vehicle_id").size()
+    counted = truth_tracks[counted_objects(truth_tracks)]
+    vis_n = counted.groupby("vehicle_id").size()
     rows: list[dict] = []
     if est_tracks is None or est_tracks.empty:
         return rows
@@ -174,10 +186,10 @@ def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px:
             m = m[np.isfinite(m["x_filt_px"]) & np.isfinite(m["y_filt_px"])]
             switches = None
         else:
-            assoc = associate_tracks(est, truth, gate_px=gate_px)
+            assoc = associate_tracks(est, truth_tracks, gate_px=gate_px, ignore=ignore)
             m = assoc.merge(est, on=["frame", "track_id"], how="left")
             switches = assoc.groupby("vehicle_id")["switch"].sum()
-        m = m.merge(truth[truth["visible"]][["frame", "vehicle_id", "x_px", "y_px"]],
+        m = m.merge(counted[["frame", "vehicle_id", "x_px", "y_px"]],
                     on=["frame", "vehicle_id"], suffixes=("_est", "_true"))
         kw = {"region": str(source), "motion": "track"}
         for vid, g in m.sort_values("frame").groupby("vehicle_id"):

@@ -124,3 +124,127 @@ def test_frames_are_grouped_as_pandas_groupby_groups_them():
                                     name="x").iloc[0]
     assert c.switches == s["num_switches"]
     assert c.mota == pytest.approx(s["mota"], abs=1e-12) and c.idf1 == pytest.approx(s["idf1"], abs=1e-12)
+
+
+def _boxed(rows):
+    """tracks.csv rows ``(frame, vehicle_id, x, y, half_width, extra...)``: square boxes around the centre."""
+    out = []
+    for f, v, x, y, h, extra in rows:
+        out.append({"frame": f, "vehicle_id": v, "x_px": x, "y_px": y, "bbox_x0_px": x - h, "bbox_y0_px": y - h,
+                    "bbox_x1_px": x + h, "bbox_y1_px": y + h, "visible": 1, **extra})
+    return pd.DataFrame(out)
+
+
+def _points(rows):
+    return pd.DataFrame([{"frame": f, "track_id": t, "x_filt_px": x, "y_filt_px": y, "x_px": x, "y_px": y,
+                          "x_pred_px": np.nan, "y_pred_px": np.nan, "source": "multi"} for f, t, x, y in rows])
+
+
+def test_a_track_on_a_parked_car_is_a_false_positive_and_the_parked_car_no_miss():
+    # two frames: car 1 moves, car 2 is parked; one point track inside each box
+    truth = _boxed([(f, v, x + (3.0 * f if v == 1 else 0.0), 20.0, 6.0, {"parked": p, "class": "car"})
+                    for f in (0, 1) for v, x, p in ((1, 20.0, 0), (2, 80.0, 1))])
+    est = _points([(f, t, x + (3.0 * f if t == 10 else 0.0), 21.0)
+                   for f in (0, 1) for t, x in ((10, 20.0), (11, 80.0))])
+    c = M.mot_counts(est, truth, gate_px=5.0)
+    assert (c.objects, c.predictions, c.matches, c.misses, c.false_positives) == (2, 4, 2, 0, 2)
+    assert c.mota == pytest.approx(1 - 2 / 2)
+    # the parked car has no track rows; the moving one is complete
+    rows = [r for r in M.track_rows(est, truth, gate_px=5.0) if r["metric"] == "track_completeness"]
+    assert [(r["track_id"], r["value"]) for r in rows] == [(1, 100.0)]
+    # a car queued at a light (not parked, speed 0 in a frame) stays an object in that frame
+    queued = truth.assign(speed_mps=0.0)
+    assert M.mot_counts(est, queued, gate_px=5.0).objects == 2
+    # a moving column, where present, decides over parked
+    moving = truth.assign(moving=1)
+    assert M.mot_counts(est, moving, gate_px=5.0).objects == 4
+
+
+def test_a_track_on_a_pedestrian_is_neither_a_false_positive_nor_the_pedestrian_a_miss():
+    truth = _boxed([(0, 1, 20.0, 20.0, 6.0, {"parked": 0, "class": "car"}),
+                    (0, 2, 60.0, 20.0, 2.0, {"parked": 0, "class": "pedestrian"}),
+                    (0, 3, 100.0, 20.0, 3.0, {"parked": 0, "class": "cyclist"})])
+    est = _points([(0, 10, 20.5, 20.0), (0, 11, 60.5, 20.0), (0, 12, 100.0, 21.0), (0, 13, 200.0, 200.0)])
+    c = M.mot_counts(est, truth, gate_px=5.0)
+    # only the car is an object; the tracks on the pedestrian and the cyclist are removed; 13 is clutter
+    assert (c.objects, c.predictions, c.matches, c.misses, c.false_positives) == (1, 2, 1, 0, 1)
+    h = M.hota_counts(est, truth, gate_px=5.0)
+    assert (h.tp[0], h.fn[0], h.fp[0]) == (1, 0, 1)
+    # no track on the pedestrian: still no miss
+    assert M.mot_counts(est[est["track_id"] == 10], truth, gate_px=5.0).misses == 0
+    # older truth without class and parked: every visible row is an object, the same numbers as before
+    old = truth.drop(columns=["class", "parked"])
+    c_old = M.mot_counts(est, old, gate_px=5.0)
+    assert (c_old.objects, c_old.matches, c_old.false_positives) == (3, 3, 1)
+
+
+def test_a_track_in_an_ignore_region_is_no_false_positive():
+    truth = _boxed([(f, 1, 20.0, 20.0, 6.0, {}) for f in (0, 1)])
+    # a large ignored region (a parking lot) in frame 0 only, holding two tracks
+    ignore = pd.DataFrame({"frame": [0], "bbox_x0_px": [50.0], "bbox_y0_px": [0.0], "bbox_x1_px": [150.0],
+                           "bbox_y1_px": [60.0], "class": ["car"]})
+    est = _points([(0, 10, 20.0, 20.0), (0, 11, 70.0, 30.0), (0, 12, 120.0, 40.0),
+                   (1, 10, 20.0, 20.0), (1, 11, 70.0, 30.0)])
+    c = M.mot_counts(est, truth, gate_px=5.0, ignore=ignore)
+    assert (c.objects, c.predictions, c.false_positives) == (2, 3, 1)   # frame 1's track 11 is outside any region
+    assert M.mot_counts(est, truth, gate_px=5.0).false_positives == 3
+    rows = {r["metric"]: r for r in M.mot_rows(est, truth, gate_px=5.0, ignore=ignore)}
+    assert rows["mot_false_positives"]["value"] == 1
+    # a region does not take a track from the vehicle it lies on
+    over = ignore.assign(bbox_x0_px=0.0)
+    assert M.mot_counts(est, truth, gate_px=5.0, ignore=over).matches == 2
+    with pytest.raises(ValueError, match="ignore regions: expected columns"):
+        M.mot_counts(est, truth, gate_px=5.0, ignore=ignore.drop(columns=["bbox_x1_px"]))
+
+
+def _with_distractors(rng: np.random.Generator):
+    """The scenario plus a parked car, a pedestrian, tracks on both, and a track beside the pedestrian."""
+    est, truth = _scenario(rng)
+    truth["class"], truth["parked"] = "car", 0
+    n = truth["frame"].max() + 1
+    extra = [{"frame": f, "vehicle_id": 50, "x_px": 300.0, "y_px": 300.0, "visible": 1, "class": "car",
+              "parked": 1} for f in range(n)]
+    extra += [{"frame": f, "vehicle_id": 60, "x_px": 400.0 + f, "y_px": 50.0, "visible": 1, "class": "pedestrian",
+               "parked": 0} for f in range(n)]
+    est_extra = [{"frame": f, "track_id": 500, "x_filt_px": 301.0, "y_filt_px": 300.0, "source": "multi"}
+                 for f in range(0, n, 2)]
+    est_extra += [{"frame": f, "track_id": 600, "x_filt_px": 400.0 + f, "y_filt_px": 51.0, "source": "multi"}
+                  for f in range(n)]
+    return (pd.concat([est, pd.DataFrame(est_extra)], ignore_index=True),
+            pd.concat([truth, pd.DataFrame(extra)], ignore_index=True))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_clear_mot_with_distractors_equals_py_motmetrics_after_removal_by_hand(seed):
+    est, truth = _with_distractors(np.random.default_rng(seed))
+    gate = 5.0
+    c = M.mot_counts(est, truth, gate_px=gate)
+    # on the oracle's side, by hand: the pedestrian is no object and the one track on it (600, always within
+    # the gate of it and of no car) is removed; the parked car stays out of the objects, its track stays in
+    oracle_truth = truth[truth["class"] != "pedestrian"]
+    oracle_truth = oracle_truth.assign(visible=np.where(oracle_truth["parked"] == 1, 0, oracle_truth["visible"]))
+    oracle_est = est[est["track_id"] != 600]
+    s = mm.metrics.create().compute(
+        _oracle(oracle_est, oracle_truth, gate),
+        metrics=["num_objects", "num_predictions", "num_misses", "num_false_positives", "num_switches", "mota",
+                 "idf1"], name="x").iloc[0]
+    assert (c.objects, c.predictions, c.misses, c.false_positives, c.switches) == (
+        s.num_objects, s.num_predictions, s.num_misses, s.num_false_positives, s.num_switches)
+    assert c.mota == pytest.approx(s.mota, abs=1e-12) and c.idf1 == pytest.approx(s.idf1, abs=1e-12)
+    n_parked_track = int((est["track_id"] == 500).sum())
+    assert c.false_positives >= n_parked_track > 0   # the track on the parked car counts against MOTA
+
+
+def test_score_sequence_passes_real_footages_ignore_regions_to_every_tracking_metric():
+    from types import SimpleNamespace
+
+    truth = _boxed([(f, 1, 20.0, 20.0, 6.0, {}) for f in (0, 1)])
+    ignore = pd.DataFrame({"frame": [0, 1], "bbox_x0_px": 50.0, "bbox_y0_px": 0.0, "bbox_x1_px": 150.0,
+                           "bbox_y1_px": 60.0, "class": "car"})
+    est = _points([(f, t, x, 20.0) for f in (0, 1) for t, x in ((10, 20.0), (11, 90.0))])
+    seq = SimpleNamespace(tracks=est)
+    plain = {(r["metric"], r["region"]): r["value"] for r in M.score_sequence(seq, None, truth)}
+    kept = {(r["metric"], r["region"]): r["value"] for r in M.score_sequence(seq, None, truth, ignore_df=ignore)}
+    assert plain[("mot_false_positives", "multi")] == 2 and kept[("mot_false_positives", "multi")] == 0
+    assert kept[("mota", "multi")] == 1.0 and kept[("idf1", "multi")] == 1.0 and kept[("hota", "multi")] > plain[
+        ("hota", "multi")]

@@ -21,6 +21,14 @@ def test_point_seeds_are_the_vehicles_visible_in_frame_0_in_id_order():
     assert point_seeds(tracks.iloc[:0]) == [] and point_seeds(None) == []
 
 
+def test_point_seeds_are_the_counted_vehicles_only_no_parked_car_no_pedestrian():
+    tracks = pd.DataFrame({"frame": 0, "vehicle_id": [1, 2, 3, 4, 5], "x_px": [1.0, 2.0, 3.0, 4.0, 5.0],
+                           "y_px": 0.0, "visible": 1, "parked": [0, 1, 0, 0, 0],
+                           "class": ["car", "car", "pedestrian", "bus", "cyclist"], "speed_mps": [5.0, 0, 1, 0, 3]})
+    # vehicle 4 is a bus queued at a light (speed 0, not parked): a moving vehicle, seeded
+    assert point_seeds(tracks) == [(1, 1.0, 0.0), (4, 4.0, 0.0)]
+
+
 def test_a_cell_whose_scene_failed_to_render_is_recorded_as_failed_in_its_folder(tmp_path):
     (cell,) = expand(parse_suite({**copy.deepcopy(TINY_SUITE), "pipelines": ["dis"]}))
     payload = cell_payload(cell, tmp_path / "cells", {"git_commit": "abc", "git_dirty": False, "machine": "m"}, [])

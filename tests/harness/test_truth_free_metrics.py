@@ -121,6 +121,12 @@ def test_detection_precision_and_recall_count_moving_vehicles_only():
     assert M.detection_counts([(100.0, 20.0, 10.0)], truth)[0] == 1
 
 
+def test_detection_does_not_count_a_pedestrian_as_a_moving_vehicle():
+    truth = _truth_frame().assign(**{"class": ["car", "car", "pedestrian", "car"]})
+    tp, n_det, n_true, region = M.detection_counts([(100.0, 20.0, 40.0)], truth)
+    assert (tp, n_det, n_true, region) == (0, 1, 1, "moving")
+
+
 def test_without_a_moving_column_every_visible_vehicle_counts_and_without_boxes_there_are_no_rows():
     truth = _truth_frame().drop(columns=["parked", "speed_mps"])
     assert M.detection_counts([(60.0, 20.0, 1.0)], truth) == (1, 1, 3, "all")

@@ -1,0 +1,125 @@
+"""Which rows of the ground truth the tracking and detection metrics count, and which are distractors.
+
+The pipelines detect and track vehicles that move, so that is what they are scored on.
+
+Counted objects (truth the metrics count: a miss when no estimate matches them):
+    visible rows of tracks.csv of a vehicle class (:data:`VEHICLE_CLASSES`; a table
+    without ``class`` reads as all ``car``) that move in the sequence: a ``moving``
+    column (0/1) says it where present; else ``parked`` (0/1: a parked car is not
+    counted, a car queued at a light is, whatever its speed in that frame); without
+    either (real footage, a MOTChallenge ``gt.txt``) every row counts: the annotation
+    decides.
+
+Distractors (the MOT16 devkit's treatment, Milan et al. 2016, sec. 3.3): visible rows of
+:data:`DISTRACTOR_CLASSES` (pedestrians and cyclists in a vehicle benchmark) and the
+rows of real footage's ``ignore.csv`` (:attr:`scenes.sequence.Sequence.ignore_regions`,
+ignored objects and regions). In every frame the estimates are assigned one-to-one to
+the counted objects and distractors together (Hungarian method on the box-aware rules
+of :mod:`harness.metrics.matching`); an estimate assigned to a distractor is removed
+from that frame, and so is one that no counted object took whose position lies inside
+an ignore region (a region may hold many estimates). A distractor is never a miss.
+
+Parked vehicles are neither: a track on a parked car is a false positive (a real clip's
+"moving vehicles" truth counts it so).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from harness.metrics.matching import BOX_COLUMNS, _linear_sum_assignment, box_offset, boxes_of, correspondence
+
+VEHICLE_CLASSES = ("car", "van", "truck", "bus", "motorbike")
+DISTRACTOR_CLASSES = ("cyclist", "pedestrian")
+
+__all__ = ["VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "truth_classes", "counted_objects", "distractor_objects",
+           "distractor_table", "keep_estimates"]
+
+
+def truth_classes(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` object array of each row's class; ``car`` without a ``class`` column or where it is empty."""
+    if "class" not in truth.columns:
+        return np.full(len(truth), "car", dtype=object)
+    return truth["class"].fillna("car").astype(str).str.strip().str.lower().to_numpy(object)
+
+
+def _visible(truth: pd.DataFrame) -> np.ndarray:
+    return pd.to_numeric(truth["visible"], errors="coerce").fillna(0).to_numpy() != 0
+
+
+def counted_objects(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` bool: the rows of tracks.csv that are counted objects (see the module docstring)."""
+    keep = _visible(truth) & np.isin(truth_classes(truth), VEHICLE_CLASSES)
+    if "moving" in truth.columns:
+        return keep & (pd.to_numeric(truth["moving"], errors="coerce").to_numpy() == 1)
+    if "parked" in truth.columns:
+        return keep & (pd.to_numeric(truth["parked"], errors="coerce").to_numpy() == 0)
+    return keep
+
+
+def distractor_objects(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` bool: visible rows of tracks.csv of a distractor class (pedestrian, cyclist)."""
+    return _visible(truth) & np.isin(truth_classes(truth), DISTRACTOR_CLASSES)
+
+
+def distractor_table(truth: pd.DataFrame, ignore: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Every distractor of a sequence: ``frame, x_px, y_px, bbox_x0_px .. bbox_y1_px, region`` (bool).
+
+    The distractor rows of ``truth`` (``region`` False) and the rows of ``ignore``
+    (ignore.csv: ``frame, bbox_x0_px .. bbox_y1_px``; centre = box centre; ``region`` True).
+    """
+    cols = ["frame", "x_px", "y_px", *BOX_COLUMNS, "region"]
+    d = distractor_objects(truth)
+    b = boxes_of(truth, d)
+    parts = [pd.DataFrame({"frame": truth["frame"].to_numpy(np.int64)[d],
+                           "x_px": truth["x_px"].to_numpy(np.float64)[d], "y_px": truth["y_px"].to_numpy(np.float64)[d],
+                           **{c: b[:, k] for k, c in enumerate(BOX_COLUMNS)}, "region": False})]
+    if ignore is not None and len(ignore):
+        missing = [c for c in ("frame", *BOX_COLUMNS) if c not in ignore.columns]
+        if missing:
+            raise ValueError(f"ignore regions: expected columns frame, {', '.join(BOX_COLUMNS)}; missing {missing}")
+        ib = boxes_of(ignore)
+        parts.append(pd.DataFrame({"frame": ignore["frame"].to_numpy(np.int64),
+                                   "x_px": (ib[:, 0] + ib[:, 2]) / 2, "y_px": (ib[:, 1] + ib[:, 3]) / 2,
+                                   **{c: ib[:, k] for k, c in enumerate(BOX_COLUMNS)}, "region": True}))
+    return pd.concat(parts, ignore_index=True)[cols]
+
+
+def keep_estimates(P: np.ndarray, true_boxes: np.ndarray, Q: np.ndarray, est_boxes: np.ndarray,
+                   DP: np.ndarray, distractor_boxes: np.ndarray, region: np.ndarray, *, gate_px: float) -> np.ndarray:
+    """``(T,)`` bool: the estimates of one frame that stay after distractor removal (module docstring).
+
+    Parameters
+    ----------
+    P, true_boxes : (V, 2), (V, 4) float
+        Centres and boxes (NaN: none) of the frame's counted objects, px.
+    Q, est_boxes : (T, 2), (T, 4) float
+        Estimated positions and boxes (NaN: a point), px.
+    DP, distractor_boxes : (D, 2), (D, 4) float
+        Centres and boxes of the frame's distractors, px.
+    region : (D,) bool
+        The distractor is an ignore region (an estimate inside it is removed unless a counted
+        object took it).
+    gate_px : float
+        The gate of :func:`harness.metrics.matching.correspondence`.
+    """
+    keep = np.ones(len(Q), bool)
+    if len(DP) == 0 or len(Q) == 0:
+        return keep
+    V = len(P)
+    _, ok, cost, _ = correspondence(np.concatenate([np.reshape(P, (-1, 2)), DP]),
+                                    np.concatenate([np.reshape(true_boxes, (-1, 4)), distractor_boxes]),
+                                    Q, est_boxes, gate_px=gate_px)
+    taken = np.zeros(len(Q), bool)
+    if ok.any():
+        ia, ib = _linear_sum_assignment(np.where(ok, cost, 1e6))
+        hit = ok[ia, ib]
+        ia, ib = ia[hit], ib[hit]
+        taken[ib[ia < V]] = True
+        keep[ib[ia >= V]] = False
+    region = np.asarray(region, bool)
+    if region.any():
+        inside = (np.nan_to_num(box_offset(distractor_boxes[region], Q), nan=np.inf) <= 1.0).any(axis=0)
+        keep &= ~(inside & ~taken)
+    return keep
