@@ -604,7 +604,7 @@ _MOT_CLASS_IDS = {"car": 3, "van": 3, "truck": 3, "bus": 3, "motorbike": 5, "cyc
 def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike) -> Path:
     """Write a sequence's tracks.csv as a MOTChallenge ``gt.txt`` (9 columns, MOT16/17 layout).
 
-    One line per visible row: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
+    One line per visible row of a vehicle that is not parked: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
     ``bb_width = x1 - x0 + 1``, ``bb_height = y1 - y0 + 1`` (the inverse of the reader's
     conversion, written with every digit of the float64, so the boxes come back bit for bit),
     flag 1, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
@@ -612,7 +612,10 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike) -> Path:
     takes the box centre as the vehicle's position, which for a rendered vehicle differs from
     its projected centre ``x_px, y_px`` by up to about a pixel.
     """
-    t = tracks[tracks["visible"].astype(int) > 0].sort_values(["frame", "vehicle_id"], kind="stable")
+    t = tracks[tracks["visible"].astype(int) > 0]
+    if "parked" in t.columns:  # a motion benchmark's truth holds the vehicles that move, as the synthetic path
+        t = t[t["parked"].astype(int) == 0]  # counts them (harness.metrics.objects): parked ones are left out
+    t = t.sort_values(["frame", "vehicle_id"], kind="stable")
     cls = t["class"] if "class" in t.columns else pd.Series("car", index=t.index)
     vis = t["visible_fraction"] if "visible_fraction" in t.columns else pd.Series(1.0, index=t.index)
     lines = []

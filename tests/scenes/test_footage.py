@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pandas as pd
 import pytest
 
 from scenes import cached_sequence_result, open_sequence
@@ -272,3 +273,15 @@ def test_export_mot_gt_reads_back_the_same_boxes(tmp_path, tiny_sequence):
     cols = ["frame", "vehicle_id", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"]
     assert real.tracks[cols].equals(truth[cols].astype(real.tracks[cols].dtypes.to_dict()))
     assert all(np.array_equal(real.frame(i), seq.frame(i)) for i in range(len(seq)))
+
+
+def test_export_mot_gt_leaves_parked_vehicles_out_and_keeps_the_classes(tmp_path):
+    # the synthetic path counts the vehicles that move (harness.metrics.objects): so does the exported truth
+    box = dict(bbox_x0_px=10.0, bbox_y0_px=20.0, bbox_x1_px=29.0, bbox_y1_px=29.0, x_px=19.5, y_px=24.5)
+    tracks = pd.DataFrame([dict(frame=0, vehicle_id=1, visible=1, parked=0, **{"class": "bus"}, **box),
+                           dict(frame=0, vehicle_id=2, visible=1, parked=1, **{"class": "car"}, **box),
+                           dict(frame=0, vehicle_id=3, visible=1, parked=0, **{"class": "pedestrian"}, **box),
+                           dict(frame=0, vehicle_id=4, visible=0, parked=0, **{"class": "car"}, **box)])
+    gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt.txt"))
+    assert gt["id"].tolist() == [1, 3]
+    assert gt["class"].tolist() == ["car", "pedestrian"]  # MOTChallenge's class 3 is every car-like vehicle
