@@ -337,9 +337,14 @@ def _moved_box(region: _Region, frames, u: float, v: float, margin_px: int) -> t
     bx0, by0 = xa + s[cv2.CC_STAT_LEFT], ya + s[cv2.CC_STAT_TOP]
     bx1, by1 = bx0 + s[cv2.CC_STAT_WIDTH] - 1, by0 + s[cv2.CC_STAT_HEIGHT] - 1
     # those pixels are the vehicle in frame t and the ground it covers in frame t+1: the box reaches one
-    # motion ahead, taken off here; and the 3 x 3 average widened it by a pixel a side
-    bx0, bx1 = bx0 - min(u, 0.0) + 1, bx1 - max(u, 0.0) - 1
-    by0, by1 = by0 - min(v, 0.0) + 1, by1 - max(v, 0.0) - 1
+    # motion ahead, taken off here, unless the vehicle moved more than its length (the two places apart,
+    # the part the region chose is the vehicle alone: extent under twice the motion); and the 3 x 3
+    # average widened it by a pixel a side
+    if bx1 - bx0 + 1 >= 2 * abs(u):
+        bx0, bx1 = bx0 - min(u, 0.0), bx1 - max(u, 0.0)
+    if by1 - by0 + 1 >= 2 * abs(v):
+        by0, by1 = by0 - min(v, 0.0), by1 - max(v, 0.0)
+    bx0, bx1, by0, by1 = bx0 + 1, bx1 - 1, by0 + 1, by1 - 1
     if bx1 < bx0 or by1 < by0:
         return None
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1))
