@@ -174,7 +174,7 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
             runs.append(exc)
     live = [r for r in runs if isinstance(r, _CellRun)]
     truth_of: dict[int, Any] = {}  # the truth of the pair being scored (lock-step: one pair at a time)
-    boxes_of = _truth_by_frame(seq.tracks)
+    boxes_of = _truth_by_frame(_detection_truth(seq))
     while live:
         for run in list(live):
             t0 = time.perf_counter()
@@ -243,6 +243,17 @@ def _pair_rows(est: Any, truth: Any, prepared: Any, score_pair: Any) -> list[dic
     if getattr(est, "stage_ms", None):
         rows += timing_rows(est.stage_ms, frame=est.index)
     return rows
+
+
+def _detection_truth(seq) -> pd.DataFrame | None:
+    """The boxes detections are scored against: tracks.csv, else boxes without identities (boxes.csv of
+    real footage with YOLO labels: every labelled vehicle, visible where labelled), else None."""
+    if seq.tracks is not None:
+        return seq.tracks
+    boxes = getattr(seq, "boxes", None)
+    if boxes is None or len(boxes) == 0:
+        return None
+    return boxes if "visible" in boxes.columns else boxes.assign(visible=1)
 
 
 def _truth_by_frame(tracks: pd.DataFrame | None):

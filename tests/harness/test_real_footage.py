@@ -168,3 +168,26 @@ def test_export_writes_mot_files_and_a_lossless_video(tmp_path, render_cache, ca
     capsys.readouterr()
     assert main(["export", str(seq_dir), "--out", str(out)]) == 2  # not empty: refused
     assert "not an empty folder" in capsys.readouterr().err
+
+
+def test_detections_on_footage_with_boxes_but_no_ids_are_scored_against_every_labelled_vehicle():
+    """YOLO-labelled footage (boxes.csv, no tracks.csv): precision and recall over every vehicle (region all)."""
+    import types
+
+    from algorithms.tracking import Detection
+    from harness.cell_scoring import _detection_truth
+    from harness.metrics.detection import detection_rows
+
+    boxes = pd.DataFrame({"frame": [0, 0, 1], "class": ["car", "bus", "car"], "x_px": [15.0, 60.0, 15.0],
+                          "y_px": [15.0, 60.0, 15.0], "bbox_x0_px": [10.0, 50.0, 10.0],
+                          "bbox_y0_px": [10.0, 50.0, 10.0], "bbox_x1_px": [20.0, 70.0, 20.0],
+                          "bbox_y1_px": [20.0, 70.0, 20.0]})
+    truth = _detection_truth(types.SimpleNamespace(tracks=None, boxes=boxes))
+    assert truth["visible"].tolist() == [1, 1, 1]
+    frame0 = truth[truth["frame"] == 0]
+    dets = [Detection(15.0, 15.0, 121.0, 10.0, 10.0, 20.0, 20.0), Detection(200.0, 200.0, 9.0, 199, 199, 201, 201)]
+    rows = {r["metric"]: r for r in detection_rows(dets, frame0, frame=0)}
+    assert rows["det_precision"]["region"] == "all"
+    assert (rows["det_precision"]["sum"], rows["det_precision"]["count"]) == (1, 2)
+    assert (rows["det_recall"]["sum"], rows["det_recall"]["count"]) == (1, 2)
+    assert _detection_truth(types.SimpleNamespace(tracks=None, boxes=None)) is None
