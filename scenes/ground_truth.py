@@ -275,6 +275,40 @@ class GroundTruth:
                 hit_a[sa] &= ~b_wins
                 hit_b[sb] &= ~(both & ~b_wins)
 
+    def visible_fractions(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list,
+                          bboxes: list) -> np.ndarray:
+        """Per vehicle, the share (V,) float64 of its unoccluded projection that the frame shows.
+
+        The unoccluded projection is every pixel centre, inside the image or not, whose ray hits
+        the vehicle's boxes; a pixel shows the vehicle when it is inside the image and the render
+        has nothing nearer than the box there (``D >= Z_box - tol``: a tree crown, a bridge or
+        another vehicle in front hides it; the render's anti-aliased silhouette, where the depth
+        is the ground's, does not). 0 where nothing projects (behind the camera, or smaller than
+        a pixel between the pixel centres).
+        """
+        D = np.asarray(depth, np.float32)
+        out = np.zeros(len(vehicle_M))
+        for v, ((bbox, _), boxes, M) in enumerate(zip(bboxes, self.vehicle_boxes, vehicle_M)):
+            x0, y0, x1, y1 = bbox
+            if not np.isfinite(x0):
+                continue
+            cols = np.arange(int(np.floor(x0)), int(np.ceil(x1)) + 1)
+            rows = np.arange(int(np.floor(y0)), int(np.ceil(y1)) + 1)
+            Zv = ray_boxes_depth(R, C, M, boxes, ((cols - self.cx) / self.fx)[None, :],
+                                 ((rows - self.cy) / self.fy)[:, None])
+            hit = np.isfinite(Zv)
+            n = int(hit.sum())
+            if not n:
+                continue
+            inside = ((cols >= 0) & (cols < self.w))[None, :] & ((rows >= 0) & (rows < self.h))[:, None]
+            seen = hit & inside
+            rr, cc = np.nonzero(seen)
+            d = D[rows[rr], cols[cc]].astype(np.float64)
+            z = Zv[rr, cc]
+            front = (d > 0) & (d < z - (OCCLUSION_TOL_REL * z + OCCLUSION_TOL_ABS_M))
+            out[v] = (rr.size - int(front.sum())) / n
+        return out
+
     # -- per pair -----------------------------------------------------------------------
     def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows: np.ndarray, cols: np.ndarray):
         """Pixel coordinates and depth in frame t+1 of ``X1 = A (Z d) + b`` for the listed pixels (float64)."""

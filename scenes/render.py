@@ -13,7 +13,8 @@ import sys
 
 import numpy as np
 
-from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
+from scenes.traffic import vehicle_parts
+from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -259,7 +260,7 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
 
     Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
     walls, roofs = [], []
-    for b in world.buildings:
+    for b in world.buildings + world.overpasses:
         tint = np.asarray(ROOF_TINTS[b.roof_variant])
         for p, part in enumerate(b.parts):
             m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
@@ -369,7 +370,7 @@ class SceneRenderer:
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
-        if world.buildings:
+        if world.buildings or world.overpasses:
             self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
         for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
             self.scene.add(mesh)
@@ -380,10 +381,13 @@ class SceneRenderer:
         # vehicle frame at mid-sequence (on a curve the shadow turns a little with the car). The quad
         # lies SHADOW_QUAD_LIFT_M above the ground, within the truth's depth tolerance: it is ground.
         # Ground truth is the motion field of surfaces, not the apparent motion of a shadow.
+        # Parked vehicles never move: all of them are one static draw (a city has dozens).
         self.vehicle_nodes = []
+        self._moving = [k for k, v in enumerate(vehicles) if not v.parked]
         shadow = self.flat and light.shadows
         away = -sun[:2] / max(1e-9, sun[2])
         t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
+        parked_shadows, parked_bodies = [], []
         for v in vehicles:
             parts = []
             if shadow:
@@ -396,15 +400,30 @@ class SceneRenderer:
                 parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
-            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
+            for b, rgb in vehicle_parts(v):
                 m = box_mesh(b)
                 parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
+            if v.parked:
+                M = v.matrix(0.0).astype(np.float32)
+                placed = [{**p, "positions": p["positions"] @ M[:3, :3].T + M[:3, 3],
+                           "normals": p["normals"] @ M[:3, :3].T} for p in parts]
+                # every shadow quad before every body: blending order cannot darken a car
+                parked_shadows += placed[:1] if shadow else []
+                parked_bodies += placed[1:] if shadow else placed
+                continue
             m = _merge(parts)
             mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
                                                      alphaMode="BLEND" if shadow else "OPAQUE")
             prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
                                       indices=m["indices"], material=mat)
             self.vehicle_nodes.append(self.scene.add(pyrender.Mesh([prim]), pose=np.eye(4)))
+        if parked_bodies:
+            m = _merge(parked_shadows + parked_bodies)
+            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
+                                                     alphaMode="BLEND" if shadow else "OPAQUE")
+            self.scene.add(pyrender.Mesh([pyrender.Primitive(positions=m["positions"], normals=m["normals"],
+                                                             color_0=m["colours"], indices=m["indices"],
+                                                             material=mat)]))
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
@@ -430,8 +449,8 @@ class SceneRenderer:
         pose[:3, :3] = R_wc
         pose[:3, 3] = C_w
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
-        for node, M in zip(self.vehicle_nodes, vehicle_poses):
-            self.scene.set_pose(node, M)
+        for node, k in zip(self.vehicle_nodes, self._moving):
+            self.scene.set_pose(node, vehicle_poses[k])
         rgb, depth = self.renderer.render(self.scene, flags=self.flags)
         return np.ascontiguousarray(rgb[..., :3]), depth
 

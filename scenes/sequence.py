@@ -484,8 +484,15 @@ class Sequence:
 
     @property
     def tracks(self) -> pd.DataFrame:
+        """tracks.csv; a folder written before the ``class`` and ``visible_fraction`` columns reads as all
+        ``car`` with ``visible_fraction`` = ``visible``."""
         if self._tracks is None:
-            self._tracks = pd.read_csv(self.path / "tracks.csv")
+            df = pd.read_csv(self.path / "tracks.csv")
+            if "class" not in df.columns:
+                df["class"] = "car"
+            if "visible_fraction" not in df.columns and "visible" in df.columns:
+                df["visible_fraction"] = df["visible"].astype(float)
+            self._tracks = df
         return self._tracks
 
     @property
