@@ -54,6 +54,9 @@ SURFACE_TOL_ABS_M = 0.02
 # occlusion test at t+1: a point may lie this far behind the rendered surface
 OCCLUSION_TOL_REL = 5e-3
 OCCLUSION_TOL_ABS_M = 0.05
+# visible fractions: an occluder is this much nearer than the vehicle's surface (a vehicle's own
+# parts differ by less: a car's cabin 0.7 m, a truck's cargo over its cab 0.8 m)
+OCCLUDER_GAP_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -281,10 +284,11 @@ class GroundTruth:
 
         The unoccluded projection is every pixel centre, inside the image or not, whose ray hits
         the vehicle's boxes; a pixel shows the vehicle when it is inside the image and the render
-        has nothing nearer than the box there (``D >= Z_box - tol``: a tree crown, a bridge or
-        another vehicle in front hides it; the render's anti-aliased silhouette, where the depth
-        is the ground's, does not). 0 where nothing projects (behind the camera, or smaller than
-        a pixel between the pixel centres).
+        has nothing more than OCCLUDER_GAP_M nearer than the box there: a tree crown or a bridge
+        deck (both stand higher than that above every road user) or another vehicle in front hides
+        it; the render's anti-aliased silhouette (the ground's depth, or the vehicle's own cabin a
+        sub-pixel away) does not. 0 where nothing projects (behind the camera, or smaller than a
+        pixel between the pixel centres).
         """
         D = np.asarray(depth, np.float32)
         out = np.zeros(len(vehicle_M))
@@ -305,7 +309,7 @@ class GroundTruth:
             rr, cc = np.nonzero(seen)
             d = D[rows[rr], cols[cc]].astype(np.float64)
             z = Zv[rr, cc]
-            front = (d > 0) & (d < z - (OCCLUSION_TOL_REL * z + OCCLUSION_TOL_ABS_M))
+            front = (d > 0) & (d < z - OCCLUDER_GAP_M)
             out[v] = (rr.size - int(front.sum())) / n
         return out
 

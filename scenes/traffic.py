@@ -112,18 +112,22 @@ def vehicle_parts(v: VehiclePath) -> list[tuple[Box, tuple[int, int, int]]]:
         hl = 0.5 * H
         return [(Box((0.0, 0.0, hl / 2), (L, W, hl)), body),
                 (Box((-0.08 * L, 0.0, hl + 0.5 * (H - hl)), (0.84 * L, 0.97 * W, H - hl)), body),
-                (Box((0.36 * L, 0.0, hl + 0.4 * (H - hl)), (0.08 * L, 0.9 * W, 0.8 * (H - hl))), glass)]
+                (Box((0.36 * L, 0.0, hl + 0.01 + 0.4 * (H - hl)), (0.08 * L, 0.9 * W, 0.8 * (H - hl))), glass)]
     if cls == "truck":
+        # no two boxes share a visible face (coplanar faces would flicker between frames): the
+        # windscreen stands 4 cm proud of the cab, the chassis 20 cm short of the cargo's back
         cab_l, cab_h = 2.2, 0.8 * H
         cargo = tuple(int(c) for c in CARGO_RGB[int(v.vehicle_id) % len(CARGO_RGB)])
-        return [(Box((L / 2 - cab_l / 2, 0.0, cab_h / 2), (cab_l, W, cab_h)), body),
-                (Box((L / 2 - 0.25, 0.0, 0.55 * cab_h), (0.3, 0.92 * W, 0.5 * cab_h)), glass),
-                (Box((-cab_l / 2 - 0.15, 0.0, 0.55 * H), (L - cab_l - 0.3, W, 0.9 * H)), cargo),
-                (Box((-cab_l / 2 - 0.15, 0.0, 0.025 * H + 0.0), (L - cab_l - 0.3, 0.9 * W, 0.05 * H)), DARK_RGB)]
+        cargo_l = L - cab_l - 0.3
+        return [(Box((L / 2 - 0.04 - (cab_l - 0.04) / 2, 0.0, cab_h / 2), (cab_l - 0.04, W, cab_h)), body),
+                (Box((L / 2 - 0.15, 0.0, 0.6 * cab_h), (0.3, 0.92 * W, 0.45 * cab_h)), glass),
+                (Box((-L / 2 + cargo_l / 2, 0.0, 0.55 * H), (cargo_l, W, 0.9 * H)), cargo),
+                (Box((-L / 2 + 0.2 + (cargo_l - 0.2) / 2, 0.0, 0.06 * H), (cargo_l - 0.2, 0.9 * W, 0.12 * H)),
+                 DARK_RGB)]
     if cls == "bus":
         hb = 0.92 * H
         light = tuple(int(min(255, 1.12 * c)) for c in body)
-        return [(Box((0.0, 0.0, hb / 2), (L, W, hb)), body),
+        return [(Box((-0.02, 0.0, hb / 2), (L - 0.04, W, hb)), body),
                 (Box((L / 2 - 0.15, 0.0, 0.55 * hb), (0.3, 0.94 * W, 0.6 * hb)), glass),
                 (Box((-0.05 * L, 0.0, hb + 0.04 * H), (0.3 * L, 0.6 * W, 0.08 * H)), light),
                 (Box((0.3 * L, 0.0, hb + 0.03 * H), (0.08 * L, 0.4 * W, 0.06 * H)), (180, 182, 186))]
@@ -195,6 +199,7 @@ class _Leg:
     lane_w: float
     park_w: float
     stop_c: float  # the stop line's distance along the centre line from the entry node
+    index: int = -1  # in _Network.legs (a key that does not depend on memory addresses)
     approach: int = -1  # index among the leave node's approaches (traffic lights), -1 = none
 
     def offset(self, lane: float) -> float:
@@ -265,7 +270,8 @@ class _Network:
                 length = float(polyline_arc_lengths(line)[-1])
                 stop = length - (JUNCTION_CLEAR_M * widest[leave] + 1.0) if degree[leave] >= 3 else length
                 leg = _Leg(k=k, entry=int(entry), leave=int(leave), centre=np.ascontiguousarray(line), length=length,
-                           width=r.width_m, n_lanes=n, lane_w=lw, park_w=pw, stop_c=max(0.5 * length, stop))
+                           width=r.width_m, n_lanes=n, lane_w=lw, park_w=pw, stop_c=max(0.5 * length, stop),
+                           index=len(self.legs))
                 self.by_entry.setdefault(int(entry), []).append(len(self.legs))
                 self.legs.append(leg)
         # traffic lights: each approach of a junction of 3+ roads its own green, in turn
@@ -473,7 +479,7 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
                 continue
             i, c, lanes = _state(ag)
             states[idx] = (i, c, lanes)
-            leg_id = id(ag.route.legs[i].leg)
+            leg_id = ag.route.legs[i].leg.index
             for ln in lanes:
                 occ.setdefault((leg_id, ln), []).append((c, idx))
         for lst in occ.values():
@@ -489,7 +495,7 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
             leg = rl.leg
             best_gap, v_lead = math.inf, 0.0
             for ln in lanes:
-                lst = occ[(id(leg), ln)]
+                lst = occ[(leg.index, ln)]
                 k = lst.index((c, idx))
                 if k + 1 < len(lst):
                     c2, j = lst[k + 1]
@@ -498,7 +504,7 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
                         best_gap, v_lead = gap, agents[j].v
             if i + 1 < len(ag.route.legs):
                 nxt = ag.route.legs[i + 1]
-                lst = occ.get((id(nxt.leg), nxt.lane_in))
+                lst = occ.get((nxt.leg.index, nxt.lane_in))
                 if lst:
                     c2, j = lst[0]
                     gap = (leg.length - c) + c2 - (agents[j].length + ag.length) / 2
@@ -690,7 +696,7 @@ def _moving(spec, net: _Network, area, view, duration_s: float, rng: np.random.G
                     agents.append(ag)
                     c += max(ag.length + ts.min_gap_m + 4.0, float(rng.exponential(1.0 / rate)))
     # settle the initial fill: drop agents that overlap the one ahead in their lane
-    agents.sort(key=lambda a: (id(a.route.legs[0].leg), a.route.legs[0].lane_in, a.s))
+    agents.sort(key=lambda a: (a.route.legs[0].leg.index, a.route.legs[0].lane_in, a.s))
     kept: list[_Agent] = []
     for ag in agents:
         if kept and kept[-1].route.legs[0].leg is ag.route.legs[0].leg and \
@@ -715,7 +721,7 @@ def _moving(spec, net: _Network, area, view, duration_s: float, rng: np.random.G
                 key = (li, lane, cyc)
                 if key not in next_t or t < next_t[key]:
                     continue
-                lst = occ.get((id(net.legs[li]), lane), [])
+                lst = occ.get((li, lane), [])
                 drawn = pending.pop(key, None) or draw(cyc)
                 rear = lst[0][0] - agents_[lst[0][1]].length / 2 if lst else math.inf
                 room = rear - drawn[1][0] / 2 - ts.min_gap_m
@@ -862,16 +868,16 @@ def street_furniture(spec, roads, buildings: list[Building], trees: list[Tree], 
     bridges: list[Building] = []
     near = [r for r in roads if _in_box(r.centre_m, view, pad=20.0).any()]
     for _ in range(ts.bridges):
-        for _attempt in range(40):
+        for _attempt in range(200):
             r = near[int(rng.integers(0, len(near)))] if near else None
             if r is None:
                 break
             s = polyline_arc_lengths(r.centre_m)
-            if s[-1] < 40.0:
+            if s[-1] < 25.0:
                 continue
-            at = float(rng.uniform(0.3, 0.7)) * s[-1]
+            at = float(rng.uniform(0.25, 0.75)) * s[-1]
             p = np.array([np.interp(at, s, r.centre_m[:, 0]), np.interp(at, s, r.centre_m[:, 1])])
-            if not _in_box(p, (fx0 + 10, fy0 + 10, fx1 - 10, fy1 - 10)):
+            if not _in_box(p, (fx0 + 3, fy0 + 3, fx1 - 3, fy1 - 3)):
                 continue
             q = np.array([np.interp(at + 1.0, s, r.centre_m[:, 0]), np.interp(at + 1.0, s, r.centre_m[:, 1])])
             along = math.atan2(*(q - p)[::-1])
