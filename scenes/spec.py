@@ -250,10 +250,11 @@ class TrafficSpec(_Model):
     deceleration_mps2: float = Field(2.5, gt=0, le=9, description="IDM comfortable deceleration b")
     min_gap_m: float = Field(2.0, ge=0.5, le=10, description="IDM jam distance s0 (bumper to bumper, standing)")
     time_headway_s: float = Field(1.2, ge=0.3, le=5, description="IDM safe time headway T")
-    junctions: Literal["lights", "none"] = Field("lights", description="traffic lights (each approach green in "
-                                                                      "turn) or uncontrolled")
-    green_s: float = Field(10.0, ge=2, le=120, description="green time of each approach")
-    clearance_s: float = Field(3.0, ge=0, le=20, description="amber and all-red between two greens")
+    junctions: Literal["lights", "none"] = Field("lights", description="traffic lights (two phases: one axis "
+                                                                      "green, then the other; left turns give way) "
+                                                                      "or uncontrolled")
+    green_s: float = Field(15.0, ge=2, le=120, description="green time of each phase")
+    clearance_s: float = Field(3.0, ge=0, le=20, description="amber and all-red between two phases")
     turning_fraction: float = Field(0.3, ge=0, le=1, description="share of junction crossings that turn")
     lane_change_fraction: float = Field(0.2, ge=0, le=1, description="share of multi-lane legs with a lane change")
     warmup_s: float = Field(20.0, ge=0, le=300, description="simulated before frame 0 (queues form)")

@@ -25,9 +25,10 @@ gets a knot where it stops. The steps are the knots of a ``profile``
 :class:`scenes.motion.VehiclePath`: its positions at *any* time are the closed form of the
 simulation itself, so the truth between frames (rolling shutter, motion blur) is exact.
 
-Traffic lights: at every junction of three or more roads each approach has its own green
-(``green_s``), then ``clearance_s`` of amber and all-red, in turn (no two approaches cross). A
-vehicle that cannot stop at the line with ``HARD_BRAKE_MPS2`` when the light turns goes on. Turning
+Traffic lights: at every junction of three or more roads the approaches along one axis have
+green together (``green_s``), then ``clearance_s`` of amber and all-red, then the other axis. A
+left turn gives way: it waits at the line while oncoming traffic is within LEFT_YIELD_M of its own
+line or in the junction. A vehicle that cannot stop at the line with ``HARD_BRAKE_MPS2`` when the light turns goes on. Turning
 vehicles slow to ``turn_speed_mps`` through the corner. Lane changes happen on legs with two or more
 lanes (to the lane a turn needs, or at random with ``lane_change_fraction``), along a smooth
 S-curve of the lane offset over ``LANE_CHANGE_M``.
@@ -200,7 +201,8 @@ class _Leg:
     park_w: float
     stop_c: float  # the stop line's distance along the centre line from the entry node
     index: int = -1  # in _Network.legs (a key that does not depend on memory addresses)
-    approach: int = -1  # index among the leave node's approaches (traffic lights), -1 = none
+    approach: int = -1  # the phase of the leave node's traffic lights this leg belongs to, -1 = none
+    oncoming: list = field(default_factory=list)  # legs (indices) green together from the other side
 
     def offset(self, lane: float) -> float:
         return (lane + 0.5) * self.lane_w
@@ -274,20 +276,36 @@ class _Network:
                            index=len(self.legs))
                 self.by_entry.setdefault(int(entry), []).append(len(self.legs))
                 self.legs.append(leg)
-        # traffic lights: each approach of a junction of 3+ roads its own green, in turn
+        # traffic lights, two phases as most city junctions have: the approaches along one axis green
+        # together (straight on and turns; a left turn gives way to oncoming traffic), then the other
+        # axis, each green followed by clearance_s of amber and all-red
         self.degree = degree
-        self.signals: dict[int, tuple[int, float]] = {}  # node -> (number of approaches, offset in the cycle)
-        if ts.junctions == "lights":
-            approaches: dict[int, list[int]] = {}
-            for i, leg in enumerate(self.legs):
-                if degree[leg.leave] >= 3:
-                    approaches.setdefault(leg.leave, []).append(i)
-            for node, idx in approaches.items():
-                ang = [math.atan2(*(self.legs[i].centre[-1] - self.legs[i].centre[-2])[::-1]) for i in idx]
-                for order, j in enumerate(np.argsort(ang)):
-                    self.legs[idx[j]].approach = order
-                cycle = len(idx) * (ts.green_s + ts.clearance_s)
-                self.signals[node] = (len(idx), float(rng.uniform(0, cycle)))
+        self.signals: dict[int, tuple[int, float]] = {}  # node -> (number of phases, offset in the cycle)
+        approaches: dict[int, list[int]] = {}
+        for i, leg in enumerate(self.legs):
+            if degree[leg.leave] >= 3:
+                approaches.setdefault(leg.leave, []).append(i)
+        for node, idx in approaches.items():
+            axes: list[float] = []
+            for i in idx:
+                d = self.legs[i].centre[-1] - self.legs[i].centre[-2]
+                ang = math.atan2(d[1], d[0]) % math.pi
+                for g, a in enumerate(axes):
+                    diff = abs(ang - a) % math.pi
+                    if min(diff, math.pi - diff) < math.radians(45.0):
+                        break
+                else:
+                    g = len(axes)
+                    axes.append(ang)
+                self.legs[i].approach = g
+            for i in idx:  # oncoming: the approaches of the same phase from the other side
+                a = self.legs[i]
+                da = a.centre[-1] - a.centre[-2]
+                a.oncoming = [j for j in idx if j != i and self.legs[j].approach == a.approach
+                              and float(da @ (self.legs[j].centre[-1] - self.legs[j].centre[-2])) < 0]
+            if ts.junctions == "lights":
+                cycle = len(axes) * (ts.green_s + ts.clearance_s)
+                self.signals[node] = (len(axes), float(rng.uniform(0, cycle)))
         self.green_s, self.clear_s = ts.green_s, ts.clearance_s
 
     def green(self, leg: _Leg, t_s: float) -> bool:
@@ -465,6 +483,22 @@ def _state(ag: _Agent) -> tuple[int, float, tuple[int, ...]]:
     return i, c, lanes
 
 
+LEFT_YIELD_M = 35.0
+
+
+def _oncoming(net: _Network, occ: dict, agents: list, leg: _Leg) -> bool:
+    """Whether traffic comes the other way: a vehicle moving within LEFT_YIELD_M of its stop line, or past it."""
+    for j in leg.oncoming:
+        other = net.legs[j]
+        for lane in range(other.n_lanes):
+            for c, idx in reversed(occ.get((j, lane), [])):
+                if c < other.stop_c - LEFT_YIELD_M:
+                    break
+                if c + agents[idx].length / 2 >= other.stop_c or agents[idx].v > 1.0:
+                    return True
+    return False
+
+
 def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts, spawn, rng) -> None:
     """Step every agent from t0 to t1 (SIM_DT_S), recording its knots; ``spawn(t, occupancy)`` adds agents."""
     n_steps = int(math.ceil((t1_s - t0_s) / SIM_DT_S))
@@ -514,7 +548,10 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
                 front = c + ag.length / 2
                 if ag.passed_line != i and front < leg.stop_c:
                     if net.green(leg, t):
-                        pass
+                        if rl.turn_deg > 30.0 and _oncoming(net, occ, agents, leg):
+                            d = leg.stop_c - front  # a left turn waits for a gap in the oncoming traffic
+                            if d < best_gap and (ag.v * ag.v / (2 * max(d, 1e-3)) <= HARD_BRAKE_MPS2 or ag.v < 0.5):
+                                best_gap, v_lead = d, 0.0
                     else:
                         d = leg.stop_c - front
                         if ag.v * ag.v / (2 * max(d, 1e-3)) <= HARD_BRAKE_MPS2 or ag.v < 0.5:
