@@ -513,9 +513,15 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
                 continue
             i, c, lanes = _state(ag)
             states[idx] = (i, c, lanes)
-            leg_id = ag.route.legs[i].leg.index
+            rl = ag.route.legs[i]
             for ln in lanes:
-                occ.setdefault((leg_id, ln), []).append((c, idx))
+                occ.setdefault((rl.leg.index, ln), []).append((c, idx))
+            if i > 0 and ag.s - ag.length / 2 < rl.s_part:
+                # still in the junction: those behind it on the road it came from see it too, whichever
+                # way they go on (it counts there as driving on past the end of that road's lane)
+                prev = ag.route.legs[i - 1]
+                c_prev = prev.leg.length - rl.cut_in + (ag.s - rl.s_corner)
+                occ.setdefault((prev.leg.index, prev.lane_out), []).append((c_prev, idx))
         for lst in occ.values():
             lst.sort()
         if step == n_steps:
@@ -662,16 +668,30 @@ def place_traffic(spec, world: World, path: CameraPath, rng: np.random.Generator
     need_net = ts.density_per_lane_km > 0 or ts.cyclists_per_lane_km > 0 or ts.kerb_parking_per_km > 0 \
         or ts.pedestrians_per_km > 0
     if not need_net:
-        return _number(out + _lot_parking(spec, world, view, rng), first_id)
+        return _number(out + _apart(_lot_parking(spec, world, view, rng)), first_id)
     margin = 60.0
     area = (fx0 - margin, fy0 - margin, fx1 + margin, fy1 + margin)
     net = _Network(world, ts, area, rng)
     if ts.density_per_lane_km > 0 or ts.cyclists_per_lane_km > 0:
         out += _moving(spec, net, area, view, duration_s, rng)
-    out += _kerb_parking(spec, net, view, rng)
-    out += _lot_parking(spec, world, view, rng)
+    out += _apart(_kerb_parking(spec, net, view, rng) + _lot_parking(spec, world, view, rng))
     out += _pedestrians(spec, net, view, duration_s, path, rng)
     return _number(out, first_id)
+
+
+def _apart(parked: list[VehiclePath], gap_m: float = 0.2) -> list[VehiclePath]:
+    """The parked vehicles less any that would touch one kept before it (a kerb where a lot's edge comes close,
+    two kerbs at a bend)."""
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    out = []
+    for vp in parked:
+        x, y, th = vp.pose(0.0)
+        corners = _rect_corners(x, y, vp.size_m[0], vp.size_m[1], th)
+        if any(math.hypot(x - c[0], y - c[1]) < 14.0 and rects_overlap(corners, k, gap_m) for c, k in kept):
+            continue
+        kept.append((np.array([x, y]), corners))
+        out.append(vp)
+    return out
 
 
 def _number(vps: list[VehiclePath], first_id: int) -> list[VehiclePath]:
