@@ -483,7 +483,7 @@ def _state(ag: _Agent) -> tuple[int, float, tuple[int, ...]]:
     return i, c, lanes
 
 
-LEFT_YIELD_M = 35.0
+LEFT_YIELD_M = 25.0
 
 
 def _oncoming(net: _Network, occ: dict, agents: list, leg: _Leg) -> bool:
@@ -494,7 +494,7 @@ def _oncoming(net: _Network, occ: dict, agents: list, leg: _Leg) -> bool:
             for c, idx in reversed(occ.get((j, lane), [])):
                 if c < other.stop_c - LEFT_YIELD_M:
                     break
-                if c + agents[idx].length / 2 >= other.stop_c or agents[idx].v > 1.0:
+                if c + agents[idx].length / 2 >= other.stop_c or agents[idx].v > 2.0:
                     return True
     return False
 
