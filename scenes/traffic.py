@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from scenes.formats import TRUTH_CLASSES
 from scenes.motion import CameraPath, VehiclePath, polyline_arc_lengths
 from scenes.world import (CAR_COLOURS, GLASS_RGB, Box, Building, Tree, World, _bezier, _offset_right, _rect_corners,
                           _trim, distance_to_polyline, ground_footprint, point_rect_distance, rects_overlap,
@@ -61,7 +62,7 @@ __all__ = [
     "max_height_m",
 ]
 
-CLASSES = ("car", "van", "truck", "bus", "motorbike", "cyclist", "pedestrian")
+CLASSES = TRUTH_CLASSES  # the class names of tracks.csv, synthetic and real (one home: scenes.formats)
 VEHICLE_CLASSES = ("car", "van", "truck", "bus", "motorbike")
 # (length, width, height) ranges in metres: European cars, vans (Sprinter-like), rigid trucks,
 # 12 m city buses, motorbikes; a cyclist with the bicycle, a pedestrian seen from above (depth x shoulders)
