@@ -13,7 +13,8 @@ import sys
 
 import numpy as np
 
-from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
+from scenes.traffic import vehicle_parts
+from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -259,7 +260,7 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
 
     Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
     walls, roofs = [], []
-    for b in world.buildings:
+    for b in world.buildings + world.overpasses:
         tint = np.asarray(ROOF_TINTS[b.roof_variant])
         for p, part in enumerate(b.parts):
             m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
@@ -369,22 +370,31 @@ class SceneRenderer:
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
-        if world.buildings:
+        if world.buildings or world.overpasses:
             self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
         for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
             self.scene.add(mesh)
 
-        # Each vehicle is one draw: body, glass cabin and roof merged, with vertex colours. Under flat
+        # All vehicles are two draws: the parked ones one static mesh, the moving ones one mesh whose
+        # vertices are placed on the CPU for every render (pyrender costs about 0.5 ms of CPU a draw,
+        # and a city has a hundred road users: one draw each cost more than the rest of the scene).
+        # Each road user is its boxes (scenes.traffic.vehicle_parts) with vertex colours. Under flat
         # light it also carries its shadow: a translucent dark quad (vertex alpha, blended), its
         # footprint moved away from the sun by the shadow of the car's middle height, turned into the
         # vehicle frame at mid-sequence (on a curve the shadow turns a little with the car). The quad
         # lies SHADOW_QUAD_LIFT_M above the ground, within the truth's depth tolerance: it is ground.
-        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow.
-        self.vehicle_nodes = []
+        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow. Every
+        # shadow quad comes before every body in its mesh, so the blending order cannot darken a car.
+        self._pyrender = pyrender
+        self._moving = [k for k, v in enumerate(vehicles) if not v.parked]
+        self._moving_node = None
         shadow = self.flat and light.shadows
         away = -sun[:2] / max(1e-9, sun[2])
         t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
-        for v in vehicles:
+        self._vehicle_material = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
+                                                                    alphaMode="BLEND" if shadow else "OPAQUE")
+        parked_shadows, parked_bodies, moving_shadows, moving_bodies = [], [], [], []
+        for k, v in enumerate(vehicles):
             parts = []
             if shadow:
                 th = v.pose(t_mid_s)[2]
@@ -396,15 +406,26 @@ class SceneRenderer:
                 parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
-            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
+            for b, rgb in vehicle_parts(v):
                 m = box_mesh(b)
                 parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
-            m = _merge(parts)
-            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
-                                                     alphaMode="BLEND" if shadow else "OPAQUE")
-            prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
-                                      indices=m["indices"], material=mat)
-            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh([prim]), pose=np.eye(4)))
+            for p in parts:
+                p["owner"] = np.full(len(p["positions"]), k, np.int64)
+            if v.parked:
+                M = v.matrix(0.0)
+                parts = [{**p, "positions": (p["positions"] @ M[:3, :3].T + M[:3, 3]).astype(np.float32),
+                          "normals": (p["normals"] @ M[:3, :3].T).astype(np.float32)} for p in parts]
+                parked_shadows += parts[:1] if shadow else []
+                parked_bodies += parts[1:] if shadow else parts
+            else:
+                moving_shadows += parts[:1] if shadow else []
+                moving_bodies += parts[1:] if shadow else parts
+        if parked_bodies:
+            m = _merge(parked_shadows + parked_bodies)
+            self.scene.add(pyrender.Mesh([pyrender.Primitive(positions=m["positions"], normals=m["normals"],
+                                                             color_0=m["colours"], indices=m["indices"],
+                                                             material=self._vehicle_material)]))
+        self._moving_parts = _merge(moving_shadows + moving_bodies) if moving_bodies else None
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
@@ -430,10 +451,22 @@ class SceneRenderer:
         pose[:3, :3] = R_wc
         pose[:3, 3] = C_w
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
-        for node, M in zip(self.vehicle_nodes, vehicle_poses):
-            self.scene.set_pose(node, M)
+        if self._moving_parts is not None:
+            self._place_moving(vehicle_poses)
         rgb, depth = self.renderer.render(self.scene, flags=self.flags)
         return np.ascontiguousarray(rgb[..., :3]), depth
+
+    def _place_moving(self, vehicle_poses: list[np.ndarray]) -> None:
+        """Replace the moving vehicles' mesh by one with every vertex at its vehicle's pose."""
+        m = self._moving_parts
+        M = np.asarray(vehicle_poses, np.float64)[m["owner"]]  # (n, 4, 4) per vertex
+        pos = np.einsum("nij,nj->ni", M[:, :3, :3], m["positions"].astype(np.float64)) + M[:, :3, 3]
+        nrm = np.einsum("nij,nj->ni", M[:, :3, :3], m["normals"].astype(np.float64))
+        prim = self._pyrender.Primitive(positions=pos.astype(np.float32), normals=nrm.astype(np.float32),
+                                        color_0=m["colours"], indices=m["indices"], material=self._vehicle_material)
+        if self._moving_node is not None:
+            self.scene.remove_node(self._moving_node)
+        self._moving_node = self.scene.add(self._pyrender.Mesh([prim]))
 
     def render_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
                     cx_px: float, cy_px: float) -> tuple[np.ndarray, np.ndarray]:

@@ -117,6 +117,7 @@ class Tree:
     bush: bool = False
     yaw_rad: float = 0.0  # hedge bushes are stretched along their row
     stretch: float = 1.0  # radius along the row / crown_radius_m
+    overhangs_road: bool = False  # a street tree (scenes.traffic): its crown reaches over the road, high up
 
     @property
     def reach_m(self) -> float:
@@ -138,11 +139,13 @@ class World:
     wall_textures: list[np.ndarray] = field(default_factory=list)
     roof_textures: list[np.ndarray] = field(default_factory=list)
     crown_textures: list[np.ndarray] = field(default_factory=list)
+    overpasses: list[Building] = field(default_factory=list)  # footbridges over roads (scenes.traffic)
 
     @property
     def top_m(self) -> float:
         """Height of the highest static thing (0 for a bare ground)."""
-        return max([b.top_m for b in self.buildings] + [t.height_m for t in self.trees], default=0.0)
+        return max([b.top_m for b in self.buildings + self.overpasses] + [t.height_m for t in self.trees],
+                   default=0.0)
 
     def adjacency(self) -> dict[int, list[tuple[int, int]]]:
         """node -> [(road index, other node)] over the road graph."""
@@ -670,6 +673,13 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     # -- buildings, trees, hedges -------------------------------------------------------------
     buildings = _place_buildings(ws.buildings, cells, kinds, seen, road_index, phi, rng)
     trees = _place_trees(ws, cells, kinds, edges, road_index, buildings, extent, rng)
+    overpasses: list[Building] = []
+    if spec.traffic.street_trees_per_km > 0 or spec.traffic.bridges > 0:
+        from scenes.traffic import street_furniture  # scenes.traffic builds on this module
+
+        # its own stream (the seed's sixth child), so the rest of the world does not change with it
+        rng_street = np.random.Generator(np.random.PCG64(np.random.SeedSequence(spec.seed).spawn(6)[5]))
+        trees, overpasses = street_furniture(spec, roads, buildings, trees, seen, rng_street)
 
     # -- roads on top: asphalt, patches, worn markings, junctions -------------------------------
     for r in roads:
@@ -704,6 +714,10 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     light = spec.light
     if light.mode == "flat" and light.shadows:
         _paint_shadows(canvas, buildings, trees, light)
+        if overpasses:
+            from scenes.traffic import overpass_shadow_polygons
+
+            canvas.polygon(overpass_shadow_polygons(overpasses, light), float(light.ambient), mode="mul")
 
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
@@ -716,7 +730,8 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     crown_textures = [_crown_texture(rng, base) for base in ((58, 82, 44), (82, 98, 56))]
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
-                 wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures)
+                 wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures,
+                 overpasses=overpasses)
 
 
 def _parking_lot(canvas: _Canvas, rect, yaw: float, rng: np.random.Generator) -> list[tuple[float, float, float]]:
