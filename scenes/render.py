@@ -13,6 +13,8 @@ import sys
 
 import numpy as np
 
+from scenes.car_paint import GLOSS_ROUGHNESS, vehicle_parts
+from scenes.vegetation import sun_shading, trunk_size, unit_cone
 from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
@@ -299,38 +301,44 @@ def _unit_crown() -> dict:
             "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
 
 
-def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
-    """Crowns instanced per colour variant (one draw each), trunks instanced once."""
-    crown = _unit_crown()
-    if flat:  # baked sky shading: tops light, flanks and undersides darker (the same from every side,
-        # since hedge bushes are turned along their rows; painted shadows give the sun's direction)
-        k = (0.5 + 0.5 * np.clip(0.3 + 0.8 * crown["normals"][:, 2], 0.0, 1.0)).astype(np.float32)
-        col = np.column_stack([k, k, k, np.ones_like(k)])
-    else:
-        col = np.ones((crown["positions"].shape[0], 4), np.float32)
+def _instanced(pyrender, mesh: dict, poses: np.ndarray, colours: np.ndarray, material):
+    return pyrender.Mesh([pyrender.Primitive(positions=mesh["positions"], normals=mesh["normals"],
+                                             texcoord_0=mesh.get("texcoords"), color_0=colours,
+                                             indices=mesh["indices"], material=material, poses=poses)])
+
+
+def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient: float) -> list:
+    """Crown lobes instanced per colour variant (one draw each; conifers' cones likewise), trunks instanced
+    once, and the woods' canopies in one draw. Under flat light the sun's shading is baked into the vertex
+    colours (trees are never turned, so the baked light keeps its direction)."""
+    crown, cone = _unit_crown(), unit_cone(CROWN_SEGMENTS)
+
+    def shade(mesh):
+        if not flat:
+            return np.ones((mesh["positions"].shape[0], 4), np.float32)
+        k = sun_shading(mesh["normals"], sun, ambient)
+        return np.column_stack([k, k, k, np.ones_like(k)])
+
     meshes = []
     for v, tex in enumerate(world.crown_textures):
         trees = [t for t in world.trees if t.variant == v]
         if not trees:
             continue
-        poses = np.zeros((len(trees), 4, 4), np.float32)
-        for n, t in enumerate(trees):
-            c, s_ = np.cos(t.yaw_rad), np.sin(t.yaw_rad)
-            Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
-            poses[n, :3, :3] = Rz @ np.diag([t.crown_radius_m * t.stretch, t.crown_radius_m, t.crown_half_height_m])
-            poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
-            poses[n, 3, 3] = 1.0
-        mat = _textured_material(pyrender, tex, repeat=False)
-        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
-                                                        texcoord_0=crown["texcoords"], color_0=col,
-                                                        indices=crown["indices"], material=mat, poses=poses)]))
+        poses = []
+        for t in trees:
+            for dx, dy, z, rx, ry, rz in t.lobes:
+                pose = np.diag([rx, ry, rz, 1.0]).astype(np.float32)
+                pose[:3, 3] = (t.x_m + dx, t.y_m + dy, z)
+                poses.append(pose)
+        unit = cone if trees[0].conifer else crown
+        meshes.append(_instanced(pyrender, unit, np.asarray(poses, np.float32), shade(unit),
+                                 _textured_material(pyrender, tex, repeat=False)))
     trunks = [t for t in world.trees if not t.bush]
     if trunks:
         unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
         poses = np.zeros((len(trunks), 4, 4), np.float32)
         for n, t in enumerate(trunks):
-            h = t.height_m - 2 * t.crown_half_height_m + 0.3 * t.crown_half_height_m
-            w = max(0.25, 0.08 * t.crown_radius_m)
+            w, h = trunk_size(t)
             poses[n] = np.diag([w, w, h, 1.0])
             poses[n, :3, 3] = (t.x_m, t.y_m, h / 2)
         col = _face_colours(unit, (92, 74, 56), flat=flat)
@@ -338,6 +346,13 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list
         meshes.append(pyrender.Mesh([pyrender.Primitive(positions=unit["positions"], normals=unit["normals"],
                                                         color_0=col, indices=unit["indices"], material=mat,
                                                         poses=poses)]))
+    if world.canopies:
+        m = _merge([{k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
+                    | {"colours": np.column_stack([c["tint"] * shade(c)[:, :3], np.ones(len(c["tint"]), np.float32)])}
+                    for c in world.canopies])
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.canopy_texture, repeat=True))]))
     return meshes
 
 
@@ -371,7 +386,7 @@ class SceneRenderer:
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
         if world.buildings:
             self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
-        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
+        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun, ambient=light.ambient):
             self.scene.add(mesh)
 
         # Each vehicle is one draw: body, glass cabin and roof merged, with vertex colours. Under flat
@@ -396,11 +411,13 @@ class SceneRenderer:
                 parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
-            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
-                m = box_mesh(b)
-                parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
+            # body, glass cabin, roof; the body's and roof's tops glossy (scenes.car_paint)
+            parts += vehicle_parts(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb),
+                                   glossy=(True, False, True), paint_highlight=self.flat,
+                                   side_shade=FLAT_FACE_SHADE["side"] if self.flat else 1.0)
             m = _merge(parts)
-            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
+            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0,
+                                                     roughnessFactor=1.0 if self.flat else GLOSS_ROUGHNESS,
                                                      alphaMode="BLEND" if shadow else "OPAQUE")
             prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
                                       indices=m["indices"], material=mat)
