@@ -198,7 +198,9 @@ def canopy_mesh(poly_m: np.ndarray, rng: np.random.Generator, *, inset_m: float,
         return None
     mask = np.zeros((ny, nx), np.uint8)
     cv2.fillPoly(mask, [np.rint((poly_m - lo) / g * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
-    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 5) * g - inset_m  # metres inside the shrunk outline
+    # metres inside the shrunk outline (the transform measures to the nearest outside grid point, about
+    # half a grid step beyond the outline)
+    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 5) * g - 0.5 * g - inset_m
     inside = dist > 0
     if inside.sum() < 16:
         return None

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from algorithms.flow import as_gray, warp_backward
 from scenes import load_scene_spec
 from scenes.generate import SceneGenerator
-from tests.scenes.test_world_layout import _world
+from tests.scenes.test_world_layout import _resampled, _world
 
 pytestmark = pytest.mark.gl
 
@@ -61,11 +62,18 @@ def test_flat_light_paints_static_shadows_on_the_ground_and_only_darkens():
     assert ((b - a).sum(axis=2) > 60).mean() > 0.01
     # the shadows lie on the side away from the sun (azimuth 135: south-east, so north-west)
     darker = (b - a).sum(axis=2) > 60
-    rows, cols = np.nonzero(darker)
     x0, y0 = with_shadows.extent_m[:2]
-    xs, ys = x0 + (cols + 0.5) * with_shadows.texel_m, y0 + (rows + 0.5) * with_shadows.texel_m
-    objects = np.array([b_.centre[:2] for b_ in with_shadows.buildings]
-                       + [(t.x_m, t.y_m) for t in with_shadows.trees])
+    texel = with_shadows.texel_m
+    # a wood's canopy casts its shadow from its rim: the ground under the canopy is left out, its
+    # rim's points are casters
+    rims = [_resampled(np.vstack([c["outline"], c["outline"][:1]]), 1.0) for c in with_shadows.canopies]
+    under = np.zeros(darker.shape, np.uint8)
+    for c in with_shadows.canopies:
+        cv2.fillPoly(under, [np.rint((c["outline"] - (x0, y0)) / texel - 0.5).astype(np.int32)], 1)
+    rows, cols = np.nonzero(darker & (under == 0))
+    xs, ys = x0 + (cols + 0.5) * texel, y0 + (rows + 0.5) * texel
+    objects = np.vstack([np.array([b_.centre[:2] for b_ in with_shadows.buildings]
+                                  + [(t.x_m, t.y_m) for t in with_shadows.trees]).reshape(-1, 2)] + rims)
     nearest = objects[np.argmin((xs[:, None] - objects[None, :, 0]) ** 2 + (ys[:, None] - objects[None, :, 1]) ** 2,
                                 axis=1)]
     d = np.stack([xs, ys], axis=1) - nearest
