@@ -46,37 +46,38 @@ class Layer:
     softness: float = 1.0
 
 
-# base RGB and layers; depths are relative brightness (a few gray levels to ~20 % at most):
-# aerial photographs of ground are muted, and their detail is mostly in the finest scales
+# base RGB and layers; depths are relative brightness (a few gray levels to ~20 % at most): aerial
+# photographs of ground are muted. The finest layers stay faint (a few %): content near the pixel
+# scale is what bilinear resampling, and so the warp check of the flow truth, gets wrong
 MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
     # mown grass: fine even blades, faint clumps, dry yellowish patches metres wide
-    "grass": ((84, 102, 66), (Layer(0.5, 0.15, 0.6, 0.07), Layer(2.0, 0.6, 4.0, 0.06),
+    "grass": ((84, 102, 66), (Layer(0.5, 0.15, 0.6, 0.042), Layer(2.0, 0.6, 4.0, 0.06),
                               Layer(2.5, 4.0, 30.0, 0.5, (128, 124, 84), 0.8, 1.2))),
     # meadow: tussocks half a metre to two (strong middle band), flower specks, brown patches
-    "meadow": ((110, 118, 78), (Layer(0.5, 0.15, 0.5, 0.05), Layer(1.0, 0.5, 2.0, 0.14),
+    "meadow": ((110, 118, 78), (Layer(0.5, 0.15, 0.5, 0.03), Layer(1.0, 0.5, 2.0, 0.14),
                                 Layer(0.0, 0.15, 0.35, 0.8, (196, 190, 150), 2.3, 0.4),
                                 Layer(2.5, 5.0, 25.0, 0.45, (126, 112, 80), 0.6, 1.5))),
     # bare soil: clods (steep slope from 1 m down), damp darker patches, pale stones
     "soil": ((128, 108, 86), (Layer(1.5, 0.15, 1.2, 0.12), Layer(2.5, 3.0, 25.0, 0.5, (96, 80, 64), 0.3, 1.5),
                               Layer(0.0, 0.15, 0.3, 0.7, (168, 158, 142), 2.4, 0.5))),
     # gravel: flat white grain at the texel (stones), little else
-    "gravel": ((148, 144, 136), (Layer(0.0, 0.15, 0.45, 0.16), Layer(2.0, 2.0, 15.0, 0.04),
+    "gravel": ((148, 144, 136), (Layer(0.0, 0.15, 0.45, 0.096), Layer(2.0, 2.0, 15.0, 0.04),
                                  Layer(0.0, 0.15, 0.3, 0.6, (96, 94, 90), 2.0, 0.6))),
     # yards: worn concrete and paving, oil and water stains metres wide, fine grain
-    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.04), Layer(2.0, 1.5, 12.0, 0.07),
+    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.024), Layer(2.0, 1.5, 12.0, 0.07),
                                Layer(2.5, 3.0, 20.0, 0.35, (112, 110, 106), 1.2, 1.0))),
     # the floor under a wood's canopy: dark, leaf litter and undergrowth
     "wood": ((56, 66, 44), (Layer(1.0, 0.15, 2.0, 0.14), Layer(2.0, 2.0, 15.0, 0.1))),
     # lawns in yards: finer and greener than a field of grass
-    "lawn": ((84, 112, 62), (Layer(0.5, 0.15, 0.5, 0.06), Layer(2.0, 0.5, 6.0, 0.05))),
+    "lawn": ((84, 112, 62), (Layer(0.5, 0.15, 0.5, 0.036), Layer(2.0, 0.5, 6.0, 0.05))),
     # verges along roads: rough grass, some dry
-    "verge": ((100, 112, 72), (Layer(0.5, 0.15, 0.8, 0.08), Layer(2.0, 1.0, 10.0, 0.4, (138, 130, 96), 0.8, 1.0))),
+    "verge": ((100, 112, 72), (Layer(0.5, 0.15, 0.8, 0.048), Layer(2.0, 1.0, 10.0, 0.4, (138, 130, 96), 0.8, 1.0))),
     # sidewalk paving: light, slightly blotchy
-    "paving": ((150, 148, 142), (Layer(0.3, 0.15, 0.5, 0.05), Layer(2.0, 1.0, 10.0, 0.05))),
+    "paving": ((150, 148, 142), (Layer(0.3, 0.15, 0.5, 0.03), Layer(2.0, 1.0, 10.0, 0.05))),
     # asphalt: aggregate grain and faint patching
-    "asphalt": ((108, 108, 112), (Layer(0.0, 0.15, 0.4, 0.06), Layer(2.0, 1.5, 20.0, 0.05))),
+    "asphalt": ((108, 108, 112), (Layer(0.0, 0.15, 0.4, 0.036), Layer(2.0, 1.5, 20.0, 0.05))),
     # crops under the field rows: a little grain only (the rows carry the rest)
-    "crop": ((1.0, 1.0, 1.0), (Layer(0.5, 0.15, 0.8, 0.06), Layer(2.0, 0.8, 8.0, 0.04))),
+    "crop": ((1.0, 1.0, 1.0), (Layer(0.5, 0.15, 0.8, 0.036), Layer(2.0, 0.8, 8.0, 0.04))),
 }
 
 
@@ -91,14 +92,16 @@ def spectral_noise(white_f: np.ndarray, texel_m: float, *, beta: float, shortest
     texel_m : float, metres per texel
     beta : float, the power spectrum's slope, ``P(f) ~ f^-beta`` (0 white, 2 Brownian-like)
     shortest_m, longest_m : float, the band kept (wavelengths in metres; soft-edged at both ends);
-        wavelengths below two texels are not representable and are left out
+        nothing finer than three texels (two image pixels: the texel is 1 / 1.5 of the ground sampling
+        distance) is kept, so that resampling the texture at another sub-pixel phase changes it little
+        (flow ground truth is checked by warping frames)
     """
     n = white_f.shape[0]
     fy = np.fft.fftfreq(n)[:, None]
     fx = np.fft.rfftfreq(n)[None, :]
     f = (np.hypot(fx, fy) / texel_m).astype(np.float32)  # cycles per metre
     f[0, 0] = 1.0
-    hi, lo = 1.0 / max(shortest_m, 2 * texel_m), 1.0 / longest_m
+    hi, lo = 1.0 / max(shortest_m, 3 * texel_m), 1.0 / longest_m
     # amplitude ~ f^(-beta/2) in the band, Gaussian roll-off outside it (no ringing)
     logf = np.log(f)
     amp = np.exp(-0.5 * beta * logf

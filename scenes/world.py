@@ -247,10 +247,10 @@ def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
 
 # value-noise octaves (cell size in metres, weight) that shade the ground: weak at 40 m (no cloudy
 # blotches: photographs of fields are fairly even), strongest at 1 m and at the pixel (grain to track)
-# (the materials of scenes/textures.py carry each surface's own detail: this shade is light and soil
-# moisture over everything, kept faint so that materials stay distinct)
-NOISE_OCTAVES_M = ((40.0, 0.06), (10.0, 0.05), (3.0, 0.03), (1.0, 0.02))
-GRAIN_AMP = 0.03
+# (the materials of scenes/textures.py carry each surface's own detail; this shade adds light and soil
+# moisture over everything, weaker than it was at 40 m, and the smooth grain that flow needs)
+NOISE_OCTAVES_M = ((40.0, 0.06), (10.0, 0.06), (3.0, 0.08), (1.0, 0.1))
+GRAIN_AMP = 0.08
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
 _DRAW_ROWS = 1024  # noise lattices are drawn this many rows at a time (no float64 copy of a big one)

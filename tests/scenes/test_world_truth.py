@@ -51,6 +51,11 @@ def test_sun_shadows_only_darken():
     diff = lit.sum(axis=2) - plain.sum(axis=2)
     assert (diff <= 3).all()  # shadow maps take light away, never add it
     assert (diff < -30).mean() > 0.01  # and buildings and trees cast visible shadows
+    # a shadow is lit by the sky: the ambient fraction of the sunlit colour, not black
+    shadow = diff < -30
+    ratio = lit.sum(axis=2)[shadow] / np.maximum(1, plain.sum(axis=2)[shadow])
+    assert abs(np.median(ratio) - spec.light.ambient) < 0.05
+    assert np.percentile(ratio, 2) > spec.light.ambient - 0.1
 
 
 def test_flat_light_paints_static_shadows_on_the_ground_and_only_darkens():
