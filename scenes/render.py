@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from scenes.car_paint import GLOSS_ROUGHNESS, vehicle_parts
-from scenes.vegetation import sun_shading, trunk_size, unit_cone
+from scenes.vegetation import CROWN_BASES, sun_shading, trunk_size, unit_cone
 from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
@@ -235,7 +235,16 @@ def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
     if flat:
         up = mesh["normals"][:, 2]
         col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
-    return col
+    return col if flat else _to_linear(col)
+
+
+def _to_linear(col: np.ndarray) -> np.ndarray:
+    """Vertex colours (n, 4) for sun light: pyrender multiplies the lit colour in linear light by the
+    vertex colour and then writes ``c ** (1 / 2.2)``, so a colour meant as seen (sRGB) goes in as
+    ``c ** 2.2`` (textures it decodes itself; flat light writes colours as they are)."""
+    out = np.array(col, np.float32, copy=True)
+    out[:, :3] **= 2.2
+    return out
 
 
 def _merge(meshes: list[dict]) -> dict:
@@ -301,38 +310,40 @@ def _unit_crown() -> dict:
             "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
 
 
-def _instanced(pyrender, mesh: dict, poses: np.ndarray, colours: np.ndarray, material):
-    return pyrender.Mesh([pyrender.Primitive(positions=mesh["positions"], normals=mesh["normals"],
-                                             texcoord_0=mesh.get("texcoords"), color_0=colours,
-                                             indices=mesh["indices"], material=material, poses=poses)])
-
-
 def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient: float) -> list:
-    """Crown lobes instanced per colour variant (one draw each; conifers' cones likewise), trunks instanced
-    once, and the woods' canopies in one draw. Under flat light the sun's shading is baked into the vertex
-    colours (trees are never turned, so the baked light keeps its direction)."""
+    """Every crown lobe and conifer cone in one draw (a merged mesh: per-vertex colour, so each variant and
+    each tree its own tint, which instancing cannot give; llvmpipe pays per vertex either way, pyrender
+    per draw), trunks instanced once, and the woods' canopies in one draw. Under flat light the sun's
+    shading is baked into the vertex colours (trees are never turned, so the baked light keeps its
+    direction)."""
     crown, cone = _unit_crown(), unit_cone(CROWN_SEGMENTS)
 
-    def shade(mesh):
+    def shade(normals):
         if not flat:
-            return np.ones((mesh["positions"].shape[0], 4), np.float32)
-        k = sun_shading(mesh["normals"], sun, ambient)
-        return np.column_stack([k, k, k, np.ones_like(k)])
+            return np.ones(len(normals), np.float32)
+        return sun_shading(normals, sun, ambient)
 
     meshes = []
-    for v, tex in enumerate(world.crown_textures):
-        trees = [t for t in world.trees if t.variant == v]
-        if not trees:
-            continue
-        poses = []
-        for t in trees:
-            for dx, dy, z, rx, ry, rz in t.lobes:
-                pose = np.diag([rx, ry, rz, 1.0]).astype(np.float32)
-                pose[:3, 3] = (t.x_m + dx, t.y_m + dy, z)
-                poses.append(pose)
-        unit = cone if trees[0].conifer else crown
-        meshes.append(_instanced(pyrender, unit, np.asarray(poses, np.float32), shade(unit),
-                                 _textured_material(pyrender, tex, repeat=False)))
+    parts = []
+    for t in world.trees:
+        unit = cone if t.conifer else crown
+        tint = np.asarray(CROWN_BASES[t.variant], np.float32) / 255.0
+        for dx, dy, z, rx, ry, rz in t.lobes:
+            scale = np.array([rx, ry, rz], np.float32)
+            nrm = unit["normals"] / scale  # normals of a scaled surface: by the inverse scale
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            col = np.empty((len(nrm), 4), np.float32)
+            col[:, :3] = tint * shade(nrm)[:, None]
+            col[:, 3] = 1.0
+            if not flat:
+                col = _to_linear(col)
+            parts.append({"positions": unit["positions"] * scale + np.array([t.x_m + dx, t.y_m + dy, z], np.float32),
+                          "normals": nrm, "texcoords": unit["texcoords"], "colours": col, "indices": unit["indices"]})
+    if parts:
+        m = _merge(parts)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.crown_textures[0], repeat=False))]))
     trunks = [t for t in world.trees if not t.bush]
     if trunks:
         unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
@@ -348,7 +359,8 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient
                                                         poses=poses)]))
     if world.canopies:
         m = _merge([{k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
-                    | {"colours": np.column_stack([c["tint"] * shade(c)[:, :3], np.ones(len(c["tint"]), np.float32)])}
+                    | {"colours": (lambda col: col if flat else _to_linear(col))(
+                        np.column_stack([c["tint"] * shade(c["normals"])[:, None], np.ones(len(c["tint"]), np.float32)]))}
                     for c in world.canopies])
         meshes.append(pyrender.Mesh([pyrender.Primitive(
             positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
@@ -412,9 +424,10 @@ class SceneRenderer:
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
             # body, glass cabin, roof; the body's and roof's tops glossy (scenes.car_paint)
-            parts += vehicle_parts(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb),
-                                   glossy=(True, False, True), paint_highlight=self.flat,
-                                   side_shade=FLAT_FACE_SHADE["side"] if self.flat else 1.0)
+            body = vehicle_parts(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb),
+                                 glossy=(True, False, True), paint_highlight=self.flat,
+                                 side_shade=FLAT_FACE_SHADE["side"] if self.flat else 1.0)
+            parts += body if self.flat else [{**p, "colours": _to_linear(p["colours"])} for p in body]
             m = _merge(parts)
             mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0,
                                                      roughnessFactor=1.0 if self.flat else GLOSS_ROUGHNESS,

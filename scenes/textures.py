@@ -64,8 +64,8 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
     "gravel": ((148, 144, 136), (Layer(0.0, 0.15, 0.45, 0.096), Layer(2.0, 2.0, 15.0, 0.04),
                                  Layer(0.0, 0.15, 0.3, 0.6, (96, 94, 90), 2.0, 0.6))),
     # yards: worn concrete and paving, oil and water stains metres wide, fine grain
-    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.024), Layer(2.0, 1.5, 12.0, 0.07),
-                               Layer(2.5, 3.0, 20.0, 0.35, (112, 110, 106), 1.2, 1.0))),
+    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.024), Layer(2.0, 1.5, 12.0, 0.035),
+                               Layer(2.5, 3.0, 20.0, 0.35, (112, 110, 106), 1.6, 1.0))),
     # the floor under a wood's canopy: dark, leaf litter and undergrowth
     "wood": ((56, 66, 44), (Layer(1.0, 0.15, 2.0, 0.14), Layer(2.0, 2.0, 15.0, 0.1))),
     # lawns in yards: finer and greener than a field of grass
@@ -152,10 +152,19 @@ class MaterialPattern:
 
     def __call__(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
         n = self.tile.shape[0]
-        # texel centres sit at (k + 0.5) texels: rounding (not flooring) is safe from float error
-        c = (np.rint((X - self.x0_m) / self.texel_m - 0.5).astype(np.int64) + self.offset_px[0]) % n
-        r = (np.rint((Y - self.y0_m) / self.texel_m - 0.5).astype(np.int64) + self.offset_px[1]) % n
-        v = self.tile[r, c] * np.asarray(self.gain, np.float32)
+
+        def index(v, v0, off):
+            # texel centres sit at (k + 0.5) texels: rounding (not flooring) is safe from float error
+            return (np.rint((v - v0) / self.texel_m - 0.5).astype(np.int64) + off) % n
+
+        if X.ndim == 2 and X.shape[0] > 1 and X.shape[1] > 1 and (X[0] == X[-1]).all() and (Y[:, 0] == Y[:, -1]).all():
+            # a grid (rows of equal X, columns of equal Y): index once per row and column
+            # two takes (row copies) are 4x faster than one 2-D fancy index
+            v = self.tile.take(index(Y[:, 0], self.y0_m, self.offset_px[1]), axis=0).take(
+                index(X[0], self.x0_m, self.offset_px[0]), axis=1)
+        else:
+            v = self.tile[index(Y, self.y0_m, self.offset_px[1]), index(X, self.x0_m, self.offset_px[0])]
+        v = v * np.asarray(self.gain, np.float32)
         if self.under is not None:
             return self.under(X, Y) * v
         return v

@@ -30,7 +30,7 @@ __all__ = ["CROWN_BASES", "CONIFER_VARIANTS", "crown_lobes", "hedge_lobes", "con
 # crowns average about RGB (50, 64, 58))
 CROWN_BASES = ((50, 68, 50), (64, 82, 56), (76, 90, 58), (58, 72, 60), (38, 52, 46), (44, 56, 58))
 CONIFER_VARIANTS = (4, 5)
-CANOPY_GRID_M = 0.9  # vertex spacing of a wood's canopy height field
+CANOPY_GRID_M = 1.1  # vertex spacing of a wood's canopy height field
 
 
 def crown_lobes(rng: np.random.Generator, *, height_m: float, radius_m: float,
@@ -61,8 +61,10 @@ def crown_lobes(rng: np.random.Generator, *, height_m: float, radius_m: float,
 
 def hedge_lobes(rng: np.random.Generator, *, height_m: float, radius_m: float, length_m: float,
                 yaw_rad: float) -> tuple[tuple[float, ...], ...]:
-    """A hedge bush: 2-4 round lobes along ``yaw_rad`` over ``length_m``, ``radius_m`` across, top at ``height_m``."""
-    n = int(rng.integers(2, 5))
+    """A hedge bush: two round lobes along ``yaw_rad`` over ``length_m``, ``radius_m`` across, top at ``height_m``
+    (bushes stand closer than their length: a row of them is a closed hedge; every lobe is an instance that
+    the rasteriser pays for)."""
+    n = 2
     c, s = math.cos(yaw_rad), math.sin(yaw_rad)
     half = 0.45 * height_m
     out = []

@@ -60,7 +60,7 @@ MARK_RGB = (212, 212, 204)
 KERB_RGB = (170, 168, 160)
 # every building shares one facade and one roof texture (one draw each); roofs differ by a tint
 ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92))
-N_CROWN_VARIANTS = len(CROWN_BASES)  # crown colours (the last ones conifers'): each one instanced draw
+N_CROWN_VARIANTS = len(CROWN_BASES)  # crown colours (the last ones conifers'), all in one draw
 ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
 ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
 BUILDING_GAP_M = 1.5  # between two buildings' footprints
@@ -249,7 +249,7 @@ def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
 # blotches: photographs of fields are fairly even), strongest at 1 m and at the pixel (grain to track)
 # (the materials of scenes/textures.py carry each surface's own detail; this shade adds light and soil
 # moisture over everything, weaker than it was at 40 m, and the smooth grain that flow needs)
-NOISE_OCTAVES_M = ((40.0, 0.06), (10.0, 0.06), (3.0, 0.08), (1.0, 0.1))
+NOISE_OCTAVES_M = ((40.0, 0.05), (10.0, 0.04), (3.0, 0.04), (1.0, 0.1))
 GRAIN_AMP = 0.08
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
@@ -345,9 +345,10 @@ class _Paint:
             return
         local = slice(a - r0, b - r0)
         value = self.value
-        if callable(value) and self.alpha is not None:
-            # a pattern is evaluated on the covered texels only (a diagonal road's box is mostly empty)
-            alpha = self.alpha[a - self.rows.start:b - self.rows.start]
+        if callable(value) and self.alpha is not None and (
+                4 * np.count_nonzero(alpha := self.alpha[a - self.rows.start:b - self.rows.start]) < alpha.size):
+            # a sparse shape's pattern is evaluated on the covered texels only (a diagonal road's box is
+            # mostly empty); a dense one's on its whole box, below
             rr, cc = np.nonzero(alpha)
             if not len(rr):
                 return
@@ -774,7 +775,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     del shade
 
     wall_textures, roof_textures = _building_textures(rng, texel)
-    crown_textures = [crown_texture(rng, base) for base in CROWN_BASES]
+    crown_textures = [crown_texture(rng, (255, 255, 255))]  # leaves in gray: each crown's colour comes on top
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
                  wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures,

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from scenes.vegetation import canopy_mesh, crown_lobes, sun_shading, tree_shadow_shapes, trunk_size
+from scenes.vegetation import CANOPY_GRID_M, canopy_mesh, crown_lobes, sun_shading, tree_shadow_shapes, trunk_size
 from scenes.world import Tree, sun_direction
 from tests.scenes.test_world_layout import _world
 
@@ -136,7 +136,8 @@ def test_a_wood_is_one_canopy_of_crowns_over_its_block():
     p = pos[c["indices"].astype(int)]
     e1, e2 = p[:, 1, :2] - p[:, 0, :2], p[:, 2, :2] - p[:, 0, :2]
     area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
-    assert 43 * 33 < area < 45 * 35
+    g = CANOPY_GRID_M
+    assert (44 - g) * (34 - g) < area < (44 + g) * (34 + g)
     assert len(np.unique(np.round(c["tint"], 3), axis=0)) > 20  # each crown its own tint
     assert (c["normals"][:, 2] > 0).all()
 
