@@ -358,10 +358,12 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient
                                                         color_0=col, indices=unit["indices"], material=mat,
                                                         poses=poses)]))
     if world.canopies:
-        m = _merge([{k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
-                    | {"colours": (lambda col: col if flat else _to_linear(col))(
-                        np.column_stack([c["tint"] * shade(c["normals"])[:, None], np.ones(len(c["tint"]), np.float32)]))}
-                    for c in world.canopies])
+        parts = []
+        for c in world.canopies:
+            col = np.column_stack([c["tint"] * shade(c["normals"])[:, None], np.ones(len(c["tint"]), np.float32)])
+            parts.append({k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
+                         | {"colours": col if flat else _to_linear(col)})
+        m = _merge(parts)
         meshes.append(pyrender.Mesh([pyrender.Primitive(
             positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
             indices=m["indices"], material=_textured_material(pyrender, world.canopy_texture, repeat=True))]))

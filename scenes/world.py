@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from scenes.car_paint import CAR_COLOURS, GLASS_RGB, car_colour  # noqa: F401 (CAR_COLOURS: re-exported)
+from scenes.car_paint import GLASS_RGB, car_colour
 from scenes.motion import CameraPath, VehiclePath, polyline_arc_lengths
 from scenes.textures import TILE_PX, MaterialPattern, material_tile
 from scenes.vegetation import (CONIFER_VARIANTS, CROWN_BASES, canopy_mesh, canopy_texture, conifer_lobe, crown_lobes,
@@ -142,7 +142,7 @@ class World:
     stalls: list[tuple[float, float, float]] = field(default_factory=list)  # parking: x, y, theta
     wall_textures: list[np.ndarray] = field(default_factory=list)
     roof_textures: list[np.ndarray] = field(default_factory=list)
-    crown_textures: list[np.ndarray] = field(default_factory=list)
+    crown_textures: list[np.ndarray] = field(default_factory=list)  # one: gray leaves, tinted per crown
     canopies: list[dict] = field(default_factory=list)  # woods: height-field meshes (scenes.vegetation)
     canopy_texture: np.ndarray | None = None
 
