@@ -30,7 +30,7 @@ __all__ = ["CROWN_BASES", "CONIFER_VARIANTS", "crown_lobes", "hedge_lobes", "con
 # crowns average about RGB (50, 64, 58))
 CROWN_BASES = ((50, 68, 50), (64, 82, 56), (76, 90, 58), (58, 72, 60), (38, 52, 46), (44, 56, 58))
 CONIFER_VARIANTS = (4, 5)
-CANOPY_GRID_M = 1.1  # vertex spacing of a wood's canopy height field
+CANOPY_GRID_M = 1.3  # vertex spacing of a wood's canopy height field
 
 
 def crown_lobes(rng: np.random.Generator, *, height_m: float, radius_m: float,
