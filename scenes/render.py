@@ -13,7 +13,9 @@ import sys
 
 import numpy as np
 
-from scenes.traffic import vehicle_parts
+from scenes import car_paint
+from scenes.traffic import PAINTED_CLASSES, vehicle_parts
+from scenes.vegetation import CROWN_BASES, sun_shading, trunk_size, unit_cone
 from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
@@ -234,7 +236,16 @@ def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
     if flat:
         up = mesh["normals"][:, 2]
         col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
-    return col
+    return col if flat else _to_linear(col)
+
+
+def _to_linear(col: np.ndarray) -> np.ndarray:
+    """Vertex colours (n, 4) for sun light: pyrender multiplies the lit colour in linear light by the
+    vertex colour and then writes ``c ** (1 / 2.2)``, so a colour meant as seen (sRGB) goes in as
+    ``c ** 2.2`` (textures it decodes itself; flat light writes colours as they are)."""
+    out = np.array(col, np.float32, copy=True)
+    out[:, :3] **= 2.2
+    return out
 
 
 def _merge(meshes: list[dict]) -> dict:
@@ -300,38 +311,46 @@ def _unit_crown() -> dict:
             "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
 
 
-def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
-    """Crowns instanced per colour variant (one draw each), trunks instanced once."""
-    crown = _unit_crown()
-    if flat:  # baked sky shading: tops light, flanks and undersides darker (the same from every side,
-        # since hedge bushes are turned along their rows; painted shadows give the sun's direction)
-        k = (0.5 + 0.5 * np.clip(0.3 + 0.8 * crown["normals"][:, 2], 0.0, 1.0)).astype(np.float32)
-        col = np.column_stack([k, k, k, np.ones_like(k)])
-    else:
-        col = np.ones((crown["positions"].shape[0], 4), np.float32)
+def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient: float) -> list:
+    """Every crown lobe and conifer cone in one draw (a merged mesh: per-vertex colour, so each variant and
+    each tree its own tint, which instancing cannot give; llvmpipe pays per vertex either way, pyrender
+    per draw), trunks instanced once, and the woods' canopies in one draw. Under flat light the sun's
+    shading is baked into the vertex colours (trees are never turned, so the baked light keeps its
+    direction)."""
+    crown, cone = _unit_crown(), unit_cone(CROWN_SEGMENTS)
+
+    def shade(normals):
+        if not flat:
+            return np.ones(len(normals), np.float32)
+        return sun_shading(normals, sun, ambient)
+
     meshes = []
-    for v, tex in enumerate(world.crown_textures):
-        trees = [t for t in world.trees if t.variant == v]
-        if not trees:
-            continue
-        poses = np.zeros((len(trees), 4, 4), np.float32)
-        for n, t in enumerate(trees):
-            c, s_ = np.cos(t.yaw_rad), np.sin(t.yaw_rad)
-            Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
-            poses[n, :3, :3] = Rz @ np.diag([t.crown_radius_m * t.stretch, t.crown_radius_m, t.crown_half_height_m])
-            poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
-            poses[n, 3, 3] = 1.0
-        mat = _textured_material(pyrender, tex, repeat=False)
-        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
-                                                        texcoord_0=crown["texcoords"], color_0=col,
-                                                        indices=crown["indices"], material=mat, poses=poses)]))
+    parts = []
+    for t in world.trees:
+        unit = cone if t.conifer else crown
+        tint = np.asarray(CROWN_BASES[t.variant], np.float32) / 255.0
+        for dx, dy, z, rx, ry, rz in t.lobes:
+            scale = np.array([rx, ry, rz], np.float32)
+            nrm = unit["normals"] / scale  # normals of a scaled surface: by the inverse scale
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            col = np.empty((len(nrm), 4), np.float32)
+            col[:, :3] = tint * shade(nrm)[:, None]
+            col[:, 3] = 1.0
+            if not flat:
+                col = _to_linear(col)
+            parts.append({"positions": unit["positions"] * scale + np.array([t.x_m + dx, t.y_m + dy, z], np.float32),
+                          "normals": nrm, "texcoords": unit["texcoords"], "colours": col, "indices": unit["indices"]})
+    if parts:
+        m = _merge(parts)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.crown_textures[0], repeat=False))]))
     trunks = [t for t in world.trees if not t.bush]
     if trunks:
         unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
         poses = np.zeros((len(trunks), 4, 4), np.float32)
         for n, t in enumerate(trunks):
-            h = t.height_m - 2 * t.crown_half_height_m + 0.3 * t.crown_half_height_m
-            w = max(0.25, 0.08 * t.crown_radius_m)
+            w, h = trunk_size(t)
             poses[n] = np.diag([w, w, h, 1.0])
             poses[n, :3, 3] = (t.x_m, t.y_m, h / 2)
         col = _face_colours(unit, (92, 74, 56), flat=flat)
@@ -339,7 +358,35 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list
         meshes.append(pyrender.Mesh([pyrender.Primitive(positions=unit["positions"], normals=unit["normals"],
                                                         color_0=col, indices=unit["indices"], material=mat,
                                                         poses=poses)]))
+    if world.canopies:
+        parts = []
+        for c in world.canopies:
+            col = np.column_stack([c["tint"] * shade(c["normals"])[:, None], np.ones(len(c["tint"]), np.float32)])
+            parts.append({k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
+                         | {"colours": col if flat else _to_linear(col)})
+        m = _merge(parts)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.canopy_texture, repeat=True))]))
     return meshes
+
+
+def _road_user_parts(v, *, flat: bool) -> list[dict]:
+    """Mesh parts (positions, normals, indices, colours) of road user ``v`` in its own frame: the boxes of
+    :func:`scenes.traffic.vehicle_parts` (the truth's shape), coloured. Cars, vans, trucks and buses are
+    painted (:func:`scenes.car_paint.vehicle_parts`): the tops of their body-coloured boxes glossy, with
+    the sky highlight painted under flat light; glass and cargo matt. Motorbikes, cyclists and
+    pedestrians are plain boxes shaded like buildings."""
+    boxes_rgb = vehicle_parts(v)
+    if v.vclass not in PAINTED_CLASSES:
+        return [{**m, "colours": _face_colours(m, rgb, flat=flat)} for m, rgb in
+                ((box_mesh(b), rgb) for b, rgb in boxes_rgb)]
+    boxes, colours = zip(*boxes_rgb)
+    body = tuple(int(c) for c in v.body_rgb)
+    glossy = tuple(tuple(int(c) for c in rgb) == body for rgb in colours)
+    parts = car_paint.vehicle_parts(boxes, colours, glossy=glossy, paint_highlight=flat,
+                                    side_shade=FLAT_FACE_SHADE["side"] if flat else 1.0)
+    return parts if flat else [{**p, "colours": _to_linear(p["colours"])} for p in parts]
 
 
 class SceneRenderer:
@@ -372,7 +419,7 @@ class SceneRenderer:
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
         if world.buildings or world.overpasses:
             self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
-        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
+        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun, ambient=light.ambient):
             self.scene.add(mesh)
 
         # All vehicles are two draws: the parked ones one static mesh, the moving ones one mesh whose
@@ -391,8 +438,11 @@ class SceneRenderer:
         shadow = self.flat and light.shadows
         away = -sun[:2] / max(1e-9, sun[2])
         t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
-        self._vehicle_material = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
-                                                                    alphaMode="BLEND" if shadow else "OPAQUE")
+        # one material for all road users (a draw each costs): glossy under sun light (car paint's
+        # specular highlight; pedestrians' and cyclists' few pixels take it too), matt under flat light
+        self._vehicle_material = pyrender.MetallicRoughnessMaterial(
+            metallicFactor=0.0, roughnessFactor=1.0 if self.flat else car_paint.GLOSS_ROUGHNESS,
+            alphaMode="BLEND" if shadow else "OPAQUE")
         parked_shadows, parked_bodies, moving_shadows, moving_bodies = [], [], [], []
         for k, v in enumerate(vehicles):
             parts = []
@@ -406,9 +456,7 @@ class SceneRenderer:
                 parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
-            for b, rgb in vehicle_parts(v):
-                m = box_mesh(b)
-                parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
+            parts += _road_user_parts(v, flat=self.flat)
             for p in parts:
                 p["owner"] = np.full(len(p["positions"]), k, np.int64)
             if v.parked:

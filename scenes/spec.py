@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.1.0"
+GENERATOR_VERSION = "2.2.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -154,6 +154,7 @@ class TreesSpec(_Model):
     hedge_fraction: float = Field(0.35, ge=0, le=1, description="share of field and grass block sides with a hedge")
     crown_diameter_range_m: tuple[float, float] = (3.5, 8.0)
     height_range_m: tuple[float, float] = (5.0, 14.0)
+    conifer_fraction: float = Field(0.15, ge=0, le=1, description="share of single trees that are conifers")
 
     @model_validator(mode="after")
     def _ranges(self) -> "TreesSpec":
@@ -178,6 +179,8 @@ class WorldSpec(_Model):
     built_fraction: float = Field(0.2, ge=0, le=1, description="share of blocks that are built-up yards "
                                                                  "(where buildings stand)")
     wood_fraction: float = Field(0.1, ge=0, le=1, description="share of blocks that are woods")
+    crosswalk_fraction: float = Field(0.5, ge=0, le=1, description="share of junctions with zebra crossings "
+                                                                    "on every road into them")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
     trees: TreesSpec = Field(default_factory=TreesSpec)
 

@@ -42,15 +42,18 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from scenes.car_paint import GLASS_RGB, colour_by_share
 from scenes.formats import TRUTH_CLASSES
 from scenes.motion import CameraPath, VehiclePath, polyline_arc_lengths
-from scenes.world import (CAR_COLOURS, GLASS_RGB, Box, Building, Tree, World, _bezier, _offset_right, _rect_corners,
+from scenes.vegetation import CONIFER_VARIANTS, CROWN_BASES, crown_lobes
+from scenes.world import (Box, Building, Tree, World, _bezier, _offset_right, _rect_corners,
                           _trim, distance_to_polyline, ground_footprint, point_rect_distance, rects_overlap,
                           sun_direction, vehicle_boxes)
 
 __all__ = [
     "CLASSES",
     "VEHICLE_CLASSES",
+    "PAINTED_CLASSES",
     "CLASS_SIZES_M",
     "HARD_GAP_M",
     "vehicle_parts",
@@ -64,6 +67,7 @@ __all__ = [
 
 CLASSES = TRUTH_CLASSES  # the class names of tracks.csv, synthetic and real (one home: scenes.formats)
 VEHICLE_CLASSES = ("car", "van", "truck", "bus", "motorbike")
+PAINTED_CLASSES = ("car", "van", "truck", "bus")  # glossy paint with a sky highlight (scenes.car_paint)
 # (length, width, height) ranges in metres: European cars, vans (Sprinter-like), rigid trucks,
 # 12 m city buses, motorbikes; a cyclist with the bicycle, a pedestrian seen from above (depth x shoulders)
 CLASS_SIZES_M = {
@@ -164,8 +168,9 @@ def _draw_colours(cls: str, rng: np.random.Generator) -> tuple[tuple, tuple]:
         body = BUS_RGB[int(rng.integers(0, len(BUS_RGB)))]
     elif cls in ("cyclist", "pedestrian", "motorbike"):
         body = CLOTHES_RGB[int(rng.integers(0, len(CLOTHES_RGB)))]
-    else:
-        body = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
+    else:  # cars, vans and trucks' cabs by the colours' shares on the road (scenes.car_paint); one
+        # integer drawn, as for the other classes, so the traffic's stream does not depend on the palette
+        body = colour_by_share(int(rng.integers(0, 1000)) / 1000.0)
     head = HAIR_RGB[int(rng.integers(0, len(HAIR_RGB)))] if cls in ("cyclist", "pedestrian") else GLASS_RGB
     if cls == "motorbike":
         head = CLOTHES_RGB[int(rng.integers(0, len(CLOTHES_RGB)))]
@@ -996,8 +1001,11 @@ def street_furniture(spec, roads, buildings: list[Building], trees: list[Tree], 
                     others = np.vstack([trunks, np.array([[t.x_m, t.y_m] for t in new]).reshape(-1, 2)])
                     if len(others) and np.hypot(*(others - p).T).min() < 3.0:
                         continue
+                    # a broad-leaved crown of lobes (scenes.vegetation), none lower than the crown's bottom
                     new.append(Tree(x_m=float(p[0]), y_m=float(p[1]), height_m=height, crown_radius_m=radius,
-                                    crown_half_height_m=half, variant=int(rng.integers(0, 2)),
+                                    crown_half_height_m=half,
+                                    variant=int(rng.integers(0, len(CROWN_BASES) - len(CONIFER_VARIANTS))),
+                                    lobes=crown_lobes(rng, height_m=height, radius_m=radius, half_height_m=half),
                                     overhangs_road=True))
         trees += new
     return trees, bridges
