@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.0.0"
+GENERATOR_VERSION = "2.1.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
