@@ -16,15 +16,15 @@ image, no ground truth needed, per frame on gray levels 0..255 (the median over 
   - ``gradient_median``, ``gradient_p90``: gradient magnitude (central differences), gray levels a px;
   - ``local_contrast``: median over the image of the standard deviation in 15 x 15 windows;
   - ``saturation``: mean HSV saturation ``(max - min) / max`` of the RGB frame;
-  - ``noise_sigma``: Immerkaer's (1996) second-difference mask, made robust: 1.4826 x the median
-    absolute response / 6 over the flatter half of the image (gray levels);
+  - ``noise_sigma``: Immerkaer's (1996) second-difference mask, ``sqrt(pi / 2)`` x the mean absolute
+    response / 6, over the flatter half of the image (gray levels);
   - ``blockiness``: mean absolute difference across the 8 x 8 block boundaries over the mean
     inside the blocks (1 = none; JPEG / H.264 blocking raises it);
 scene, from the boxes (KIT AIS labels; synthetic ``tracks.csv``, visible vehicles):
   - ``vehicles_per_mpx``: vehicles in view per megapixel;
   - ``moving_fraction``: synthetic: vehicles not parked; real: of the boxes matched to a box of the
     next frame after registering the two frames by their global shift (phase correlation of the
-    whole frames refined by ECC, a translation), those whose residual displacement exceeds ``MOVING_THRESHOLD_PX`` (3 px at the
+    whole frames, refined by ECC where it stays within half a pixel of it), those whose residual displacement exceeds ``MOVING_THRESHOLD_PX`` (3 px at the
     real frames' own scale: the boxes' own jitter is 1-2 px);
   - ``vehicle_length_px``: median of the longer box side;
   - ``speed_px_per_frame``: median displacement of moving vehicles relative to the ground (synthetic:
@@ -157,9 +157,11 @@ IMMERKAER_MASK = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float64)
 def noise_sigma(gray: np.ndarray, *, flat_fraction: float = 0.5) -> float:
     """Standard deviation of white noise in an image, gray levels (a robust Immerkaer estimate).
 
-    The mask's response is taken where the image is flattest (the ``flat_fraction`` of pixels
-    with the smallest gradient, edges and texture excluded) and turned into a sigma by the median
-    absolute value (1.4826 MAD / 6). On real footage texture finer than the mask counts as noise.
+    The mask's response ``r`` is taken where the image is flattest (the ``flat_fraction`` of
+    pixels with the smallest gradient, edges and texture excluded) and turned into a sigma as
+    Immerkaer does, ``sqrt(pi / 2) mean|r| / 6`` (a median of ``|r|`` would be robust too, but on
+    8-bit frames it moves in steps of a quarter gray level). On real footage texture finer than
+    the mask counts as noise.
     """
     g = np.asarray(gray, np.float64)
     if g.ndim != 2 or min(g.shape) < 8:
@@ -170,7 +172,7 @@ def noise_sigma(gray: np.ndarray, *, flat_fraction: float = 0.5) -> float:
     smooth = cv2.GaussianBlur(g, (0, 0), 2.0)
     grad = gradient_magnitude(smooth)[1:-1, 1:-1]
     flat = grad <= np.quantile(grad, flat_fraction)
-    return float(1.4826 * np.median(np.abs(r[flat])) / 6.0)
+    return float(np.sqrt(np.pi / 2) * np.abs(r[flat]).mean() / 6.0)
 
 
 def blockiness(gray: np.ndarray, *, block_px: int = BLOCK_PX) -> float:
@@ -194,10 +196,18 @@ def blockiness(gray: np.ndarray, *, block_px: int = BLOCK_PX) -> float:
 # --------------------------------------------------------------------------- scene statistics
 
 
+ECC_MAX_STEP_PX = 0.5
+
+
 def global_shift_px(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, float]:
     """(dx, dy) px that frame 1 is moved by relative to frame 0: a ground point at p in frame 0 is at
-    p + (dx, dy) in frame 1. Phase correlation (Hann window) for the start, then ECC (Evangelidis and
-    Psarakis 2008) for a translation, sub-pixel; the phase correlation alone if ECC does not converge."""
+    p + (dx, dy) in frame 1.
+
+    Phase correlation (Hann window), refined by ECC for a translation (Evangelidis and Psarakis
+    2008) when ECC converges within ``ECC_MAX_STEP_PX`` of it: phase correlation's sub-pixel peak
+    is off by up to half a pixel on smooth texture, and ECC alone locks onto lane markings a
+    period away on some KIT AIS frames (2-3 px off on MunichStreet02).
+    """
     a = np.asarray(gray0, np.float32)
     b = np.asarray(gray1, np.float32)
     win = cv2.createHanningWindow((a.shape[1], a.shape[0]), cv2.CV_32F)
@@ -208,7 +218,10 @@ def global_shift_px(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, float]
                                        (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4), None, 5)
     except cv2.error:
         return float(dx), float(dy)
-    return float(warp[0, 2]), float(warp[1, 2])
+    ex, ey = float(warp[0, 2]), float(warp[1, 2])
+    if np.hypot(ex - dx, ey - dy) > ECC_MAX_STEP_PX:
+        return float(dx), float(dy)
+    return ex, ey
 
 
 def match_boxes(c0: np.ndarray, c1: np.ndarray, shift_px: tuple[float, float], *,
