@@ -419,15 +419,22 @@ def verdict(ratio: float, *, tolerance: float = TOLERANCE) -> str:
     return "PASS" if abs(ratio - 1.0) <= tolerance else "FAIL"
 
 
-def side_by_side(synthetic: np.ndarray, real: np.ndarray, *, crop_px: int = 256) -> np.ndarray:
-    """Centre crops of the two images, ``crop_px`` square (or smaller), next to each other with a gap."""
-    def crop(img):
-        h, w = img.shape[:2]
-        c = min(crop_px, h, w)
-        y, x = (h - c) // 2, (w - c) // 2
-        return img[y:y + c, x:x + c]
+def side_by_side(synthetic: np.ndarray, real: np.ndarray, *, crop_px: int = 256,
+                 centres: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> np.ndarray:
+    """Square crops of the two images (``crop_px`` or smaller), next to each other with a white gap.
 
-    a, b = crop(synthetic), crop(real)
+    Each crop is centred on the median of that image's vehicle ``centres`` (N, 2) px when given
+    (so that vehicles of the same size stand side by side), else on the image centre.
+    """
+    def crop(img, c):
+        h, w = img.shape[:2]
+        n = min(crop_px, h, w)
+        cx, cy = (np.median(c, axis=0) if c is not None and len(c) else (w / 2, h / 2))
+        x = int(np.clip(round(cx - n / 2), 0, w - n))
+        y = int(np.clip(round(cy - n / 2), 0, h - n))
+        return img[y:y + n, x:x + n]
+
+    a, b = crop(synthetic, centres[0]), crop(real, centres[1])
     h = max(a.shape[0], b.shape[0])
     canvas = np.full((h, a.shape[1] + 8 + b.shape[1], 3), 255, np.uint8)
     canvas[:a.shape[0], :a.shape[1]] = a
@@ -473,7 +480,8 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(f"{len(UNITS) - len(failed)} of {len(UNITS)} within +/-{TOLERANCE:.0%}"
           + (f"; failing: {', '.join(failed)}" if failed else ""))
-    pic = side_by_side(scaled(synth[0].frames[0], s_syn), scaled(real[0].frames[0], s_real))
+    pic = side_by_side(scaled(synth[0].frames[0], s_syn), scaled(real[0].frames[0], s_real),
+                       centres=(synth[0].boxes[0].centres * s_syn, real[0].boxes[0].centres * s_real))
     cv2.imwrite(args.image, cv2.cvtColor(pic, cv2.COLOR_RGB2BGR))
     print(f"side by side (synthetic left, real right, same vehicle size): {args.image}")
     return 0

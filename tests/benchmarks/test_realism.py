@@ -122,3 +122,13 @@ def test_verdict_is_pass_within_a_quarter_and_na_without_a_number():
     assert realism.verdict(1.25) == "PASS" and realism.verdict(0.75) == "PASS"
     assert realism.verdict(1.26) == "FAIL" and realism.verdict(0.7) == "FAIL"
     assert realism.verdict(float("nan")) == "n/a"
+
+
+def test_side_by_side_puts_the_crops_next_to_each_other_around_the_vehicles():
+    a = np.zeros((300, 400, 3), np.uint8)
+    a[250:260, 350:360] = 200  # a vehicle near the corner
+    b = np.full((40, 120, 3), 50, np.uint8)  # lower than the crop: cropped to its short side
+    pic = realism.side_by_side(a, b, crop_px=64, centres=(np.array([[355.0, 255.0]]), None))
+    assert pic.shape == (64, 64 + 8 + 40, 3)
+    assert (pic[:64, :64] == 200).any()  # the vehicle is in the left crop
+    assert (pic[:, 64:72] == 255).all() and (pic[:40, 72:] == 50).all()
