@@ -78,7 +78,7 @@ def _flo_name(index: int, *, local: bool) -> str:
 
 # --------------------------------------------------------------------------- tables from estimates
 
-def stabilisation_table(seq_estimate: Any, camera: pd.DataFrame) -> pd.DataFrame:
+def stabilisation_table(seq_estimate: Any, camera: pd.DataFrame | None) -> pd.DataFrame:
     """Per frame: the estimated cumulative shift, flight line, correction and jitter beside the truth.
 
     Parameters
@@ -86,14 +86,21 @@ def stabilisation_table(seq_estimate: Any, camera: pd.DataFrame) -> pd.DataFrame
     seq_estimate : SequenceEstimate
         ``cumulative_px``, ``flight_line_px``, ``correction_px``, ``jitter_px``: (N, 2) float px;
         an array of another shape is written as NaN.
-    camera : DataFrame
-        The sequence's camera.csv (``global_dx_px, global_dy_px, jitter_x_px, jitter_y_px``), N rows.
+    camera : DataFrame or None
+        The sequence's camera.csv (``global_dx_px, global_dy_px, jitter_x_px, jitter_y_px``), N rows;
+        None for real footage: the truth columns are NaN and N is the estimate's length.
 
     Returns
     -------
     DataFrame
         :data:`STABILISATION_COLUMNS`, N rows, float px (``frame`` int).
     """
+    truthless = camera is None
+    if truthless:
+        cum = getattr(seq_estimate, "cumulative_px", None)
+        n = len(cum) if cum is not None else 0
+        camera = pd.DataFrame({c: np.full(n, np.nan) for c in ("global_dx_px", "global_dy_px", "jitter_x_px",
+                                                                 "jitter_y_px")})
     n = len(camera)
     out = pd.DataFrame({"frame": np.arange(n)})
     for name in ("cumulative_px", "flight_line_px", "correction_px", "jitter_px"):
@@ -106,7 +113,8 @@ def stabilisation_table(seq_estimate: Any, camera: pd.DataFrame) -> pd.DataFrame
     # cumulative truth of frame i: sum of the pair shifts before it (frame 0 at the origin)
     true_shifts = np.column_stack([pd.to_numeric(camera[f"global_d{a}_px"], errors="coerce").to_numpy(float)
                                    for a in ("x", "y")])
-    true_cumulative = cumulative_path(np.nan_to_num(true_shifts[:-1]))
+    true_cumulative = (np.full((n, 2), np.nan) if truthless
+                       else cumulative_path(np.nan_to_num(true_shifts[:-1])))
     out["true_cumulative_x_px"], out["true_cumulative_y_px"] = true_cumulative[:, 0], true_cumulative[:, 1]
     out["true_jitter_x_px"] = camera["jitter_x_px"].to_numpy(float)
     out["true_jitter_y_px"] = camera["jitter_y_px"].to_numpy(float)

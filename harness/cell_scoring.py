@@ -40,8 +40,11 @@ class _Frames:
         return self._seq.frame(i)
 
 
-def point_seeds(tracks: pd.DataFrame) -> list[tuple[int, float, float]]:
-    """Seeds for the point tracker: ground-truth centres of the vehicles visible in frame 0."""
+def point_seeds(tracks: pd.DataFrame | None) -> list[tuple[int, float, float]]:
+    """Seeds for the point tracker: ground-truth centres of the vehicles visible in frame 0.
+
+    None (real footage without identities: no tracks.csv) gives no seed, so no point tracking.
+    """
     if tracks is None or len(tracks) == 0:
         return []
     first = tracks[(tracks["frame"] == 0) & (tracks["visible"].astype(int) == 1)]
@@ -170,10 +173,10 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                     if est.index not in truth_of:
                         truth_of.clear()
                         truth = seq.pair_truth(est.index)
-                        truth_of[est.index] = (truth, prepare_pair_truth(truth))
+                        truth_of[est.index] = (truth, _prepare(truth, prepare_pair_truth))
                         del truth
                     truth, prepared = truth_of[est.index]
-                    run.rows += score_pair(est, truth, frame=est.index, prepared=prepared)  # fresh dicts: no copy
+                    run.rows += _pair_rows(est, truth, prepared, score_pair)  # fresh dicts: no copy
                     del truth, prepared
                     if est.index in run.pictures:
                         artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
@@ -198,6 +201,30 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     return out
 
 
+def _prepare(truth: Any, prepare_pair_truth: Any) -> Any:
+    """The prepared truth of a pair with full truth; None for a pair of real footage (partial or no truth)."""
+    if truth is None or truth.flow_camera is None:
+        return None
+    return prepare_pair_truth(truth)
+
+
+def _pair_rows(est: Any, truth: Any, prepared: Any, score_pair: Any) -> list[dict]:
+    """A pair's rows: every flow metric with full truth; with only the total flow of real footage,
+    the total motion over its known pixels (no local motion, no regions: no camera flow, no
+    instances); without truth, the stage timings alone (no flow row: never a zero)."""
+    from harness.metrics import score_flow, timing_rows
+
+    if prepared is not None:
+        return score_pair(est, truth, frame=est.index, prepared=prepared)
+    rows = []
+    if truth is not None:
+        rows += score_flow(est.flow_total, truth.flow, truth.valid, valid_est=est.valid, motion="total",
+                           frame=est.index, regions=("all",))
+    if getattr(est, "stage_ms", None):
+        rows += timing_rows(est.stage_ms, frame=est.index)
+    return rows
+
+
 def _finish(run: _CellRun, seq: Any) -> list[dict]:
     """The sequence rows and files of a cell whose pipeline ran to the end; its rows, filtered."""
     from harness.metrics import score_sequence
@@ -205,6 +232,7 @@ def _finish(run: _CellRun, seq: Any) -> list[dict]:
     t0 = time.perf_counter()
     if run.seq_est is None:
         raise RuntimeError("the pipeline yielded no SequenceEstimate")
+    # real footage: camera.csv and tracks.csv may be absent (None): their metrics give no rows
     rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks)  # fresh dicts: no copy
     artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
     artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))

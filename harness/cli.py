@@ -11,6 +11,9 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
     aerobench eval-flow DIR --format middlebury|sintel|kitti --method NAME [--param KEY=VALUE ...]
+    aerobench eval-video VIDEO --out DIR [--gt FILE] [--gt-format mot|visdrone|uavdt] [--pipelines a,b]
+                         [--scale S] [--fps F] [--frames A:B] [--workers N] [--cache DIR] [--no-report] [--quiet]
+    aerobench export SEQ_DIR --out DIR [--video NAME.mkv]
     aerobench baseline RUN_DIR --out FILE
     aerobench gate RUN_DIR --baseline FILE [--rules FILE] [--junit FILE] [--summary FILE] [--json FILE]
 
@@ -228,6 +231,11 @@ def _paths(report: Any) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    return _run(args.suite, args)
+
+
+def _run(suite: Any, args: argparse.Namespace) -> int:
+    """Run ``suite`` (a name, a path or a Suite) as ``aerobench run`` does, report and pick the exit code."""
     from harness.runner import run_suite
 
     with ExitStack() as stack:  # the report's figure processes, if started early
@@ -238,8 +246,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             if not args.no_report:
                 early["figures"] = _start_figures(stack, run_dir, cells, args.workers)
 
-        result = run_suite(args.suite, args.out, workers=args.workers, resume=args.resume,
-                           executor=args.executor, scheduler=args.scheduler, cache_dir=args.cache,
+        result = run_suite(suite, args.out, workers=args.workers, resume=getattr(args, "resume", False),
+                           executor=getattr(args, "executor", "process"), scheduler=getattr(args, "scheduler", None),
+                           cache_dir=args.cache,
                            progress=not args.quiet, on_cells_done=cells_done)
         print(f"{result.cells} cells ({result.reused_cells} reused), scenes {result.scenes_rendered} rendered / "
               f"{result.scenes_reused} reused, {len(result.table)} rows, {result.elapsed_s:.1f} s -> "
@@ -273,6 +282,82 @@ def cmd_report(args: argparse.Namespace) -> int:
     report = _write_report(run_dir, args.baseline, args.gate, args.rules, workers=args.workers,
                            progress=not args.quiet)
     print(f"report: {_paths(report)}")
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- real footage
+
+
+def _frame_range(text: str | None) -> tuple[int, int | None]:
+    """``--frames A:B`` -> (start, stop): source frames A to B exclusive, 0-based; either may be left out."""
+    if text is None:
+        return 0, None
+    a, sep, b = text.partition(":")
+    try:
+        start = int(a) if a.strip() else 0
+        stop = int(b) if b.strip() else None
+    except ValueError:
+        start = stop = -1
+    if not sep or start < 0 or (stop is not None and stop < start + 2):
+        raise UsageError(f"--frames: expected A:B, source frames A to B (exclusive, 0-based, at least 2 frames; "
+                         f"A or B may be left out), got {text!r}")
+    return start, stop
+
+
+def eval_video_suite(args: argparse.Namespace) -> Any:
+    """The one-scene suite ``aerobench eval-video`` runs (validated; paths absolute)."""
+    from harness.suites import load_suite, parse_suite
+
+    video = Path(args.video)
+    if not video.exists():
+        raise UsageError(f"{video}: no such video file or frames folder")
+    if args.gt is not None and not Path(args.gt).is_file():
+        raise UsageError(f"--gt: {args.gt}: no such file")
+    start, stop = _frame_range(args.frames)
+    scene: dict[str, Any] = {"real": str(video.resolve()), "label": video.stem or video.name, "start": start,
+                             "scale": args.scale, "gt_format": args.gt_format}
+    for key, value in (("stop", stop), ("fps", args.fps),
+                       ("gt", str(Path(args.gt).resolve()) if args.gt is not None else None)):
+        if value is not None:
+            scene[key] = value
+    if args.pipelines:
+        pipelines = [p.strip() for p in args.pipelines.split(",") if p.strip()]
+        if not pipelines:
+            raise UsageError(f"--pipelines: expected names separated by commas, got {args.pipelines!r}")
+    else:
+        pipelines = list(load_suite("standard").pipelines)
+    data = {"name": f"eval-video-{scene['label']}",
+            "description": f"aerobench eval-video {video.name}: one real clip through {', '.join(pipelines)}",
+            "scenes": [scene], "seeds": [0], "pipelines": pipelines, "picture_pairs": [0]}
+    return parse_suite(data, source="eval-video")
+
+
+def cmd_eval_video(args: argparse.Namespace) -> int:
+    from harness.suites import expand
+
+    suite = eval_video_suite(args)
+    expand(suite, source="eval-video")  # a bad file is refused here, before --out is made
+    return _run(suite, args)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from scenes import open_sequence
+    from scenes.footage import export_frames, export_mot_gt, export_video
+
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UsageError(f"--out {out}: exists and is not an empty folder")
+    seq = open_sequence(args.seq_dir)
+    if args.video is not None and Path(args.video).suffix.lower() not in (".mkv", ".avi", ".mp4", ".mov"):
+        raise UsageError(f"--video: expected a .mkv, .avi (FFV1), .mp4 or .mov (H.264 RGB, crf 0) name, "
+                         f"got {args.video!r}")
+    export_frames(seq, out / "img1")
+    if seq.tracks is not None:
+        export_mot_gt(seq.tracks, out / "gt" / "gt.txt")
+    if args.video is not None:
+        export_video(seq, out / Path(args.video).name, fps=float(seq.meta.get("fps") or 25.0))
+    print(f"wrote {out} ({len(seq)} frames in img1/" + (", gt/gt.txt" if seq.tracks is not None else "")
+          + (f", {Path(args.video).name}" if args.video else "") + ")")
     return EXIT_OK
 
 
@@ -414,6 +499,32 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword parameter of the method, e.g. --param levels=4 (repeatable)")
     s.set_defaults(fn=cmd_eval_flow)
+
+    s = sub.add_parser("eval-video", help="run the pipelines on one real clip (a video or a frames folder) "
+                                          "and score them against its annotations")
+    s.add_argument("video", help="a video (.mp4 .mov .avi .mkv) or a folder of frames (.png .jpg)")
+    s.add_argument("--out", required=True, help="the run folder (must be empty)")
+    s.add_argument("--gt", default=None, help="MOTChallenge-style ground truth (gt.txt); without it only the "
+                                               "metrics that need no truth are scored")
+    s.add_argument("--gt-format", choices=("mot", "visdrone", "uavdt"), default="mot",
+                   help="column layout of --gt (default mot)")
+    s.add_argument("--pipelines", default=None, help="pipelines separated by commas (default: the standard suite's)")
+    s.add_argument("--scale", type=float, default=1.0, help="resize factor of frames and annotations (default 1)")
+    s.add_argument("--fps", type=float, default=None, help="frame rate (default: the video's own)")
+    s.add_argument("--frames", default=None, metavar="A:B", help="source frames A to B, exclusive, 0-based")
+    s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
+    s.add_argument("--cache", default=None, help="render cache (default: $AEROBENCH_CACHE or ~/.cache/aerobench)")
+    s.add_argument("--no-report", action="store_true", help="do not write report.html / report.md")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(fn=cmd_eval_video)
+
+    s = sub.add_parser("export", help="write a sequence folder as MOTChallenge files (img1/ frames, gt/gt.txt) "
+                                      "and optionally a lossless video")
+    s.add_argument("seq_dir", help="a sequence folder (aerobench render, or an entry of the render cache)")
+    s.add_argument("--out", required=True, help="the folder to write (must be empty)")
+    s.add_argument("--video", default=None, help="also write the frames as this lossless video (NAME.mkv or .avi: "
+                                                  "FFV1; NAME.mp4 or .mov: H.264 in RGB at crf 0)")
+    s.set_defaults(fn=cmd_export)
 
     s = sub.add_parser("baseline", help="write the baseline of a run (for the gate)")
     s.add_argument("run_dir")

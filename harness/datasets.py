@@ -43,13 +43,11 @@ import pandas as pd
 from algorithms.registry import get_flow_method
 from harness.metrics import score_flow
 from harness.results import rows_to_frame
-from scenes.formats import FormatError, read_flo, read_png, write_png
+from scenes.formats import (KITTI_OFFSET, KITTI_SCALE, FormatError, read_flo, read_kitti_flow, read_png,
+                            write_kitti_flow)
 
 __all__ = ["FlowPair", "FORMATS", "read_middlebury", "read_sintel", "read_kitti", "read_kitti_flow",
            "write_kitti_flow", "iter_pairs", "evaluate_flow_dataset", "KITTI_SCALE", "KITTI_OFFSET"]
-
-KITTI_SCALE = 64.0
-KITTI_OFFSET = 2 ** 15
 
 
 @dataclass
@@ -154,34 +152,6 @@ def read_sintel(root: str | os.PathLike, *, pass_: str = "clean") -> list[FlowPa
 
 
 # --------------------------------------------------------------------------- KITTI
-
-def read_kitti_flow(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a KITTI flow PNG: ``(flow (H, W, 2) float32 with NaN where invalid, valid (H, W) bool)``.
-
-    The file must be a 16-bit RGB PNG: channels u, v, valid with
-    ``u = (R - 2**15) / 64`` px (Geiger et al., KITTI devkit).
-    """
-    path = Path(path)
-    try:
-        img = read_png(path, expect="rgb16")
-    except FormatError as exc:
-        raise FormatError(f"{path}: a KITTI flow file must be a 16-bit RGB PNG (u, v, valid): {exc}") from None
-    flow = (img[..., :2].astype(np.float32) - KITTI_OFFSET) / KITTI_SCALE
-    valid = img[..., 2] > 0
-    flow[~valid] = np.nan
-    return flow, valid
-
-
-def write_kitti_flow(path: str | os.PathLike, flow: np.ndarray, valid: np.ndarray | None = None) -> None:
-    """Write flow as a KITTI 16-bit PNG (values rounded to 1/64 px; |u|, |v| must stay below 512 px)."""
-    f = np.asarray(flow, np.float64)
-    v = np.isfinite(f).all(-1) if valid is None else np.asarray(valid, bool) & np.isfinite(f).all(-1)
-    q = np.round(np.where(v[..., None], f, 0.0) * KITTI_SCALE + KITTI_OFFSET)
-    if q.min() < 0 or q.max() > 65535:
-        raise ValueError("flow: KITTI PNG holds |u|, |v| < 512 px; got larger values")
-    img = np.dstack([q[..., 0], q[..., 1], v.astype(np.float64)]).astype(np.uint16)
-    write_png(path, img)
-
 
 def read_kitti(root: str | os.PathLike, *, occ: bool = True) -> list[FlowPair]:
     """Every pair of a KITTI training layout (``flow_occ`` if ``occ`` else ``flow_noc``)."""

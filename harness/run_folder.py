@@ -49,7 +49,8 @@ class RunFolderFormatError(ValueError):
 
 @dataclass(frozen=True)
 class CellEntry:
-    """A cell as run.json lists it: ids, and the absolute path of its sequence folder."""
+    """A cell as run.json lists it: ids, the absolute path of its sequence folder, and whether that
+    sequence is rendered (``source`` "synthetic") or real footage ("real")."""
 
     cell_id: str
     scene: str
@@ -57,13 +58,18 @@ class CellEntry:
     pipeline: str
     config_hash: str
     sequence: Path | None
+    source: str = "synthetic"
 
 
 def cell_entry(*, cell_id: str, scene: str, seed: int, pipeline: str, config_hash: str,
-               sequence: str | os.PathLike | None) -> dict:
-    """One cell of run.json's ``cells`` list, as :func:`write_run` expects it."""
+               sequence: str | os.PathLike | None, source: str = "synthetic") -> dict:
+    """One cell of run.json's ``cells`` list, as :func:`write_run` expects it; ``source`` is
+    "synthetic" (a rendered scene) or "real" (footage, a suite's ``real:`` scene)."""
+    if source not in ("synthetic", "real"):
+        raise ValueError(f"source: expected 'synthetic' or 'real', got {source!r}")
     return {"cell_id": str(cell_id), "scene": str(scene), "seed": int(seed), "pipeline": str(pipeline),
-            "config_hash": str(config_hash), "sequence": None if sequence is None else str(sequence)}
+            "config_hash": str(config_hash), "sequence": None if sequence is None else str(sequence),
+            "source": source}
 
 
 def write_run(run_dir: str | os.PathLike, info: Mapping) -> Path:
@@ -130,6 +136,12 @@ class RunFolder:
     def cell_dir(self, cell_id: str) -> Path:
         return self.path / CELLS_DIR / str(cell_id)
 
+    @property
+    def real_scenes(self) -> list[str]:
+        """Labels of the scenes that are real footage (run.json's cells with ``source`` "real"; a
+        run.json written before real footage has none), sorted."""
+        return sorted({c.scene for c in self.cells if c.source == "real"})
+
     def sequence_dir(self, scene: str, seed) -> Path | None:
         """The sequence folder of (scene label, seed) as run.json names it; None when it is gone."""
         for c in self.cells:
@@ -183,5 +195,6 @@ def read_run(run_dir: str | os.PathLike) -> RunFolder:
         seq = c.get("sequence")
         cells.append(CellEntry(cell_id=str(c["cell_id"]), scene=_opt_str(c.get("scene")),
                                seed=int(c.get("seed", 0)), pipeline=_opt_str(c.get("pipeline")),
-                               config_hash=_opt_str(c.get("config_hash")), sequence=Path(seq) if seq else None))
+                               config_hash=_opt_str(c.get("config_hash")), sequence=Path(seq) if seq else None,
+                               source=_opt_str(c.get("source")) or "synthetic"))
     return RunFolder(path=path, info=info, cells=cells)

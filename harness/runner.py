@@ -207,11 +207,18 @@ def run_suite(
 def _sequence_dir(v: SceneVariant, cache: Path) -> Path:
     """Where the render cache keeps (or will keep) the sequence of ``v``: its absolute path."""
     from scenes.cache import cache_key
+    from scenes.footage import FootageSpec, footage_key
 
+    if isinstance(v.spec, FootageSpec):  # its scene hash is the footage hash: the files are not read again
+        return (cache / footage_key(v.spec, v.scene_hash)).resolve()
     return (cache / cache_key(v.spec)).resolve()
 
 
 def _cell_entry(c: Cell, cache: Path) -> dict:
-    """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache."""
+    """A cell in run.json; ``sequence`` is its sequence folder, so readers need not scan the cache;
+    ``source`` says whether it is real footage (the report's "Synthetic vs real" splits by it)."""
+    from scenes.footage import FootageSpec
+
     return cell_entry(cell_id=c.cell_id, scene=c.variant.label, seed=c.variant.seed, pipeline=c.pipeline,
-                      config_hash=c.config_hash, sequence=_sequence_dir(c.variant, cache))
+                      config_hash=c.config_hash, sequence=_sequence_dir(c.variant, cache),
+                      source="real" if isinstance(c.variant.spec, FootageSpec) else "synthetic")

@@ -19,7 +19,28 @@ Example::
       - {name: hs-alpha-5, base: thesis-hs, spec: {flow: {params: {alpha: 5.0}}}}
     metrics: [epe_mean, shift_error]
 
-(``tests/harness/test_suites.py`` parses and expands this example.) ``imports:`` names
+(``tests/harness/test_suites.py`` parses and expands this example.)
+
+A scene may instead be real footage (:class:`RealEntry`): a video file or a folder of
+frames, with a frame range, a scale, a frame rate and optional annotations; relative
+paths are taken from the suite file's folder::
+
+    scenes:
+      - real: clips/flight3.mp4
+        label: flight3
+        start: 100
+        frames: 60            # or stop: 160 (exclusive); default: to the end
+        scale: 0.5
+        fps: 30               # default: the video's own rate
+        gt: clips/flight3/gt/gt.txt
+        gt_format: mot        # or visdrone, uavdt
+      - real: kit_ais/MOS74-93 # frames folder; NAME.txt YOLO labels beside each frame are read
+        label: MOS74
+
+A real scene is decoded once into the render cache (:mod:`scenes.footage`) and runs once,
+with seed 0, whatever ``seeds`` says (it has nothing random to vary).
+
+``imports:`` names
 modules to import first, e.g. one that registers your own flow method; modules in the
 working folder are importable (:func:`import_modules`).
 
@@ -37,14 +58,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Union
+from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator
+from pydantic import (BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationError, field_validator,
+                      model_validator)
 
 __all__ = [
     "SuiteError",
     "SceneEntry",
+    "RealEntry",
     "InlinePipeline",
     "Suite",
     "SceneVariant",
@@ -116,6 +139,51 @@ class SceneEntry(_Model):
         return v
 
 
+class RealEntry(_Model):
+    """One real clip of a suite: a video or a folder of frames, its range, scale and annotations.
+
+    Paths are absolute once loaded (:func:`load_suite` resolves them from the suite file's folder).
+    """
+
+    real: str = Field(min_length=1, description="a video (.mp4 .mov .avi .mkv) or a folder of frames (.png .jpg)")
+    label: str | None = Field(None, description="name in tables; default: the file or folder name")
+    start: int = Field(0, ge=0, description="first source frame (0-based)")
+    stop: int | None = Field(None, description="source frame to stop before (exclusive); default: the end")
+    frames: int | None = Field(None, ge=2, description="number of frames from start (instead of stop)")
+    scale: float = Field(1.0, gt=0, description="resize factor of frames and annotations")
+    fps: float | None = Field(None, gt=0, description="frame rate; default: the video's own")
+    gt: str | None = Field(None, description="MOTChallenge-style ground truth (gt.txt)")
+    gt_format: Literal["mot", "visdrone", "uavdt"] = Field("mot", description="the column layout of gt")
+    yolo: bool | None = Field(None, description="YOLO labels beside the frames: true, false, or read if present")
+    classes: list[str] | None = Field(None, description="YOLO class names; default: classes.txt beside the frames")
+    flow: str | None = Field(None, description="folder of flow truth for some pairs (.flo or KITTI .png)")
+
+    @model_validator(mode="after")
+    def _range(self) -> "RealEntry":
+        if self.stop is not None and self.frames is not None:
+            raise ValueError("give stop or frames, not both")
+        if self.stop is not None and self.stop < self.start + 2:
+            raise ValueError(f"stop: expected >= start + 2 (a pair at least), got {self.stop} with start {self.start}")
+        return self
+
+    def footage_spec(self) -> Any:
+        """The :class:`scenes.footage.FootageSpec` of this entry."""
+        from scenes.footage import FootageSpec
+
+        stop = self.stop if self.frames is None else self.start + self.frames
+        return FootageSpec(name=self.label or Path(self.real).stem, source=self.real, start=self.start, stop=stop,
+                           scale=self.scale, fps=self.fps, gt=self.gt, gt_format=self.gt_format, yolo=self.yolo,
+                           classes=tuple(self.classes) if self.classes is not None else None, flow=self.flow)
+
+
+# A scene entry: a preset (rendered) or real footage, told apart by the key "real".
+SceneLine = Annotated[
+    Union[Annotated[SceneEntry, Tag("preset-scene")], Annotated[RealEntry, Tag("real-scene")]],
+    Discriminator(lambda v: "real-scene" if (isinstance(v, RealEntry) or (isinstance(v, Mapping) and "real" in v))
+                  else "preset-scene"),
+]
+
+
 class InlinePipeline(_Model):
     """A pipeline written in the suite: a name, an optional built-in base and the dict on top."""
 
@@ -144,7 +212,7 @@ class Suite(_Model):
 
     name: str = Field(min_length=1)
     description: str = ""
-    scenes: list[SceneEntry] = Field(min_length=1)
+    scenes: list[SceneLine] = Field(min_length=1)
     seeds: list[int] = Field(min_length=1)
     pipelines: list[PipelineEntry] = Field(min_length=1)
     metrics: list[str] | None = Field(None, description="metric names; default: every metric")
@@ -259,7 +327,7 @@ def _field_path(loc: tuple) -> str:
     for part in loc:
         if isinstance(part, int):
             s += f"[{part}]"
-        elif part in ("pipeline-name", "inline-pipeline", "function-after"):
+        elif part in ("pipeline-name", "inline-pipeline", "function-after", "preset-scene", "real-scene"):
             # pydantic names union branches in the location; they mean nothing to a user
             continue
         else:
@@ -276,8 +344,25 @@ def _format_validation(err: ValidationError, source: str) -> str:
     return "; ".join(dict.fromkeys(lines))
 
 
-def parse_suite(data: Any, *, source: str = "<suite>") -> Suite:
+def _resolve_real_paths(data: Any, base_dir: Path) -> Any:
+    """A copy of ``data`` whose real scenes' relative paths (``real``, ``gt``, ``flow``) start at ``base_dir``."""
+    if not (isinstance(data, Mapping) and isinstance(data.get("scenes"), list)):
+        return data
+    scenes = []
+    for entry in data["scenes"]:
+        if isinstance(entry, Mapping) and "real" in entry:
+            entry = dict(entry)
+            for key in ("real", "gt", "flow"):
+                if isinstance(entry.get(key), str) and entry[key] and not Path(entry[key]).is_absolute():
+                    entry[key] = os.path.normpath(base_dir / entry[key])
+        scenes.append(entry)
+    return {**data, "scenes": scenes}
+
+
+def parse_suite(data: Any, *, source: str = "<suite>", base_dir: str | os.PathLike | None = None) -> Suite:
     """Validate a suite given as a dict; check pipeline and metric names against the registries.
+
+    ``base_dir``: the folder relative paths of real scenes start from (default: the working folder).
 
     Raises
     ------
@@ -286,6 +371,7 @@ def parse_suite(data: Any, *, source: str = "<suite>") -> Suite:
     """
     if not isinstance(data, Mapping):
         raise SuiteError(f"{source}: expected a mapping at the top level, got {type(data).__name__}")
+    data = _resolve_real_paths(data, Path(base_dir) if base_dir is not None else Path.cwd())
     try:
         suite = Suite.model_validate(dict(data))
     except ValidationError as exc:
@@ -317,6 +403,8 @@ def _check_names(suite: Suite, source: str) -> None:
 
     presets = set(list_presets())
     for i, s in enumerate(suite.scenes):
+        if isinstance(s, RealEntry):
+            continue
         looks_like_path = s.preset.endswith((".yaml", ".yml")) or os.sep in s.preset
         if not looks_like_path and s.preset not in presets:
             raise SuiteError(
@@ -350,7 +438,7 @@ def load_suite(name_or_path: str | os.PathLike) -> Suite:
         raise SuiteError(f"{path}: YAML syntax error at {line}{exc.problem or exc}") from None
     except yaml.YAMLError as exc:
         raise SuiteError(f"{path}: not valid YAML: {exc}") from None
-    return parse_suite(data, source=str(path))
+    return parse_suite(data, source=str(path), base_dir=path.resolve().parent)
 
 
 # --------------------------------------------------------------------------- expansion
@@ -449,6 +537,9 @@ def _variants(suite: Suite, source: str) -> list[SceneVariant]:
 
     out = []
     for i, s in enumerate(suite.scenes):
+        if isinstance(s, RealEntry):
+            out.append(_real_variant(s, i, source))
+            continue
         base_label = s.label or Path(s.preset).stem
         grid = [()]
         keys: list[str] = []
@@ -481,6 +572,20 @@ def _variants(suite: Suite, source: str) -> list[SceneVariant]:
                     )
                 )
     return out
+
+
+def _real_variant(entry: RealEntry, i: int, source: str) -> SceneVariant:
+    """The one variant of a real clip: seed 0, its scene hash the hash of the files' bytes and the options."""
+    from scenes.footage import validate_footage
+    from scenes.formats import FormatError
+
+    spec = entry.footage_spec()
+    try:
+        digest = validate_footage(spec)
+    except (FormatError, ValueError, OSError) as exc:
+        raise SuiteError(f"{source}: scenes[{i}] ({spec.name}): {exc}") from None
+    return SceneVariant(label=spec.name, preset=f"real:{entry.real}", seed=0, overrides={}, sweep_param="",
+                        sweep_value=None, spec=spec, scene_hash=digest)
 
 
 def expand(suite: Suite, *, source: str | None = None) -> list[Cell]:

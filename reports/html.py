@@ -332,8 +332,9 @@ def _scene_pictures(data: RunData, cells: pd.DataFrame, base: str, colors: dict[
     for f in frames[:_MAX_PICTURE_FRAMES]:
         img, truth, valid, camera = None, None, None, None
         if seq is not None:
-            img, pair = seq.frame(f), seq.pair_truth(f)
-            truth, valid, camera = pair.flow, pair.valid, pair.flow_camera
+            img, pair = seq.frame(f), seq.pair_truth(f)  # None: real footage without flow truth for the pair
+            if pair is not None:
+                truth, valid, camera = pair.flow, pair.valid, pair.flow_camera
         totals = {p: read_cell_flow(d, f) for p, d in cell_dirs.items()}
         totals = {p: v for p, v in totals.items() if v is not None}
         locals_ = {p: read_cell_flow(d, f, local=True) for p, d in cell_dirs.items() if p in totals}

@@ -224,14 +224,17 @@ def read_tracks(cell_dir: Path) -> pd.DataFrame | None:
 
 def read_true_tracks(seq: Sequence | None) -> pd.DataFrame | None:
     """The sequence's tracks.csv (every vehicle's projected centre) as ``frame, vehicle_id, x, y,
-    parked`` for the frames where the vehicle is visible; None without a sequence."""
-    if seq is None:
+    parked`` for the frames where the vehicle is visible; None without a sequence or without
+    track truth (real footage with no ground-truth file)."""
+    if seq is None or seq.tracks is None:  # real footage without identities has no tracks.csv
         return None
     df = seq.tracks
     df = df[df["visible"].astype(int) > 0]
+    # real footage does not say which vehicles are parked: none is taken as parked
+    parked = df["parked"].astype(int) if "parked" in df.columns else 0
     return pd.DataFrame({"frame": df["frame"].astype(int), "vehicle_id": df["vehicle_id"].astype(int),
                          "x": df["x_px"].astype(float), "y": df["y_px"].astype(float),
-                         "parked": df["parked"].astype(int)}
+                         "parked": parked}
                         ).sort_values(["vehicle_id", "frame"], kind="stable").reset_index(drop=True)
 
 

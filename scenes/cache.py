@@ -1,5 +1,9 @@
 """The render cache: one folder per (resolved spec, generator version, folder layout), reused when intact.
 
+Real footage (:class:`scenes.footage.FootageSpec`) is decoded into the same cache, its
+entry keyed by :func:`scenes.footage.footage_hash` (the bytes of the files read and the
+options): every function here takes either kind of spec.
+
 Entries are written with the compact flow format (``flow/NNNNNN.npz``).
 
 An entry is named by a content hash. It is reused only if its manifest
@@ -25,6 +29,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from scenes.footage import FootageSpec, footage_hash, footage_key, write_footage
 from scenes.sequence import SEQUENCE_LAYOUT, ManifestError, Progress, _write_into, verify_manifest
 from scenes.spec import GENERATOR_VERSION, SceneSpec, load_scene_spec, spec_hash
 
@@ -40,12 +45,14 @@ class CacheResult:
     key: str
 
 
-def cache_key(spec: SceneSpec) -> str:
+def cache_key(spec: SceneSpec | FootageSpec) -> str:
     """Content hash of the resolved spec, the generator version and the folder layout, 20 hex digits.
 
     The layout (:data:`scenes.sequence.SEQUENCE_LAYOUT`) is in the key so that an entry
     written in an older layout (``.flo`` flow) is never looked up, let alone misread.
     """
+    if isinstance(spec, FootageSpec):
+        return footage_key(spec)
     text = f"{spec_hash(spec)}|{GENERATOR_VERSION}|layout-{SEQUENCE_LAYOUT}"
     label = re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.name).strip("._")[:40] or "scene"
     return f"{label}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
@@ -83,14 +90,28 @@ def _discard(path: Path) -> None:
     shutil.rmtree(trash, ignore_errors=True)
 
 
-def cached_sequence_result(spec: SceneSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
+def cached_sequence_result(spec: SceneSpec | FootageSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
                            progress: Progress | None = None) -> CacheResult:
-    """Return the cached sequence of ``spec``, rendering it if absent, partial or corrupt."""
-    if not isinstance(spec, SceneSpec):
-        spec = load_scene_spec(spec)
+    """Return the cached sequence of ``spec``, rendering (or decoding real footage) if absent, partial or corrupt.
+
+    A footage entry whose files cannot be read raises :class:`scenes.formats.FormatError`
+    and leaves nothing in the cache.
+    """
+    if isinstance(spec, FootageSpec):
+        digest = footage_hash(spec)
+        key = footage_key(spec, digest)
+
+        def write(folder: Path) -> None:
+            write_footage(spec, folder, digest=digest)
+    else:
+        if not isinstance(spec, SceneSpec):
+            spec = load_scene_spec(spec)
+        key = cache_key(spec)
+
+        def write(folder: Path) -> None:
+            _write_into(spec, folder, progress, None)
     cache_dir = Path(cache_dir)
     cache_dir.mkdir(parents=True, exist_ok=True)
-    key = cache_key(spec)
     target = cache_dir / key
     _remove_orphaned_partials(cache_dir)
     if target.exists():
@@ -103,7 +124,7 @@ def cached_sequence_result(spec: SceneSpec | str | os.PathLike, cache_dir: str |
             _discard(target)
     tmp = Path(tempfile.mkdtemp(prefix=f".{key}.partial-{_HOST}-{os.getpid()}-", dir=cache_dir))
     try:
-        _write_into(spec, tmp, progress, None)
+        write(tmp)
         try:
             os.rename(tmp, target)
         except OSError:
@@ -117,7 +138,7 @@ def cached_sequence_result(spec: SceneSpec | str | os.PathLike, cache_dir: str |
     return CacheResult(path=target, rendered=True, key=key)
 
 
-def cached_sequence(spec: SceneSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
+def cached_sequence(spec: SceneSpec | FootageSpec | str | os.PathLike, cache_dir: str | os.PathLike, *,
                     progress: Progress | None = None) -> Path:
     """Path of the cached sequence of ``spec`` (see :func:`cached_sequence_result`)."""
     return cached_sequence_result(spec, cache_dir, progress=progress).path

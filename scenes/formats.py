@@ -21,10 +21,12 @@ import tempfile
 import threading
 import zipfile
 import zlib
+import re
 from pathlib import Path
 
 import cv2
 import numpy as np
+import pandas as pd
 import zstandard
 
 __all__ = [
@@ -45,6 +47,13 @@ __all__ = [
     "encode_flow_npz",
     "decode_flow_npz",
     "read_flow_npz",
+    "KITTI_SCALE",
+    "KITTI_OFFSET",
+    "read_kitti_flow",
+    "write_kitti_flow",
+    "MOT_LAYOUTS",
+    "read_mot_gt",
+    "read_yolo_boxes",
 ]
 
 FLO_TAG = 202021.25
@@ -474,3 +483,241 @@ def read_flow_npz(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a compact flow file: ``(flow, flow_camera)``, each ``(H, W, 2)`` float32 px, bit for bit."""
     path = Path(path)
     return decode_flow_npz(path.read_bytes(), name=str(path))
+
+
+# --------------------------------------------------------------------------- KITTI flow PNG
+
+KITTI_SCALE = 64.0
+KITTI_OFFSET = 2 ** 15
+
+
+def read_kitti_flow(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a KITTI flow PNG: ``(flow (H, W, 2) float32 with NaN where invalid, valid (H, W) bool)``.
+
+    The file must be a 16-bit RGB PNG: channels u, v, valid with
+    ``u = (R - 2**15) / 64`` px (Geiger et al., KITTI devkit).
+    """
+    path = Path(path)
+    try:
+        img = read_png(path, expect="rgb16")
+    except FormatError as exc:
+        raise FormatError(f"{path}: a KITTI flow file must be a 16-bit RGB PNG (u, v, valid): {exc}") from None
+    flow = (img[..., :2].astype(np.float32) - KITTI_OFFSET) / KITTI_SCALE
+    valid = img[..., 2] > 0
+    flow[~valid] = np.nan
+    return flow, valid
+
+
+def write_kitti_flow(path: str | os.PathLike, flow: np.ndarray, valid: np.ndarray | None = None) -> None:
+    """Write flow as a KITTI 16-bit PNG (values rounded to 1/64 px; |u|, |v| must stay below 512 px)."""
+    f = np.asarray(flow, np.float64)
+    v = np.isfinite(f).all(-1) if valid is None else np.asarray(valid, bool) & np.isfinite(f).all(-1)
+    q = np.round(np.where(v[..., None], f, 0.0) * KITTI_SCALE + KITTI_OFFSET)
+    if q.min() < 0 or q.max() > 65535:
+        raise ValueError("flow: KITTI PNG holds |u|, |v| < 512 px; got larger values")
+    img = np.dstack([q[..., 0], q[..., 1], v.astype(np.float64)]).astype(np.uint16)
+    write_png(path, img)
+
+
+# --------------------------------------------------------------------------- annotations of real footage
+
+# The classes every reader maps to (the ground truth's ``class`` column of tracks.csv).
+TRUTH_CLASSES = ("car", "van", "truck", "bus", "motorbike", "cyclist", "pedestrian")
+
+# MOTChallenge (MOT16/17/20, Milan et al. 2016, sec. 3): class column 8. Classes 8-13 are
+# distractors, occluders, reflections and crowds: ignored, never scored.
+_MOT_CLASSES = {1: "pedestrian", 2: "pedestrian", 3: "car", 4: "cyclist", 5: "motorbike", 6: "cyclist",
+                7: "pedestrian", -1: "car"}
+_MOT_IGNORED = {8, 9, 10, 11, 12, 13}
+# VisDrone2019-MOT (toolkit README): object_category column 8; 0 = ignored region, 11 = others (ignored).
+_VISDRONE_CLASSES = {1: "pedestrian", 2: "pedestrian", 3: "cyclist", 4: "car", 5: "van", 6: "truck",
+                     7: "motorbike", 8: "motorbike", 9: "bus", 10: "motorbike"}
+_VISDRONE_IGNORED = {0, 11}
+# occlusion column 10: 0 none, 1 partial (1-50 % occluded), 2 heavy (50-100 %): middle of each band
+_VISDRONE_VISIBLE = {0: 1.0, 1: 0.75, 2: 0.25}
+# UAVDT (Du et al. 2018, the benchmark's GT/*_gt_whole.txt): category 1 car, 2 truck, 3 bus;
+# occlusion 1 no (0 %), 2 large (70-100 %), 3 medium (30-70 %), 4 small (1-30 %); out-of-view
+# 1 no (0 %), 2 medium (30-50 %), 3 small (1-30 %): the visible fraction is the product of the
+# middles of the two bands.
+_UAVDT_CLASSES = {1: "car", 2: "truck", 3: "bus"}
+_UAVDT_OCCLUSION = {1: 1.0, 2: 0.15, 3: 0.5, 4: 0.845}
+_UAVDT_OUT_OF_VIEW = {1: 1.0, 2: 0.6, 3: 0.845}
+
+MOT_LAYOUTS = ("mot", "visdrone", "uavdt")
+MOT_COLUMNS = ["frame", "id", "left", "top", "width", "height", "ignore", "class", "visible_fraction", "line"]
+
+
+def _fields(line: str) -> list[str]:
+    return [f for f in re.split(r"[,\s]+", line.strip()) if f]
+
+
+def _number(text: str, what: str, where: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise FormatError(f"{where}: {what}: expected a number, got {text!r}") from None
+    if not np.isfinite(v):
+        raise FormatError(f"{where}: {what}: expected a finite number, got {text!r}")
+    return v
+
+
+def _integer(text: str, what: str, where: str, *, lo: int | None = None) -> int:
+    v = _number(text, what, where)
+    if v != int(v) or (lo is not None and v < lo):
+        raise FormatError(f"{where}: {what}: expected an integer{f' >= {lo}' if lo is not None else ''}, "
+                          f"got {text!r}")
+    return int(v)
+
+
+def _coded(text: str, what: str, where: str, table: dict | set) -> int:
+    v = _integer(text, what, where)
+    if v not in table:
+        raise FormatError(f"{where}: {what}: expected one of {sorted(table)}, got {text!r}")
+    return v
+
+
+def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame:
+    """Read a MOTChallenge ground-truth file (or its VisDrone-MOT / UAVDT variant), every line checked.
+
+    Columns read, 1-based as the formats number them (frames are 1-based too):
+
+    * ``mot`` (MOTChallenge ``gt/gt.txt``): 1 frame, 2 id, 3-6 bb_left, bb_top, bb_width,
+      bb_height (px, bb_left 1-based), 7 the "consider" flag (0: ignored). With exactly 9
+      columns (MOT16/17/20) also 8 class (1, 2, 7 pedestrian, 3 car, 4 and 6 cyclist,
+      5 motorbike, -1 unspecified: car; 8-13 distractors, occluders, reflections, crowds:
+      ignored) and 9 visibility (0..1; -1, "not given", reads as 1). 6, 7 or 10 columns (MOT15: 8-10 are world
+      coordinates) are read as class car, visibility 1; columns 8-10 are then not read.
+    * ``visdrone`` (VisDrone2019-MOT ``annotations/*.txt``, 10 columns): 1-6 as above, 7 score
+      (0: ignored), 8 object_category (0 ignored region and 11 others: ignored; 1, 2
+      pedestrian, 3 cyclist, 4 car, 5 van, 6 truck, 7, 8, 10 motorbike, 9 bus), 9 truncation
+      (0 or 1; checked, not used), 10 occlusion (0, 1, 2 -> visible fraction 1, 0.75, 0.25).
+    * ``uavdt`` (UAVDT ``GT/*_gt_whole.txt``, 9 columns): 1-6 as above, 7 out-of-view (1 no,
+      2 medium, 3 small), 8 occlusion (1 no, 2 large, 3 medium, 4 small), 9 object_category
+      (1 car, 2 truck, 3 bus); visible fraction = the product of the middles of the two
+      bands. UAVDT's ignore regions (``*_gt_ignore.txt``) are a separate file, not read here.
+
+    Fields are separated by commas or white space; blank lines are skipped.
+
+    Returns
+    -------
+    DataFrame
+        :data:`MOT_COLUMNS`: frame (int, 1-based), id (int), left, top (the box's left and top
+        pixel, 1-based, float), width, height (px, float > 0), ignore (bool: an ignored
+        object or region, never scored), class (str, one of :data:`TRUTH_CLASSES`),
+        visible_fraction (float 0..1), line (int, 1-based line in the file).
+
+    Raises
+    ------
+    FormatError
+        naming the file and line: a wrong number of columns, a field that is not a number, a
+        frame < 1, a box of zero or negative size, a code outside its table, an id given twice
+        in one frame; or a file with no line at all.
+    """
+    path = Path(path)
+    if layout not in MOT_LAYOUTS:
+        raise ValueError(f"layout: expected one of {', '.join(MOT_LAYOUTS)}, got {layout!r}")
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise FormatError(f"{path}: not a text file") from None
+    rows = []
+    seen: dict[tuple[int, int], int] = {}
+    for k, line in enumerate(text.splitlines(), 1):
+        f = _fields(line)
+        if not f:
+            continue
+        where = f"{path}: line {k}"
+        if layout == "mot" and len(f) not in (6, 7, 9, 10):
+            raise FormatError(f"{where}: expected 6, 7, 9 or 10 MOTChallenge columns (frame, id, bb_left, bb_top, "
+                              f"bb_width, bb_height, flag[, class, visibility]), got {len(f)}")
+        if layout == "visdrone" and len(f) != 10:
+            raise FormatError(f"{where}: expected 10 VisDrone-MOT columns (frame, id, left, top, width, height, "
+                              f"score, category, truncation, occlusion), got {len(f)}")
+        if layout == "uavdt" and len(f) != 9:
+            raise FormatError(f"{where}: expected 9 UAVDT columns (frame, id, left, top, width, height, "
+                              f"out_of_view, occlusion, category), got {len(f)}")
+        frame = _integer(f[0], "frame (column 1)", where, lo=1)
+        tid = _integer(f[1], "id (column 2)", where)
+        left, top = _number(f[2], "bb_left (column 3)", where), _number(f[3], "bb_top (column 4)", where)
+        w, h = _number(f[4], "bb_width (column 5)", where), _number(f[5], "bb_height (column 6)", where)
+        ignore, cls, vis = False, "car", 1.0
+        if layout == "mot":
+            if len(f) >= 7:
+                ignore = _number(f[6], "flag (column 7)", where) == 0
+            if len(f) == 9:
+                c = _integer(f[7], "class (column 8)", where)
+                if c in _MOT_IGNORED:
+                    ignore = True
+                elif c in _MOT_CLASSES:
+                    cls = _MOT_CLASSES[c]
+                else:
+                    raise FormatError(f"{where}: class (column 8): expected -1 or 1..13 (MOTChallenge), got {f[7]!r}")
+                vis = _number(f[8], "visibility (column 9)", where)
+                if vis == -1.0:  # MOTChallenge's "not given"
+                    vis = 1.0
+                elif not 0.0 <= vis <= 1.0:
+                    raise FormatError(f"{where}: visibility (column 9): expected 0..1 (or -1: not given), "
+                                      f"got {f[8]!r}")
+        elif layout == "visdrone":
+            ignore = _coded(f[6], "score (column 7)", where, {0, 1}) == 0
+            c = _coded(f[7], "object_category (column 8)", where, set(range(12)))
+            ignore = ignore or c in _VISDRONE_IGNORED
+            cls = _VISDRONE_CLASSES.get(c, "car")
+            _coded(f[8], "truncation (column 9)", where, {0, 1})
+            vis = _VISDRONE_VISIBLE[_coded(f[9], "occlusion (column 10)", where, _VISDRONE_VISIBLE)]
+        else:
+            out = _coded(f[6], "out_of_view (column 7)", where, _UAVDT_OUT_OF_VIEW)
+            occ = _coded(f[7], "occlusion (column 8)", where, _UAVDT_OCCLUSION)
+            cls = _UAVDT_CLASSES[_coded(f[8], "object_category (column 9)", where, _UAVDT_CLASSES)]
+            vis = _UAVDT_OUT_OF_VIEW[out] * _UAVDT_OCCLUSION[occ]
+        if not (w > 0 and h > 0):
+            raise FormatError(f"{where}: box size: expected width and height > 0 px, got {f[4]} x {f[5]}")
+        if not ignore:
+            if (frame, tid) in seen:
+                raise FormatError(f"{where}: id {tid} appears twice in frame {frame} (first on line "
+                                  f"{seen[frame, tid]})")
+            seen[frame, tid] = k
+        rows.append((frame, tid, left, top, w, h, ignore, cls, vis, k))
+    if not rows:
+        raise FormatError(f"{path}: no annotation line (an empty ground-truth file)")
+    df = pd.DataFrame(rows, columns=MOT_COLUMNS)
+    return df.astype({"frame": np.int64, "id": np.int64, "ignore": bool, "line": np.int64})
+
+
+def read_yolo_boxes(path: str | os.PathLike) -> np.ndarray:
+    """Read a YOLO label file: one box a line, ``class cx cy w h``, the centre and size as fractions
+    of the image's width and height.
+
+    Returns
+    -------
+    (N, 5) float64
+        class (a non-negative integer), cx, cy (0..1), w, h (0 < w, h <= 1); N may be 0.
+
+    Raises
+    ------
+    FormatError
+        naming the file and line: not 5 fields, a field that is not a number, a class that is
+        not a non-negative integer, a centre outside 0..1 or a size outside (0, 1].
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise FormatError(f"{path}: not a text file") from None
+    out = []
+    for k, line in enumerate(text.splitlines(), 1):
+        f = line.split()
+        if not f:
+            continue
+        where = f"{path}: line {k}"
+        if len(f) != 5:
+            raise FormatError(f"{where}: expected 5 YOLO fields (class cx cy w h), got {len(f)}")
+        c = _integer(f[0], "class (field 1)", where, lo=0)
+        cx, cy, w, h = (_number(v, n, where) for v, n in zip(f[1:], ("cx (field 2)", "cy (field 3)",
+                                                                    "w (field 4)", "h (field 5)")))
+        if not (0.0 <= cx <= 1.0 and 0.0 <= cy <= 1.0):
+            raise FormatError(f"{where}: centre: expected cx, cy in 0..1 (fractions of the image), got {f[1]}, {f[2]}")
+        if not (0.0 < w <= 1.0 and 0.0 < h <= 1.0):
+            raise FormatError(f"{where}: size: expected w, h in (0, 1] (fractions of the image), got {f[3]}, {f[4]}")
+        out.append((c, cx, cy, w, h))
+    return np.asarray(out, np.float64).reshape(-1, 5)

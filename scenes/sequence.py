@@ -416,6 +416,12 @@ class Sequence:
     :class:`PairTruth` of i -> i+1; ``seq.camera`` / ``seq.tracks`` pandas tables;
     ``seq.meta`` dict; ``seq.spec`` the resolved :class:`SceneSpec`. Also
     indexable (``seq[i]`` is ``seq.frame(i)``), so a pipeline can take it as frames.
+
+    Real footage (``seq.source == "real"``, :mod:`scenes.footage`) has only the truths its
+    annotations give: ``pair_truth(i)`` is None for a pair without flow truth (and has
+    ``flow_camera`` and ``instances`` None where it exists), ``camera`` and ``spec`` are
+    None, ``tracks`` is None without a ground-truth file, ``boxes`` holds boxes without
+    identities. ``has_pair_truth``, ``has_camera_truth`` and ``has_track_truth`` say what exists.
     """
 
     def __init__(self, path: str | os.PathLike, *, verify: bool = False):
@@ -430,8 +436,11 @@ class Sequence:
         if self.flow_format not in FLOW_FORMATS:
             raise FormatError(f"{self.path / 'meta.json'}: flow_format {self.flow_format!r}, "
                               f"expected one of {', '.join(FLOW_FORMATS)}")
+        # "real": decoded footage (scenes.footage) whose absent truths are absent files
+        self.source = str(self.meta.get("source", "synthetic"))
         self._camera = None
         self._tracks = None
+        self._boxes = None
         self._spec = None
 
     def _manifest_exists(self) -> dict:
@@ -464,10 +473,33 @@ class Sequence:
         i = self._index(i, self._n, "frame")
         return read_png(self.path / "instances" / f"{i:06d}.png", expect="gray16")
 
-    def pair_truth(self, i: int) -> PairTruth:
-        """Ground truth of the pair i -> i+1."""
+    def has_pair_truth(self, i: int) -> bool:
+        """Whether pair i -> i+1 has ground-truth flow (always, for a rendered sequence)."""
+        i = self._index(i, self._n - 1, "pair")
+        if self.source != "real":
+            return True
+        return i in set(self.meta.get("annotations", {}).get("flow_pairs", []))
+
+    @property
+    def has_camera_truth(self) -> bool:
+        """Whether camera.csv (the true global shifts and jitter) exists."""
+        return (self.path / "camera.csv").is_file()
+
+    @property
+    def has_track_truth(self) -> bool:
+        """Whether tracks.csv (vehicles with identities) exists."""
+        return (self.path / "tracks.csv").is_file()
+
+    def pair_truth(self, i: int) -> PairTruth | None:
+        """Ground truth of the pair i -> i+1; None for a pair of real footage without flow truth."""
         i = self._index(i, self._n - 1, "pair")
         name = f"{i:06d}"
+        if self.source == "real":
+            if not self.has_pair_truth(i):
+                return None
+            flow = read_flo(self.path / "flow" / f"{name}.flo")
+            valid = read_png(self.path / "valid" / f"{name}.png", expect="gray8") > 127
+            return PairTruth(flow=flow, flow_camera=None, valid=valid, instances=None)
         valid = read_png(self.path / "valid" / f"{name}.png", expect="gray8") > 127
         if self.flow_format == "npz":
             flow, flow_camera = read_flow_npz(self.path / "flow" / f"{name}.npz")
@@ -477,26 +509,55 @@ class Sequence:
         return PairTruth(flow=flow, flow_camera=flow_camera, valid=valid, instances=self.instances(i))
 
     @property
-    def camera(self) -> pd.DataFrame:
-        if self._camera is None:
+    def camera(self) -> pd.DataFrame | None:
+        """camera.csv; None where it is absent (real footage)."""
+        if self._camera is None and (self.source != "real" or self.has_camera_truth):
             self._camera = pd.read_csv(self.path / "camera.csv")
         return self._camera
 
     @property
-    def tracks(self) -> pd.DataFrame:
-        if self._tracks is None:
+    def tracks(self) -> pd.DataFrame | None:
+        """tracks.csv; None where it is absent (real footage without a ground-truth file)."""
+        if self._tracks is None and (self.source != "real" or self.has_track_truth):
             self._tracks = pd.read_csv(self.path / "tracks.csv")
         return self._tracks
 
     @property
-    def spec(self) -> SceneSpec:
-        if self._spec is None:
+    def boxes(self) -> pd.DataFrame | None:
+        """Boxes of the objects to detect, with or without identities: ``frame, class, x_px, y_px,
+        bbox_x0_px, bbox_y0_px, bbox_x1_px, bbox_y1_px``.
+
+        boxes.csv where it exists (real footage with YOLO labels), else the visible rows of
+        tracks.csv (class ``car`` where it has no class column), else None.
+        """
+        if self._boxes is None:
+            if (self.path / "boxes.csv").is_file():
+                self._boxes = pd.read_csv(self.path / "boxes.csv", dtype={"class": str})
+            elif self.tracks is not None:
+                t = self.tracks[self.tracks["visible"].astype(int) > 0]
+                cls = t["class"] if "class" in t.columns else "car"
+                self._boxes = t.assign(**{"class": cls})[
+                    ["frame", "class", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
+                     "bbox_y1_px"]].reset_index(drop=True)
+        return self._boxes
+
+    @property
+    def ignore_regions(self) -> pd.DataFrame | None:
+        """ignore.csv of real footage (objects and regions never scored), or None."""
+        path = self.path / "ignore.csv"
+        return pd.read_csv(path, dtype={"class": str}) if path.is_file() else None
+
+    @property
+    def spec(self) -> SceneSpec | None:
+        """The resolved scene spec; None for real footage (it has none)."""
+        if self._spec is None and (self.path / "scene.yaml").is_file():
             self._spec = load_scene_spec(str(self.path / "scene.yaml"))
         return self._spec
 
     @property
-    def K(self) -> np.ndarray:
-        return np.asarray(self.meta["K"], np.float64)
+    def K(self) -> np.ndarray | None:
+        """(3, 3) intrinsics; None for real footage (unknown)."""
+        return np.asarray(self.meta["K"], np.float64) if "K" in self.meta else None
 
     def __repr__(self) -> str:
         return f"Sequence({str(self.path)!r}, {self._n} frames, {self.meta['width']}x{self.meta['height']})"
