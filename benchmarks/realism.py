@@ -342,7 +342,12 @@ def synthetic_side(arg: str, frames: int) -> Side:
         if tracks is None:
             boxes.append(SceneBoxes(np.zeros((0, 2)), np.zeros((0, 2))))
             continue
-        t = tracks[(tracks["frame"] == i) & (tracks["visible"] > 0)]
+        t = tracks[tracks["frame"] == i]
+        if "visible" in t:  # real footage's annotations may not say
+            t = t[t["visible"] > 0]
+        if not {"bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"} <= set(t.columns):
+            boxes.append(SceneBoxes(t[["x_px", "y_px"]].to_numpy(float), np.full((len(t), 2), np.nan)))
+            continue
         x0, y0, x1, y1 = (t[c].to_numpy(float) for c in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"))
         b = SceneBoxes(centres=t[["x_px", "y_px"]].to_numpy(float), sizes=np.column_stack([x1 - x0 + 1, y1 - y0 + 1]))
         if "parked" in t:
@@ -353,7 +358,7 @@ def synthetic_side(arg: str, frames: int) -> Side:
             g = np.array([row["global_dx_px"], row["global_dy_px"]], float)
             sp = []
             for vid, x, y, mv in zip(t["vehicle_id"], t["x_px"], t["y_px"], b.moving):
-                if mv and vid in nxt.index and nxt.loc[vid, "visible"] > 0:
+                if mv and vid in nxt.index and nxt.loc[vid].get("visible", 1) > 0:
                     sp.append(float(np.hypot(nxt.loc[vid, "x_px"] - x - g[0], nxt.loc[vid, "y_px"] - y - g[1])))
             b.speeds_px = np.asarray(sp)
         boxes.append(b)
@@ -361,7 +366,9 @@ def synthetic_side(arg: str, frames: int) -> Side:
 
 
 def median_length_px(sides: list[Side]) -> float:
+    """Median of the longer box side over every box of ``sides``, px (NaN without boxes)."""
     lengths = np.concatenate([b.sizes.max(axis=1) for s in sides for b in s.boxes if len(b.sizes)] or [np.zeros(0)])
+    lengths = lengths[np.isfinite(lengths)]
     return float(np.median(lengths)) if lengths.size else float("nan")
 
 
@@ -391,7 +398,7 @@ def side_statistics(sides: list[Side], scale: float) -> dict[str, float]:
             per["blockiness"].append(blockiness(g_native))
             n_boxes += len(b.centres)
             mpx += small.shape[0] * small.shape[1] / 1e6
-            if len(b.sizes):
+            if len(b.sizes) and np.isfinite(b.sizes).all():
                 lengths.append(b.sizes.max(axis=1) * scale)
             if b.moving is not None:
                 k = b.moving_known
