@@ -383,10 +383,15 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                     bar.set_postfix_str(_render_status(pending, ctx), refresh=True)
                 fill()
                 continue
-            done, _ = wait(list(pending), return_when=FIRST_COMPLETED,
-                           timeout=PROGRESS_POLL_S if ctx["progress"] else None)
+            # poll while there is a bar to update, or cells wait for the kernels (a free worker
+            # must not idle behind a long render once they are ready)
+            polling = ctx["progress"] or (ready and not ctx["kernels_ready"].is_set())
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED, timeout=PROGRESS_POLL_S if polling else None)
             if ctx["progress"]:
                 bar.set_postfix_str(_render_status(pending, ctx), refresh=True)
+            if not done:
+                fill()  # the kernels may be ready now
+                continue
             for fut in done:
                 kind, item = pending.pop(fut)
                 try:
