@@ -246,8 +246,8 @@ def _ground_tiles(pyrender, world: World) -> list:
 # south-east would (top faces full, walls less); sun light shades them itself
 FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
 CROWN_SEGMENTS = 10
-SHADOW_QUAD_LIFT_M = 0.03
-CULL_MARGIN_PX = 4.0  # a vehicle this far outside the view is still drawn (multisampling, rounding)  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+CULL_MARGIN_PX = 4.0  # a vehicle this far outside the view is still drawn (multisampling, rounding)
 
 
 def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
