@@ -182,7 +182,14 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise UsageError(f"{out}: the output folder is not empty")
     from tqdm import tqdm
 
+    from harness.scheduling import kernels_to_compile
+
     label = Path(args.scene).stem if args.scene.endswith((".yaml", ".yml")) else args.scene
+    # the frames' PNG encoder runs in every render (the truth's kernels not under a rolling shutter,
+    # the flow decoder's only when reading): cold, the first frame waits for numba to compile them all
+    cold = kernels_to_compile("scenes", modules={"scenes._codec_kernels"}) if not args.quiet else []
+    if any(k.endswith((".avg_filter", ".deflate_huffman")) for k in cold):
+        print("compiling numerical kernels (first run only, a few seconds)...", file=sys.stderr, flush=True)
     with tqdm(total=spec.image.n_frames, desc=f"rendering {label}", unit="frame", file=sys.stderr,
               disable=args.quiet, dynamic_ncols=True) as bar:
         def progress(done: int, total: int) -> None:

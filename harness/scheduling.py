@@ -188,21 +188,46 @@ def _execute(ctx: dict, todo: list[Cell], executor: str, workers: int | None,
     return work.rendered, work.reused, work.render_failed
 
 
-def kernels_to_compile() -> list[str]:
-    """Names of the numba kernels of ``algorithms`` that numba's on-disk cache lacks (or holds for
-    another version of their source): what the first run compiles, about a minute of CPU.
+# modules whose kernels every pipeline runs (besides its flow and global-motion methods')
+PIPELINE_KERNEL_MODULES = ("algorithms.pipeline", "algorithms.filters", "algorithms.tracking")
+
+
+def pipeline_kernel_modules(specs: list[Any]) -> set[str]:
+    """The modules whose numba kernels the pipelines ``specs`` (resolved dicts) run: their flow and
+    global-motion methods' modules and :data:`PIPELINE_KERNEL_MODULES`."""
+    import algorithms.pipeline  # noqa: F401  (registers every built-in stage)
+    from algorithms.registry import STAGES
+
+    modules = set(PIPELINE_KERNEL_MODULES)
+    for spec in specs:
+        for kind in ("flow", "global_motion"):
+            stage = spec.get(kind) if isinstance(spec, Mapping) else None
+            fn = STAGES.get(kind, {}).get(stage.get("method")) if isinstance(stage, Mapping) else None
+            if fn is not None:
+                modules.add(fn.__module__)
+    return modules
+
+
+def kernels_to_compile(package: str = "algorithms", *, modules: set[str] | None = None) -> list[str]:
+    """Names of the numba kernels of ``package`` (``"algorithms"`` or ``"scenes"``; only those of
+    ``modules`` when given) that numba's on-disk cache lacks (or holds for another version of
+    their source): what a first run compiles (the pipelines' kernels about a minute of CPU, the
+    scenes' about ten seconds).
 
     Reads numba's cache index through its caching module; if that changes, nothing is reported.
     """
-    import algorithms.pipeline  # noqa: F401  (imports every built-in stage, and its kernels)
+    import importlib
 
+    for module in {"algorithms": ("algorithms.pipeline",),  # imports every built-in stage and its kernels
+                   "scenes": ("scenes._truth_kernels", "scenes._codec_kernels")}[package]:
+        importlib.import_module(module)
     try:
         from numba.core.registry import CPUDispatcher
     except ImportError:
         return []
     cold = []
     for name, module in sorted(sys.modules.items()):
-        if not name.startswith("algorithms.") or module is None:
+        if not name.startswith(f"{package}.") or module is None or (modules is not None and name not in modules):
             continue
         for attr, obj in vars(module).items():
             if not isinstance(obj, CPUDispatcher) or getattr(obj, "__module__", name) != name:
@@ -221,7 +246,9 @@ def kernels_to_compile() -> list[str]:
 def compile_ahead(todo: list[Cell], ctx: dict, *, local: bool) -> threading.Event:
     """Compile the numba kernels once in this process while the workers render, if the cache is cold.
 
-    Without it every worker compiled the same kernels at its first cell (the first smoke run
+    Only the kernels of the modules these pipelines run count (:func:`pipeline_kernel_modules`: a
+    suite without TV-L1 never compiles its kernels). Without this every worker compiled the same
+    kernels at its first cell (the first smoke run
     sat at ``4/24`` for over a minute, saying nothing). Here the pipelines of ``todo`` run once
     on a tiny sequence (``harness.cell_scoring.warm_up``) in a thread, numba writes its cache,
     and cells are handed out when the returned event is set (renders go on meanwhile); the
@@ -229,11 +256,12 @@ def compile_ahead(todo: list[Cell], ctx: dict, *, local: bool) -> threading.Even
     workers are not on this machine (``local=False``).
     """
     ready = threading.Event()
-    cold = kernels_to_compile() if local and todo else []
+    specs = {c.pipeline_hash: c.pipeline_spec for c in todo}
+    cold = (kernels_to_compile(modules=pipeline_kernel_modules(list(specs.values()))) if local and todo
+            else [])
     if not cold:
         ready.set()
         return ready
-    specs = {c.pipeline_hash: c.pipeline_spec for c in todo}
     if ctx["progress"]:
         ctx["bar"].write(f"compiling numerical kernels (first run only: {len(cold)} numba kernels, about a "
                          "minute); the scenes render meanwhile", file=sys.stderr)

@@ -23,8 +23,10 @@ from harness.suites import expand, parse_suite
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _render(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess:
+def _render(tmp_path: Path, *extra: str, numba_cache: Path | None = None) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    if numba_cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(numba_cache)
     return subprocess.run([sys.executable, "-m", "harness.cli", "render", "tiny", "--set", "image.n_frames=3",
                            "--out", str(tmp_path / "seq"), *extra], env=env, capture_output=True, text=True,
                           timeout=240)
@@ -33,9 +35,14 @@ def _render(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess:
 @pytest.mark.gl
 @pytest.mark.slow
 def test_render_shows_a_bar_of_frames_and_quiet_shows_none(tmp_path):
-    shown = _render(tmp_path / "a")
+    """The first render (numba's cache empty) says that it compiles; the bar counts the frames."""
+    cache = tmp_path / "numba"
+    shown = _render(tmp_path / "a", numba_cache=cache)
     assert shown.returncode == 0, shown.stderr
+    assert "compiling numerical kernels (first run only" in shown.stderr
     assert "rendering tiny" in shown.stderr and "3/3" in shown.stderr and "frame" in shown.stderr
+    again = _render(tmp_path / "c", numba_cache=cache)
+    assert "compiling" not in again.stderr and "3/3" in again.stderr
     quiet = _render(tmp_path / "b", "--quiet")
     assert quiet.returncode == 0, quiet.stderr
     assert quiet.stderr == ""
@@ -106,7 +113,7 @@ def _execute(tmp_path, monkeypatch, *, cold: list[str], progress: bool):
         yield pool
 
     monkeypatch.setattr(harness.executors, "open_executor", fake_executor)
-    monkeypatch.setattr(scheduling, "kernels_to_compile", lambda: cold)
+    monkeypatch.setattr(scheduling, "kernels_to_compile", lambda *a, **k: cold)
     monkeypatch.setattr(scheduling, "compile_ahead", compile_ahead)
     monkeypatch.setattr(harness.cell_scoring, "warm_up", slow_warm_up)
     (tmp_path / "cells").mkdir()
@@ -141,3 +148,33 @@ def test_the_bar_names_each_render_in_flight_with_its_frames(tmp_path):
                       "compiling numerical kernels (first run only)")
     ctx["kernels_ready"].set()
     assert scheduling._render_status({}, ctx) == ""
+
+
+def test_only_the_kernels_of_the_suites_pipelines_count():
+    from algorithms.pipeline import PIPELINES
+
+    smoke = scheduling.pipeline_kernel_modules([PIPELINES[n] for n in ("thesis-lk", "thesis-hs", "dis")])
+    assert {"algorithms.lucas_kanade_flow", "algorithms.horn_schunck_flow", "algorithms.pipeline"} <= smoke
+    assert "algorithms.tv_l1_flow" not in smoke
+    assert "algorithms.tv_l1_flow" in scheduling.pipeline_kernel_modules([PIPELINES["tv-l1"]])
+
+
+@pytest.mark.slow
+def test_an_empty_numba_cache_lists_the_kernels_and_compiling_them_fills_it(tmp_path):
+    code = """
+import numpy as np
+from harness.scheduling import kernels_to_compile
+mods = {"algorithms.lucas_kanade_flow"}
+before = kernels_to_compile(modules=mods)
+from algorithms import lucas_kanade
+rng = np.random.default_rng(0)
+f = (rng.random((32, 32)) * 255).astype(np.float32)
+lucas_kanade(f, np.roll(f, 1, axis=1))
+after = kernels_to_compile(modules=mods)
+print(len(before), len(after), all(k.startswith("algorithms.lucas_kanade_flow.") for k in before))
+"""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=280)
+    assert out.returncode == 0, out.stderr
+    n_before, n_after, named = out.stdout.split()
+    assert int(n_before) >= 1 and int(n_after) == 0 and named == "True", out.stdout
