@@ -13,6 +13,8 @@ file                     content
 ``local_flow_NNNNNN.flo`` the same pair's local flow: ``flow_total - flow_global`` (px)
 ``stabilisation.csv``    :data:`STABILISATION_COLUMNS`, one row per frame, px
 ``tracks.csv``           :data:`TRACK_COLUMNS`, one row per frame x estimated track, px
+``mot_<tracker>.txt``    each tracker's tracks in MOTChallenge format (:data:`MOT_COLUMNS`), for
+                         TrackEval or py-motmetrics; ``<tracker>`` is the tracks' ``source``
 ``error.txt``            the traceback, only when the cell failed
 ``cell.json``            :data:`CELL_INFO_KEYS` + ``format``; written last
 =======================  =====================================================================
@@ -25,6 +27,17 @@ write_pair_flows(cell_dir, index, flow_total, flow_global)
 write_stabilisation / read_stabilisation, write_tracks / read_tracks
 write_error / read_error, write_cell_info / read_cell_info
 picture_pairs(cell_dir) -> [int], read_flow(cell_dir, index, *, local=False)
+mot_table(tracks) / mot_truth_table(true_tracks) -> DataFrame   MOTChallenge rows
+write_mot_tracks(cell_dir, tracks) -> [Path], write_mot(path, table), read_mot(path), read_mot_tracks(cell_dir)
+
+MOTChallenge export: one line per frame x track, ``frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z``
+(frames 1-based; ``bb_left = x0 + 1``: MOTChallenge's first pixel is 1, ours is 0, both at the pixel's
+centre; ``x, y, z`` = -1, no world coordinates). A track with a box (``bbox_*_px``, e.g. the multi-target
+tracker's) is written with it; a point track (the thesis point tracker, or any tracker without a box)
+gets a fixed :data:`MOT_POINT_BOX_PX` x :data:`MOT_POINT_BOX_PX` px box centred on its filtered
+position, a carrier only: :func:`read_mot_tracks` gives a box of exactly that size back as a point (the
+box centre, no box), so that our metrics score it as a point; an IoU-based scorer would not match such
+a box to a vehicle.
 """
 
 from __future__ import annotations
@@ -47,6 +60,8 @@ __all__ = [
     "stabilisation_table", "tracks_table", "write_pair_flows", "write_stabilisation", "read_stabilisation",
     "write_tracks", "read_tracks", "write_error", "read_error", "write_cell_info", "read_cell_info",
     "picture_pairs", "read_flow",
+    "MOT_COLUMNS", "MOT_POINT_BOX_PX", "mot_file", "mot_table", "mot_truth_table", "write_mot", "write_mot_tracks",
+    "read_mot", "read_mot_tracks",
 ]
 
 CELL_FORMAT = "aerobench-cell/1"
@@ -64,8 +79,14 @@ STABILISATION_COLUMNS = ("frame",
                          "true_cumulative_x_px", "true_cumulative_y_px", "true_jitter_x_px", "true_jitter_y_px")
 # the pipeline's track columns (algorithms.pipeline SequenceEstimate.tracks) and, for point tracks,
 # the seeded vehicle's true centre in the same frame (NaN for multi-target tracks)
+# and the box of a tracker that has one (NaN for the point tracker; absent from older cells: read as NaN)
 TRACK_COLUMNS = ("frame", "track_id", "source", "seed_vehicle_id", "x_px", "y_px", "x_filt_px", "y_filt_px",
-                 "x_pred_px", "y_pred_px", "true_x_px", "true_y_px", "true_visible")
+                 "x_pred_px", "y_pred_px", "true_x_px", "true_y_px", "true_visible",
+                 "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")
+
+MOT_COLUMNS = ("frame", "id", "bb_left", "bb_top", "bb_width", "bb_height", "conf", "x", "y", "z")
+MOT_POINT_BOX_PX = 4.0  # side of the carrier box a point track is exported with, px
+_BOX = ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")
 
 
 class CellArtifactError(ValueError):
@@ -185,8 +206,11 @@ def write_stabilisation(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Pat
 
 
 def write_tracks(cell_dir: str | os.PathLike, table: pd.DataFrame) -> Path:
-    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`)."""
+    """Write ``tracks.csv`` (:data:`TRACK_COLUMNS`, from :func:`tracks_table`; box columns absent: NaN)."""
     path = Path(cell_dir) / TRACKS_FILE
+    missing_box = [c for c in _BOX if c not in table.columns]
+    if missing_box:
+        table = table.assign(**{c: np.nan for c in missing_box})
     _write_table(path, table, TRACK_COLUMNS)
     return path
 
@@ -232,10 +256,13 @@ def read_cell_info(cell_dir: str | os.PathLike) -> dict | None:
     return info
 
 
-def _read_table(path: Path, columns: tuple[str, ...]) -> pd.DataFrame | None:
+def _read_table(path: Path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> pd.DataFrame | None:
     if not path.is_file():
         return None
     df = pd.read_csv(path)
+    for c in optional:
+        if c not in df.columns:
+            df[c] = np.nan
     missing = [c for c in columns if c not in df.columns]
     if missing:
         raise CellArtifactError(f"{path}: lacks the column(s) {missing} of {CELL_FORMAT}; expected {list(columns)}")
@@ -256,7 +283,7 @@ def read_tracks(cell_dir: str | os.PathLike) -> pd.DataFrame | None:
     ``track_id`` is unique only within a ``source`` ("point" or "multi"): a track is the
     pair ``(source, track_id)``. Positions float px; ``seed_vehicle_id`` NaN for multi tracks.
     """
-    df = _read_table(Path(cell_dir) / TRACKS_FILE, TRACK_COLUMNS)
+    df = _read_table(Path(cell_dir) / TRACKS_FILE, TRACK_COLUMNS, optional=_BOX)
     if df is None or df.empty:
         return None
     df = df.copy()
@@ -287,3 +314,127 @@ def read_flow(cell_dir: str | os.PathLike, index: int, *, local: bool = False) -
     """The total (or, with ``local``, the local) flow the cell saved for pair ``index``; None if absent."""
     path = Path(cell_dir) / _flo_name(index, local=local)
     return read_flo(path) if path.is_file() else None
+
+
+# --------------------------------------------------------------------------- MOTChallenge export
+
+def mot_file(tracker: str) -> str:
+    """The file name of a tracker's MOTChallenge export: ``mot_<tracker>.txt``."""
+    name = str(tracker)
+    if not name or not all(c.isalnum() or c in "-_" for c in name):
+        raise ValueError(f"tracker: expected a name of letters, digits, '-' or '_', got {name!r}")
+    return f"mot_{name}.txt"
+
+
+def _mot_rows(frame, ids, x0, y0, x1, y1, conf) -> pd.DataFrame:
+    return pd.DataFrame({"frame": np.asarray(frame, np.int64) + 1, "id": np.asarray(ids, np.int64),
+                         "bb_left": x0 + 1.0, "bb_top": y0 + 1.0, "bb_width": x1 - x0, "bb_height": y1 - y0,
+                         "conf": conf, "x": -1, "y": -1, "z": -1}, columns=list(MOT_COLUMNS))
+
+
+def mot_table(tracks: pd.DataFrame, *, point_box_px: float = MOT_POINT_BOX_PX) -> pd.DataFrame:
+    """One tracker's estimated tracks as MOTChallenge rows (:data:`MOT_COLUMNS`), sorted by frame and id.
+
+    Parameters
+    ----------
+    tracks : DataFrame
+        ``frame`` (0-based), ``track_id``, ``x_filt_px``, ``y_filt_px`` and optionally
+        ``bbox_x0_px .. bbox_y1_px``; rows without a finite position are no prediction and
+        left out. A row without a finite box gets a ``point_box_px`` square centred on its
+        position.
+    """
+    x, y = (tracks[c].to_numpy(np.float64) for c in ("x_filt_px", "y_filt_px"))
+    ok = np.isfinite(x) & np.isfinite(y)
+    box = (np.stack([tracks[c].to_numpy(np.float64) for c in _BOX], 1) if all(c in tracks for c in _BOX)
+           else np.full((len(tracks), 4), np.nan))
+    has = np.isfinite(box).all(axis=1)
+    h = point_box_px / 2
+    point = np.stack([x - h, y - h, x + h, y + h], 1)
+    box = np.where(has[:, None], box, point)[ok]
+    out = _mot_rows(tracks["frame"].to_numpy()[ok], tracks["track_id"].to_numpy()[ok], *box.T, 1.0)
+    return out.sort_values(["frame", "id"], kind="stable").reset_index(drop=True)
+
+
+def mot_truth_table(true_tracks: pd.DataFrame) -> pd.DataFrame:
+    """A sequence's visible, boxed vehicles (tracks.csv) as MOTChallenge ground-truth rows (``conf`` 1)."""
+    vis = true_tracks["visible"].astype(bool).to_numpy()
+    box = np.stack([true_tracks[c].to_numpy(np.float64) for c in _BOX], 1)
+    ok = vis & np.isfinite(box).all(axis=1)
+    out = _mot_rows(true_tracks["frame"].to_numpy()[ok], true_tracks["vehicle_id"].to_numpy()[ok], *box[ok].T, 1.0)
+    return out.sort_values(["frame", "id"], kind="stable").reset_index(drop=True)
+
+
+def write_mot(path: str | os.PathLike, table: pd.DataFrame) -> Path:
+    """Write MOTChallenge rows (:data:`MOT_COLUMNS`) as a headerless comma-separated text file.
+
+    Floats are written in their shortest round-trip form, so a reader gets the same numbers back.
+    """
+    path = Path(path)
+    missing = [c for c in MOT_COLUMNS if c not in table.columns]
+    if missing:
+        raise ValueError(f"{path.name}: the table lacks the column(s) {missing}; expected {list(MOT_COLUMNS)}")
+    atomic_write_bytes(path, table[list(MOT_COLUMNS)].to_csv(index=False, header=False).encode())
+    return path
+
+
+def write_mot_tracks(cell_dir: str | os.PathLike, tracks: pd.DataFrame | None) -> list[Path]:
+    """Write ``mot_<source>.txt`` for each tracker (``source``) of the estimated tracks; the paths written."""
+    if tracks is None or len(tracks) == 0:
+        return []
+    return [write_mot(Path(cell_dir) / mot_file(str(source)), mot_table(g))
+            for source, g in tracks.groupby("source", sort=True)]
+
+
+def read_mot(path: str | os.PathLike) -> pd.DataFrame:
+    """A MOTChallenge text file as boxes: ``frame`` (0-based), ``id``, ``bbox_x0_px .. bbox_y1_px``, ``conf``.
+
+    Comma- or whitespace-separated, 6 to 10 columns (the first six required). ``x0 = bb_left - 1``,
+    ``x1 = x0 + bb_width`` (the same arithmetic as py-motmetrics, so both see the same boxes).
+
+    Raises
+    ------
+    CellArtifactError
+        A line with fewer than 6 fields or a field that is not a number (the message names file and line).
+    """
+    path = Path(path)
+    rows = []
+    for n, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        fields = line.replace(",", " ").split()
+        if len(fields) < 6:
+            raise CellArtifactError(f"{path}:{n}: expected at least 6 fields (frame,id,bb_left,bb_top,bb_width,"
+                                    f"bb_height), got {len(fields)}")
+        try:
+            vals = [float(v) for v in fields[:7]]
+        except ValueError:
+            raise CellArtifactError(f"{path}:{n}: expected numbers, got {line.strip()!r}") from None
+        if vals[0] != int(vals[0]) or vals[0] < 1:
+            raise CellArtifactError(f"{path}:{n}: expected a 1-based integer frame, got {fields[0]!r}")
+        rows.append(vals + [1.0] * (7 - len(vals)))
+    a = np.asarray(rows, np.float64).reshape(-1, 7)
+    x0, y0 = a[:, 2] - 1, a[:, 3] - 1
+    return pd.DataFrame({"frame": a[:, 0].astype(np.int64) - 1, "id": a[:, 1].astype(np.int64),
+                         "bbox_x0_px": x0, "bbox_y0_px": y0, "bbox_x1_px": x0 + a[:, 4], "bbox_y1_px": y0 + a[:, 5],
+                         "conf": a[:, 6]})
+
+
+def read_mot_tracks(cell_dir: str | os.PathLike) -> pd.DataFrame | None:
+    """Every ``mot_<tracker>.txt`` of a cell as estimated tracks for the metrics; None when there is none.
+
+    Columns ``frame, track_id, source, x_filt_px, y_filt_px`` (the box centre) and
+    ``bbox_x0_px .. bbox_y1_px``; a carrier box (:data:`MOT_POINT_BOX_PX` square) is dropped
+    (NaN): a point track is scored as a point, as in the run.
+    """
+    out = []
+    for path in sorted(Path(cell_dir).glob("mot_*.txt")):
+        source = path.stem.removeprefix("mot_")
+        df = read_mot(path).rename(columns={"id": "track_id"})
+        df["x_filt_px"] = (df["bbox_x0_px"] + df["bbox_x1_px"]) / 2
+        df["y_filt_px"] = (df["bbox_y0_px"] + df["bbox_y1_px"]) / 2
+        carrier = (np.isclose(df["bbox_x1_px"] - df["bbox_x0_px"], MOT_POINT_BOX_PX, rtol=0, atol=1e-9)
+                   & np.isclose(df["bbox_y1_px"] - df["bbox_y0_px"], MOT_POINT_BOX_PX, rtol=0, atol=1e-9))
+        df.loc[carrier, list(_BOX)] = np.nan
+        df["source"] = source
+        out.append(df[["frame", "track_id", "source", "x_filt_px", "y_filt_px", *_BOX]])
+    return pd.concat(out, ignore_index=True) if out else None

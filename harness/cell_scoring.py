@@ -131,13 +131,18 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     :class:`algorithms.shared_work.SharedWork` (frames decoded once, pass-1 shifts and
     compensated frames computed once per distinct setting) and each pair's ground truth
     is read and prepared once (:func:`harness.metrics.prepare_pair_truth`) and scored
-    against every pipeline's estimate of it; a pipeline's rows
-    are the rows it gives alone. A cell that raises stops alone (its outcome carries the
+    against every pipeline's estimate of it; so are the truth-free photometric
+    residual's reference check (:func:`harness.metrics.photometric.prepare_photometric`)
+    and the pair's ground-truth boxes for detection precision and recall. After the
+    pipelines finish, the stabilised video's ITF is computed per cell, the frames read
+    once for all. A pipeline's rows are the rows it gives alone. A cell that raises stops alone (its outcome carries the
     exception), the others go on. Returns one :class:`CellOutcome` per payload, in order.
     """
     from algorithms.pipeline import SequenceEstimate
     from algorithms.shared_work import SharedWork
     from harness.metrics import prepare_pair_truth, score_pair
+    from harness.metrics.detection import detection_rows
+    from harness.metrics.photometric import photometric_rows, prepare_photometric
     from scenes import open_sequence
 
     if len(payloads) != len(tmps) or not payloads:
@@ -160,6 +165,7 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
             runs.append(exc)
     live = [r for r in runs if isinstance(r, _CellRun)]
     truth_of: dict[int, Any] = {}  # the truth of the pair being scored (lock-step: one pair at a time)
+    boxes_of = _truth_by_frame(seq.tracks)
     while live:
         for run in list(live):
             t0 = time.perf_counter()
@@ -173,11 +179,15 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                     if est.index not in truth_of:
                         truth_of.clear()
                         truth = seq.pair_truth(est.index)
-                        truth_of[est.index] = (truth, _prepare(truth, prepare_pair_truth))
-                        del truth
-                    truth, prepared = truth_of[est.index]
+                        photo = prepare_photometric(shared.gray(est.index), shared.gray(est.index + 1))
+                        truth_of[est.index] = (truth, _prepare(truth, prepare_pair_truth), photo)
+                        del truth, photo
+                    truth, prepared, photo = truth_of[est.index]
                     run.rows += _pair_rows(est, truth, prepared, score_pair)  # fresh dicts: no copy
-                    del truth, prepared
+                    run.rows += photometric_rows(est.flow_total, photo, frame=est.index)
+                    if boxes_of is not None:
+                        run.rows += detection_rows(est.detections, boxes_of(est.index), frame=est.index)
+                    del truth, prepared, photo
                     if est.index in run.pictures:
                         artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
                 del est  # the arrays of a pair live no longer than its scoring
@@ -186,6 +196,7 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                 live.remove(run)
             run.seconds += time.perf_counter() - t0
     truth_of.clear()
+    _score_itf([r for r in runs if isinstance(r, _CellRun) and r.error is None and r.seq_est is not None], shared)
     renderer = _renderer_of(seq.meta or {})
     out: list[CellOutcome] = []
     for run in runs:
@@ -225,6 +236,44 @@ def _pair_rows(est: Any, truth: Any, prepared: Any, score_pair: Any) -> list[dic
     return rows
 
 
+def _truth_by_frame(tracks: pd.DataFrame | None):
+    """``frame -> tracks.csv rows of that frame`` (empty rows for a frame without any); None without tracks."""
+    if tracks is None or len(tracks) == 0:
+        return None
+    groups = {int(f): g for f, g in tracks.groupby("frame", sort=False)}
+    empty = tracks.iloc[:0]
+    return lambda f: groups.get(int(f), empty)
+
+
+def _score_itf(runs: list[_CellRun], shared: Any) -> None:
+    """``stab_itf`` rows of each finished cell: consecutive stabilised frames compared, each pair's gray
+    frames read once for every cell (:func:`harness.metrics.photometric.psnr_shifted`)."""
+    from harness.metrics.photometric import itf_rows, psnr_shifted
+
+    todo = []
+    for run in runs:
+        c = getattr(run.seq_est, "correction_px", None)
+        c = None if c is None else np.asarray(c, np.float64).reshape(-1, 2)
+        if c is not None and len(c) == len(shared) and np.isfinite(c).all():
+            todo.append((run, c, []))
+    if not todo:
+        return
+    for i in range(len(shared) - 1):
+        t0 = time.perf_counter()
+        g0, g1 = shared.gray(i), shared.gray(i + 1)
+        share = (time.perf_counter() - t0) / len(todo)
+        for run, c, psnr in todo:
+            t1 = time.perf_counter()
+            try:
+                psnr.append(psnr_shifted(g0, g1, c[i + 1] - c[i]))
+            except Exception as exc:  # fails its cell only
+                run.error = run.error or exc
+            run.seconds += share + time.perf_counter() - t1
+    for run, _, psnr in todo:
+        if run.error is None:
+            run.rows += itf_rows(psnr)
+
+
 def _finish(run: _CellRun, seq: Any) -> list[dict]:
     """The sequence rows and files of a cell whose pipeline ran to the end; its rows, filtered."""
     from harness.metrics import score_sequence
@@ -236,6 +285,7 @@ def _finish(run: _CellRun, seq: Any) -> list[dict]:
     rows = run.rows + score_sequence(run.seq_est, seq.camera, seq.tracks)  # fresh dicts: no copy
     artifacts.write_stabilisation(run.tmp, artifacts.stabilisation_table(run.seq_est, seq.camera))
     artifacts.write_tracks(run.tmp, artifacts.tracks_table(run.seq_est, seq.tracks))
+    artifacts.write_mot_tracks(run.tmp, getattr(run.seq_est, "tracks", None))
     if run.payload["metrics"] is not None:
         keep = set(run.payload["metrics"])
         rows = [r for r in rows if r["metric"] in keep]

@@ -10,13 +10,17 @@ Columns beyond docs/architecture.md:
 
 * ``kind``: "accuracy" or "timing" (the gate treats timings differently).
 * ``hist``: for quantile metrics (``epe_median``, ``epe_p95``) the row's EPE
-  histogram (0.01 px bins up to 100 px plus an overflow bin) as bytes in the
+  histogram (0.01 px bins up to 100 px plus an overflow bin, whose samples are
+  kept beside it as a sparse histogram of the same bins) as bytes in the
   compact binary form of :func:`harness.metrics.encode_hist` (the counts of the
   occupied bin range, zlib-compressed: about 0.5 kB for a 640x480 pair, where
-  schema v1's "bin:count ..." text took about 2.5 kB); empty (``b""``) for every
-  other metric. Aggregates of quantiles sum these histograms exactly and read
+  schema v1's "bin:count ..." text took about 2.5 kB); for HOTA's metrics
+  (``hota``, ``deta``, ``assa``, ``loca``) their per-alpha numerators and
+  denominators (:func:`harness.metrics.encode_alpha_totals`); empty (``b""``) for
+  every other metric. Aggregates of quantiles sum these histograms exactly and read
   the quantile off (within 0.005 px of the pooled value); ``value`` holds the
-  exact per-frame quantile, ``sum`` is NaN.
+  exact per-frame quantile, ``sum`` is NaN. HOTA's aggregates sum the per-alpha
+  totals, then average over the alphas.
 * ``schema_version``.
 
 Weighting: ``sum`` and ``count`` are totals (see :mod:`harness.metrics` for each

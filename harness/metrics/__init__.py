@@ -1,4 +1,5 @@
-"""Metric definitions and scoring against ground truth: pure numpy / pandas, no I/O.
+"""Metric definitions and scoring, against ground truth or (photometric, ITF) without: numpy / pandas /
+OpenCV on arrays, no I/O.
 
 A package split by domain, each formula in one module; this module re-exports every
 public name (``from harness.metrics import X`` works for all of them):
@@ -14,6 +15,9 @@ module             what
 ``mot``            CLEAR-MOT and identity counts (MOTA, MOTP, IDF1), HOTA
 ``sequence``       score_sequence: every sequence-level row
 ``aggregate``      reduce_totals, aggregate
+``matching``       when an estimate corresponds to a vehicle: IoU, point in box, distance gate
+``detection``      per-frame detection precision and recall against moving vehicles' boxes
+``photometric``    truth-free: photometric residual of the total flow, stabilisation ITF
 =================  ==========================================================
 
 Every metric is a :class:`MetricDef` in the plain-dict registry :data:`METRICS`
@@ -36,15 +40,20 @@ rate        100 * sum / count  (percent)                items over the limit, it
 total       sum                                         sum of x, number of items
 complement  1 - sum / count  (MOTA)                      errors, number of items
 quantile    from the summed EPE histogram (``hist``)    NaN, number of pixels
+alpha_mean  mean over alphas of summed per-alpha        NaN, visible vehicle-frames
+            ratios (``hist``; HOTA, DetA, AssA, LocA)
 ==========  ==========================================  ===========================
 
 Quantiles (``epe_median``, ``epe_p95``) cannot be summed: their rows carry the
 exact per-frame value in ``value`` and the frame's EPE histogram in ``hist``
 (fixed bins of :data:`HIST_BIN_PX` = 0.01 px from 0 to :data:`HIST_MAX_PX` = 100 px,
-plus one overflow bin, in the compact binary form of :func:`encode_hist`). :func:`aggregate` sums the
-histograms and reads the quantile off at the bin centre, so an aggregate
-quantile is within half a bin (0.005 px) of the quantile of all pixels pooled,
-for quantiles below 100 px (above, it reads 100 px: a floor).
+plus one overflow bin whose samples are kept beside it as a sparse histogram of the
+same 0.01 px bins, the *tail*, in the compact binary form of :func:`encode_hist`).
+:func:`aggregate` sums the histograms and their tails and reads the quantile off at
+the bin centre, so an aggregate quantile is within half a bin (0.005 px) of the
+quantile of all pixels pooled, above 100 px too (only rows written before tails were
+kept, which have an overflow count and no tail, leave a pooled quantile there at
+100 px: a floor).
 
 Regions of a flow field (see :func:`region_masks`): ``all`` (every valid
 pixel), ``background`` (instance 0), ``vehicles`` (instance > 0), ``interior``
@@ -61,6 +70,7 @@ register_metric, metric_def, describe_metrics         the registry
 endpoint_error, angular_error_deg                      per-pixel errors
 region_masks, boundary_mask                            pixel regions
 epe_histogram, encode_hist, decode_hist, add_hist, hist_quantile   quantile totals
+overflow_tail, merge_tails, decode_tail               the samples above 100 px, kept for exact quantiles
 flow_rows, error_rows                                  flow metrics of one field in one mask
 score_flow                                             all flow rows of one pair (no PairEstimate needed)
 timing_rows                                            rows from ``stage_ms``
@@ -70,7 +80,11 @@ shift_rows, jitter_rows, detrend                       global motion and stabili
 stabilisation_scores, stabilisation_rows               cropping ratio, distortion, stability (Liu 2013)
 position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID switches
 MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
-HOTACounts, hota_counts                                HOTA (Luiten 2021) per alpha, from summed counts
+HOTACounts, hota_counts, hota_rows, alpha_mean_value  HOTA, DetA, AssA, LocA (Luiten 2021) from per-alpha counts
+correspondence, box_iou, box_offset                    when a track or detection matches a vehicle (box-aware)
+detection_rows, detection_counts, moving_vehicles      detection precision and recall per pair
+prepare_photometric, photometric_rows                  photometric residual of the total flow (no truth)
+psnr_shifted, itf_rows                                 stabilisation ITF (no truth)
 score_sequence                                         SequenceEstimate + camera.csv + tracks.csv -> rows
 aggregate                                              rows DataFrame -> aggregates from totals
 """
@@ -83,7 +97,8 @@ from harness.metrics.registry import (  # noqa: F401
     timing_rows,
 )
 from harness.metrics.histogram import (  # noqa: F401
-    HIST_BIN_PX, HIST_MAX_PX, HIST_NBINS, add_hist, decode_hist, encode_hist, epe_histogram, hist_quantile,
+    HIST_BIN_PX, HIST_MAX_PX, HIST_NBINS, NO_TAIL, add_hist, decode_hist, decode_tail, encode_hist, epe_histogram,
+    hist_quantile, merge_tails, overflow_tail, encode_alpha_totals, decode_alpha_totals,
 )
 from harness.metrics.flow import (  # noqa: F401
     _KCOV, _KFL, _K1, _K3, _K5, _N, _S_AE, _S_EPE, _S_SQ, MOTIONS, OUTLIER_PX, REGIONS, PreparedTruth,
@@ -98,7 +113,14 @@ from harness.metrics.stabilisation import (  # noqa: F401
 from harness.metrics.trajectories import (  # noqa: F401
     _linear_sum_assignment, _mot_frames, _points_by_frame, associate_tracks, position_error_px, track_rows,
 )
-from harness.metrics.mot import HOTA_ALPHAS, HOTACounts, MOTCounts, hota_counts, mot_counts, mot_rows  # noqa: F401
+from harness.metrics.mot import (  # noqa: F401
+    HOTA_ALPHAS, HOTACounts, MOTCounts, alpha_mean_value, hota_counts, hota_rows, mot_counts, mot_rows,
+)
+from harness.metrics.matching import BOX_COLUMNS, IOU_MIN, box_iou, box_offset, correspondence  # noqa: F401
+from harness.metrics.detection import MOVING_MIN_MPS, detection_counts, detection_rows, moving_vehicles  # noqa: F401
+from harness.metrics.photometric import (  # noqa: F401
+    PreparedPhotometric, itf_rows, photometric_rows, prepare_photometric, psnr_shifted,
+)
 from harness.metrics.sequence import score_sequence  # noqa: F401
 from harness.metrics.aggregate import aggregate, reduce_totals  # noqa: F401
 
@@ -107,10 +129,15 @@ __all__ = [
     "REGIONS", "MOTIONS", "HIST_BIN_PX", "HIST_MAX_PX", "HIST_NBINS",
     "endpoint_error", "angular_error_deg", "boundary_mask", "region_masks",
     "epe_histogram", "encode_hist", "decode_hist", "add_hist", "hist_quantile",
+    "NO_TAIL", "overflow_tail", "merge_tails", "decode_tail",
     "flow_rows", "error_rows", "score_flow", "timing_rows", "score_pair", "PreparedTruth", "prepare_pair_truth",
     "shift_rows", "detrend", "jitter_rows", "stabilisation_scores", "stabilisation_rows", "position_error_px",
     "associate_tracks", "track_rows", "MOTCounts", "mot_counts", "mot_rows",
-    "HOTA_ALPHAS", "HOTACounts", "hota_counts",
+    "HOTA_ALPHAS", "HOTACounts", "hota_counts", "hota_rows", "alpha_mean_value",
+    "encode_alpha_totals", "decode_alpha_totals",
+    "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
+    "detection_rows", "detection_counts", "moving_vehicles",
+    "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",
     "score_sequence",
     "aggregate", "reduce_totals",
 ]

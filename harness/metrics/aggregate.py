@@ -8,13 +8,21 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from harness.metrics.histogram import HIST_NBINS, add_hist, encode_hist, hist_quantile
+from harness.metrics.histogram import (
+    HIST_NBINS, add_hist, decode_alpha_totals, encode_alpha_totals, encode_hist, hist_quantile, merge_tails,
+)
+from harness.metrics.mot import alpha_mean_value
 from harness.metrics.registry import METRICS, metric_def
 
-def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None) -> float:
-    """The value of ``metric`` from summed totals (and a summed histogram for quantiles)."""
+def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | None = None, *,
+                  tail: tuple[np.ndarray, np.ndarray] | None = None,
+                  alphas: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """The value of ``metric`` from summed totals (and a summed histogram and its tail for quantiles, the
+    summed per-alpha totals for HOTA's metrics)."""
     d = metric_def(metric) if metric in METRICS else None
     rule = d.reduce if d else "mean"
+    if rule == "alpha_mean":
+        return alpha_mean_value(metric, *alphas) if alphas is not None else float("nan")
     if rule == "total":
         return float(total)
     if count == 0 or not np.isfinite(count):
@@ -29,14 +37,14 @@ def reduce_totals(metric: str, total: float, count: float, hist: np.ndarray | No
         return float(1.0 - total / count)
     if hist is None:
         return float("nan")
-    return hist_quantile(hist, d.q)
+    return hist_quantile(hist, d.q, tail=tail)
 
 
 def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
     """Aggregate rows over everything not in ``by`` (+ metric, region, motion), from totals.
 
     ``sum`` and ``count`` are summed and reduced by each metric's rule; quantile
-    metrics sum their ``hist``. Rows whose ``status`` (if present) is not "ok" are
+    metrics sum their ``hist`` and its overflow tail. Rows whose ``status`` (if present) is not "ok" are
     left out. Returns one row per group with ``by, metric, region, motion, kind,
     value, sum, count, unit, higher_is_better, n_rows`` (and ``hist`` for quantiles).
     """
@@ -74,16 +82,29 @@ def aggregate(rows: pd.DataFrame, by: Iterable[str] = ()) -> pd.DataFrame:
         # instead of silently dropping its sum while keeping its count
         total = math.fsum(sums[counts != 0])
         count = math.fsum(counts)
-        hist = None
+        hist = tail = alphas = None
+        packed = b""
         d = METRICS.get(metric)
         if d is not None and d.reduce == "quantile":
-            hist = np.zeros(HIST_NBINS, np.int64)
+            hist, tails = np.zeros(HIST_NBINS, np.int64), []
             for h in ([] if hist_col is None else hist_col[order[a:b]]):
                 if isinstance(h, (bytes, bytearray)):
-                    add_hist(hist, h)
+                    add_hist(hist, h, tails=tails)
+            tail = merge_tails(tails)
+            if int(tail[1].sum()) != int(hist[-1]):  # a row written before tails were kept: the floor
+                tail = None
             total = float("nan")
-        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist), sum=total,
-                   count=count, unit=unit[g], higher_is_better=bool(hib[g]),
-                   n_rows=int(b - a), hist=encode_hist(hist) if hist is not None else b"")
+            packed = encode_hist(hist, tail=tail)
+        elif d is not None and d.reduce == "alpha_mean":
+            parts = [decode_alpha_totals(h) for h in ([] if hist_col is None else hist_col[order[a:b]])
+                     if isinstance(h, (bytes, bytearray)) and len(h)]
+            if parts:
+                # exactly rounded sums per alpha, as the totals above: independent of the rows' order
+                alphas = tuple(np.array([math.fsum(v) for v in np.stack([p[k] for p in parts], 1)]) for k in (0, 1))
+                packed = encode_alpha_totals(*alphas)
+            total = float("nan")
+        rec.update(kind=kind[g], value=reduce_totals(metric, total, count, hist, tail=tail, alphas=alphas),
+                   sum=total, count=count, unit=unit[g], higher_is_better=bool(hib[g]), n_rows=int(b - a),
+                   hist=packed)
         out.append(rec)
     return pd.DataFrame(out, columns=cols)

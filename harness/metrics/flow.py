@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from algorithms.flow import check_flow, endpoint_error  # noqa: F401  (endpoint_error: re-exported)
-from harness.metrics.histogram import HIST_BIN_PX, HIST_NBINS, encode_hist, epe_histogram
+from algorithms.flow import check_flow
+from harness.metrics.histogram import HIST_BIN_PX, HIST_NBINS, encode_hist, epe_histogram, overflow_tail
 from harness.metrics.registry import _row, register_metric, timing_rows
 
 REGIONS = ("all", "background", "vehicles", "interior")
@@ -51,8 +51,7 @@ register_metric("coverage", "%", higher_is_better=True, weighting="per ground-tr
 
 # --------------------------------------------------------------------------- per-pixel errors
 
-# endpoint_error (per-pixel EPE) lives in algorithms.flow, its one home; imported above and
-# re-exported by harness.metrics for the metric code's readers.
+# endpoint_error (per-pixel EPE) lives in algorithms.flow, its one home, re-exported by harness.metrics.
 
 
 def angular_error_deg(flow_est: np.ndarray, flow_true: np.ndarray) -> np.ndarray:
@@ -142,8 +141,10 @@ def error_rows(epe: np.ndarray, ae_deg: np.ndarray, true_mag: np.ndarray, *, reg
         med = p95 = float("nan")
     over = [int(np.count_nonzero(epe > thr)) for thr in OUTLIER_PX]
     fl = int(np.count_nonzero((epe > 3.0) & (epe > 0.05 * true_mag)))
+    hist = epe_histogram(epe)
     return _error_rows_from_totals(n, float(epe.sum()), float(epe @ epe), float(ae_deg.sum()), over, fl, med, p95,
-                                   epe_histogram(epe), region=region, motion=motion, frame=frame)
+                                   hist, region=region, motion=motion, frame=frame,
+                                   tail=overflow_tail(epe) if hist[-1] else None)
 
 
 OUTLIER_PX = (1, 3, 5)
@@ -156,15 +157,19 @@ def _rank_index(q: float, n: int) -> int:
 
 def _error_rows_from_totals(n: int, s_epe: float, s_sq: float, s_ae: float, over: list[int], fl: int,
                             med: float, p95: float, hist: np.ndarray, *, region: str, motion: str,
-                            frame: int | None) -> list[dict]:
-    """The flow metric rows of one region from its totals (one place builds them, whichever path counted)."""
+                            frame: int | None, tail: tuple[np.ndarray, np.ndarray] | None = None) -> list[dict]:
+    """The flow metric rows of one region from its totals (one place builds them, whichever path counted).
+
+    ``tail``: the overflow bin's samples (:func:`harness.metrics.histogram.overflow_tail`), kept in
+    the quantile rows' ``hist`` so that a pooled quantile above 100 px is read from them.
+    """
     nan = float("nan")
     kw = {"region": region, "motion": motion, "frame": frame}
 
     def mean(s: float) -> float:
         return s / n if n else nan
 
-    packed = encode_hist(hist)  # one bytes object shared by both quantile rows
+    packed = encode_hist(hist, tail=tail)  # one bytes object shared by both quantile rows
     rows = [
         _row("epe_mean", mean(s_epe), s_epe, n, **kw),
         _row("epe_rms", math.sqrt(s_sq / n) if n else nan, s_sq, n, **kw),
@@ -195,8 +200,9 @@ def _quantile_targets(hist: np.ndarray, qs: tuple[float, ...]):
     return target, np.where(target >= 0, rank - below, 0), sizes
 
 
-def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float, ...]) -> np.ndarray:
-    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty).
+def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float, ...]):
+    """Exact nearest-rank quantiles ``(2, R, len(qs))`` of each motion's and region's EPE (NaN when empty),
+    and the tail of each (motion, region) whose overflow bin holds samples (``{(m, r): (bins, counts)}``).
 
     ``hist_code`` (2, 2**R, nbins) is the histogram of each membership pattern, ``hist``
     (2, R, nbins) of each region (the sum of its patterns').
@@ -210,6 +216,8 @@ def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float
     # pixel is in several regions; an almost constant error puts most pixels in one bin)
     slot = np.full((n_m, nbins), -1, np.int16)  # a target bin's index among its motion's
     kept = [np.unique(target[m][target[m] >= 0]) for m in range(n_m)]
+    # the overflow bin's samples are collected too, wherever there are any: they are the tail
+    kept = [np.union1d(ks, [nbins - 1]).astype(ks.dtype) if hist[m, :, -1].any() else ks for m, ks in enumerate(kept)]
     sizes = np.zeros((n_m, max(1, max(len(k) for k in kept)), n_codes), np.int64)
     for m, ks in enumerate(kept):
         slot[m, ks] = np.arange(len(ks))
@@ -231,7 +239,13 @@ def _quantiles(e, g, t, tl, bits, bits_l, bins, hist_code, hist, qs: tuple[float
                 js = [j for j, kj in enumerate(bins_r) if kj == k]  # the quantiles read from this bin
                 samples.partition(rank[m, r, js])
                 out[m, r, js] = samples[rank[m, r, js]]
-    return out
+    tails = {}
+    for m, r in zip(*np.nonzero(hist[:, :, -1])):
+        size, first = sizes_l[m][slot_l[m][nbins - 1]], start_l[m][slot_l[m][nbins - 1]]
+        tails[int(m), int(r)] = overflow_tail(np.concatenate(
+            [values[first[b]:first[b] + size[b]] for b in range(1, n_codes) if (b >> r) & 1 and size[b]]),
+            collected=True)
+    return out, tails
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,7 +362,8 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
         return [], bad
     hist = np.zeros((2, len(names), HIST_NBINS), np.int64)
     region_hists(hist_code, stats[:, :, _N], hist)
-    quant = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist_code, hist, (0.5, 0.95))
+    quant, tails = _quantiles(e, g, truth.flow, truth.flow_local, truth.bits, bits_l, bins, hist_code, hist,
+                              (0.5, 0.95))
     # region totals: the sum of the patterns it belongs to
     member = (np.arange(n_codes)[None, :] >> np.arange(len(names))[:, None]) & 1  # (R, codes)
     rows: list[dict] = []
@@ -364,7 +379,7 @@ def _score_motions(e: np.ndarray, g: np.ndarray, truth: PreparedTruth, ve: np.nd
             rows += _error_rows_from_totals(n, float(st[_S_EPE]), float(st[_S_SQ]), float(st[_S_AE]),
                                             [int(st[_K1]), int(st[_K3]), int(st[_K5])], int(st[_KFL]),
                                             float(quant[m, j, 0]), float(quant[m, j, 1]), hist[m, j],
-                                            region=r, motion=motion, frame=frame)
+                                            region=r, motion=motion, frame=frame, tail=tails.get((m, j)))
             k = int(st[_KCOV])
             rows.append(_row("coverage", 100.0 * k / n if n else float("nan"), k, n, region=r, motion=motion,
                              frame=frame))

@@ -1,4 +1,9 @@
-"""Multi-object tracking scores from summed counts: CLEAR-MOT (MOTA, MOTP), identity (IDF1), HOTA."""
+"""Multi-object tracking scores from summed counts: CLEAR-MOT (MOTA, MOTP), identity (IDF1), HOTA.
+
+A vehicle and a track correspond by the box-aware rules of :mod:`harness.metrics.matching`:
+where the truth has a box, IoU >= 0.5 for a track that carries a box and the point inside
+the box for a point track; the distance gate (``gate_px``, 20 px) where the truth has none.
+"""
 
 from __future__ import annotations
 
@@ -8,20 +13,24 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from harness.metrics.matching import correspondence
 from harness.metrics.registry import _row, register_metric
-from harness.metrics.trajectories import _linear_sum_assignment, _mot_frames, _points_by_frame, position_error_px
+from harness.metrics.trajectories import _linear_sum_assignment, _mot_frames, _points_by_frame
 
 _MOT = "per sequence and tracker, from summed counts (never an average of per-sequence scores)"
 register_metric("mota", "ratio", higher_is_better=True, weighting=_MOT + "; 1 - (FN + FP + IDSW) / objects",
                 reduce="complement", description="CLEAR-MOT accuracy 1 - (misses + false positives + ID switches) "
-                "/ visible vehicle-frames (Bernardin 2008), match within the association gate")
+                "/ visible vehicle-frames (Bernardin 2008); a track matches a boxed vehicle at IoU >= 0.5 (boxed "
+                "tracks) or with its point inside the box (point tracks), an unboxed one within the 20 px gate")
 register_metric("motp", "px", higher_is_better=False, weighting=_MOT + "; per matched vehicle-frame",
-                description="CLEAR-MOT precision: mean distance of matched track-vehicle pairs (Bernardin 2008)")
+                description="CLEAR-MOT precision: mean centre distance of matched track-vehicle pairs (Bernardin 2008), "
+                "whichever rule matched them")
 register_metric("idf1", "ratio", higher_is_better=True, weighting=_MOT + "; 2 IDTP / (objects + predictions)",
                 description="identity F1: share of vehicle-frames and track-frames on the best one-to-one "
-                "vehicle-track assignment (Ristani 2016)")
+                "vehicle-track assignment (Ristani 2016); a pair counts where it matches by mota's rule (IoU, "
+                "point in box, or the gate)")
 register_metric("mot_misses", "count", higher_is_better=False, weighting=_MOT, reduce="total",
-                description="CLEAR-MOT misses (FN): visible vehicle-frames without a track within the gate")
+                description="CLEAR-MOT misses (FN): visible vehicle-frames no track matches (mota's rule)")
 register_metric("mot_false_positives", "count", higher_is_better=False, weighting=_MOT, reduce="total",
                 description="CLEAR-MOT false positives (FP): track-frames matched to no vehicle")
 
@@ -75,25 +84,27 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0)
         a NaN position are not predictions.
     truth : DataFrame
         tracks.csv (``frame, vehicle_id, x_px, y_px, visible``); visible rows are objects.
+        With ``bbox_x0_px .. bbox_y1_px`` on either side, the box-aware rules apply
+        (:mod:`harness.metrics.matching`).
     gate_px : float
-        A vehicle and a track correspond only within this distance (the
-        threshold of both the frame matching and the identity matching).
+        A vehicle without a box and a track correspond only within this distance.
+        The same rules decide both the frame matching and the identity matching.
 
     The identity assignment pairs each vehicle with at most one track over the
     whole sequence so as to maximise IDTP, the number of frames where the pair
-    is present and within the gate (equivalently, to minimise IDFN + IDFP);
+    is present and may correspond (equivalently, to minimise IDFN + IDFP);
     IDFN = objects - IDTP and IDFP = predictions - IDTP.
     """
     objects = predictions = matches = switches = 0
     dist_sum = 0.0
     overlap: dict[tuple[int, int], int] = {}
-    for _f, vids, tids, D, match, switch in _mot_frames(est, truth, gate_px=gate_px):
+    for _f, vids, tids, D, match, switch, ok in _mot_frames(est, truth, gate_px=gate_px):
         objects += len(vids)
         predictions += len(tids)
         matches += len(match)
         switches += sum(switch.values())
         dist_sum += float(sum(D[a, b] for a, b in match.items()))
-        for a, b in zip(*np.nonzero(D <= gate_px)):
+        for a, b in zip(*np.nonzero(ok)):
             key = (int(vids[a]), int(tids[b]))
             overlap[key] = overlap.get(key, 0) + 1
     idtp = 0
@@ -205,10 +216,13 @@ class HOTACounts:
 def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> HOTACounts:
     """HOTA totals (Luiten et al. 2021) of one tracker's points against the visible vehicles.
 
-    Similarity of a vehicle and a track in a frame: ``S = max(0, 1 - d / gate_px)``
-    with d the distance of the true centre ``x_px, y_px`` and the estimate
-    ``x_filt_px, y_filt_px`` (HOTA is defined for any similarity in [0, 1]; boxes
-    use IoU, points here a distance ramp that reaches 0 at the CLEAR-MOT gate).
+    Similarity of a vehicle and a track in a frame (HOTA is defined for any similarity
+    in [0, 1]), by :func:`harness.metrics.matching.correspondence`: the IoU of a boxed
+    track and a boxed vehicle (the paper's); for a point track on a boxed vehicle
+    ``max(0, 1 - n)``, n the point's offset from the box centre in half-extents (0 on the
+    border); for a vehicle without a box ``S = max(0, 1 - d / gate_px)`` with d the
+    distance of the true centre ``x_px, y_px`` and the estimate ``x_filt_px, y_filt_px``
+    (a ramp that reaches 0 at the CLEAR-MOT gate).
     Matching as TrackEval does it: per frame one Hungarian assignment
     maximising ``global_alignment(vehicle, track) * S``, where the global
     alignment score is the pair's soft overlap over the sequence,
@@ -223,23 +237,20 @@ def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0
     like, so a similarity equal to such an alpha fails there), and a sequence
     with neither vehicles nor tracks gives NaN, not 0 (as MOTA does here).
 
-    Parameters and row conventions as :func:`mot_counts`. Not yet a results-table
-    row: HOTA_alpha is one sum / count pair (``ass_sum``, ``tp + fn + fp``, reduce
-    ``rms``), but HOTA itself needs all 19 after pooling.
+    Parameters and row conventions as :func:`mot_counts`; the rows are :func:`hota_rows`.
     """
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
-    by_frame = list(_points_by_frame(est, truth))
-    vids = np.unique(np.concatenate([v for _, v, _, _, _ in by_frame] + [np.zeros(0, np.int64)]))
-    tids = np.unique(np.concatenate([t for _, _, _, t, _ in by_frame] + [np.zeros(0, np.int64)]))
+    by_frame = list(_points_by_frame(est, truth, boxes=True))
+    vids = np.unique(np.concatenate([f[1] for f in by_frame] + [np.zeros(0, np.int64)]))
+    tids = np.unique(np.concatenate([f[3] for f in by_frame] + [np.zeros(0, np.int64)]))
     na = len(HOTA_ALPHAS)
     tp, fn, fp = np.zeros(na), np.zeros(na), np.zeros(na)
     loc = np.zeros(na)
     frames = []
-    for _f, v, P, t, Q in by_frame:
+    for _f, v, P, t, Q, TB, EB in by_frame:
         a, b = np.searchsorted(vids, v), np.searchsorted(tids, t)
-        D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
-        frames.append((a, b, np.maximum(0.0, 1.0 - D / gate_px)))
+        frames.append((a, b, correspondence(P, TB, Q, EB, gate_px=gate_px)[3]))
     # pass 1: global alignment score of every (vehicle, track) pair
     n_v, n_t = np.zeros(len(vids)), np.zeros(len(tids))
     soft = np.zeros((len(vids), len(tids)))
@@ -270,3 +281,71 @@ def hota_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0
     union = n_v[None, :, None] + n_t[None, None, :] - matched
     ass = (matched * np.where(union > 0, matched / np.where(union > 0, union, 1), 0.0)).sum(axis=(1, 2))
     return HOTACounts(tp=tp, fn=fn, fp=fp, ass_sum=ass, loc_sum=loc)
+
+
+# per-alpha totals of each HOTA row: (numerator, denominator) -> per-alpha score, and whether an alpha
+# whose denominator is 0 counts as 0 (TrackEval's max(1, den)) or is left out of the mean
+_ALPHA_RULES = {
+    "hota": ("ass_sum", ("tp", "fn", "fp"), True, True),   # sqrt(ass_sum / (TP + FN + FP)) = sqrt(DetA AssA)
+    "deta": ("tp", ("tp", "fn", "fp"), False, True),
+    "assa": ("ass_sum", ("tp",), False, True),
+    "loca": ("loc_sum", ("tp",), False, False),
+}
+_HOTA_W = ("per sequence and tracker, from the per-alpha counts summed over sequences, then the mean over the "
+           "19 alphas 0.05..0.95 (Luiten 2021, eq. 12)")
+_HOTA_MATCH = ("; similarity IoU (boxed track on a boxed vehicle), 1 - the point's offset from the box centre in "
+               "half-extents (point track), or 1 - d / 20 px (vehicle without a box)")
+register_metric("hota", "ratio", higher_is_better=True, weighting=_HOTA_W, reduce="alpha_mean",
+                description="HOTA, sqrt(DetA AssA) averaged over the localisation thresholds (Luiten 2021)"
+                + _HOTA_MATCH)
+register_metric("deta", "ratio", higher_is_better=True, weighting=_HOTA_W, reduce="alpha_mean",
+                description="HOTA detection accuracy TP / (TP + FN + FP), mean over alphas (Luiten 2021)")
+register_metric("assa", "ratio", higher_is_better=True, weighting=_HOTA_W + "; each alpha TP-weighted",
+                reduce="alpha_mean", description="HOTA association accuracy: mean over true positives of "
+                "|TPA| / (|TPA| + |FNA| + |FPA|), mean over alphas (Luiten 2021); 0 at an alpha without TP")
+register_metric("loca", "ratio", higher_is_better=True, weighting=_HOTA_W + "; each alpha TP-weighted",
+                reduce="alpha_mean", description="HOTA localisation accuracy: mean similarity of the true "
+                "positives, mean over the alphas that have any (TrackEval counts the others as 1)")
+
+
+def alpha_mean_value(metric: str, num: np.ndarray, den: np.ndarray) -> float:
+    """The value of a HOTA metric (``hota``, ``deta``, ``assa``, ``loca``) from its summed per-alpha totals.
+
+    ``num``, ``den`` (19,) float: see :func:`hota_rows`. The mean over alphas of ``num / den``
+    (its square root for ``hota``); an alpha with ``den`` 0 counts as 0 (TrackEval's
+    convention), except for ``loca``, which leaves it out. NaN when every ``den`` is 0.
+    """
+    _, _, root, zero = _ALPHA_RULES[metric]
+    num, den = np.asarray(num, np.float64), np.asarray(den, np.float64)
+    if not (den > 0).any():
+        return math.nan
+    r = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    if root:
+        r = np.sqrt(r)
+    return float(r.mean() if zero else r[den > 0].mean())
+
+
+def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0) -> list[dict]:
+    """HOTA, DetA, AssA and LocA per tracker (``region`` = ``source``, motion "track"), poolable.
+
+    One row per metric and tracker. HOTA is a mean over 19 alphas of per-alpha ratios, so a
+    row's totals are the per-alpha numerators and denominators (:class:`HOTACounts`: HOTA
+    and DetA over TP + FN + FP, AssA over TP with ``ass_sum``, LocA over TP with
+    ``loc_sum``), stored in ``hist`` (:func:`harness.metrics.histogram.encode_alpha_totals`);
+    :func:`harness.metrics.aggregate` sums them and takes :func:`alpha_mean_value`. ``sum``
+    is NaN, ``count`` the visible vehicle-frames.
+    """
+    from harness.metrics.histogram import encode_alpha_totals
+
+    rows: list[dict] = []
+    if est_tracks is None or est_tracks.empty:
+        return rows
+    for source, est in est_tracks.groupby("source"):
+        c = hota_counts(est, truth_tracks, gate_px=gate_px)
+        objects = float(c.tp[0] + c.fn[0])
+        for metric, (num_name, den_names, _, _) in _ALPHA_RULES.items():
+            num = getattr(c, num_name)
+            den = sum(getattr(c, n) for n in den_names)
+            rows.append(_row(metric, alpha_mean_value(metric, num, den), math.nan, objects, region=str(source),
+                             motion="track", hist=encode_alpha_totals(num, den)))
+    return rows

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-REDUCES = ("mean", "rms", "rate", "total", "complement", "quantile")
+REDUCES = ("mean", "rms", "rate", "total", "complement", "quantile", "alpha_mean")
 # stages of algorithms.pipeline that report wall time (others are registered on first use)
 STAGES = ("global_motion", "jitter", "compensation", "flow", "compose", "threshold", "spatial", "temporal",
           "detection", "tracking", "total")

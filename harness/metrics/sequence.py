@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from harness.metrics.mot import mot_rows
+from harness.metrics.mot import hota_rows, mot_rows
 from harness.metrics.stabilisation import jitter_rows, shift_rows, stabilisation_rows
 from harness.metrics.trajectories import track_rows
 
@@ -33,4 +33,5 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.D
     if tracks is not None and tracks_df is not None and len(tracks):
         rows += track_rows(tracks, tracks_df, gate_px=gate_px)
         rows += mot_rows(tracks, tracks_df, gate_px=gate_px)
+        rows += hota_rows(tracks, tracks_df, gate_px=gate_px)
     return rows

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from harness.metrics.matching import boxes_of, correspondence
 from harness.metrics.registry import _row, register_metric
 
 
@@ -49,13 +50,16 @@ def position_error_px(x_est, y_est, x_true, y_true) -> np.ndarray:
 _ASSOC_COLUMNS = ["frame", "vehicle_id", "track_id", "dist_px", "switch"]
 
 
-def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame):
+def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame, *, boxes: bool = False):
     """Per frame with a visible vehicle or a finite estimate, ascending: ``(frame, vehicle_ids, P, track_ids, Q)``.
 
     vehicle_ids (V,) int64 and P (V, 2) ``x_px, y_px`` of the visible rows of ``truth``;
     track_ids (T,) int64 and Q (T, 2) ``x_filt_px, y_filt_px`` of the rows of ``est`` with a
     finite position; each in table order (as ``groupby("frame")`` gives them), from numpy
-    arrays taken once (a per-frame DataFrame selection costs ~1 ms each).
+    arrays taken once (a per-frame DataFrame selection costs ~1 ms each). With ``boxes``
+    each tuple also carries the true boxes (V, 4) and the estimated boxes (T, 4)
+    (``bbox_x0_px .. bbox_y1_px``; NaN where a side has none):
+    ``(frame, vehicle_ids, P, track_ids, Q, true_boxes, est_boxes)``.
     """
     vis = np.asarray(truth["visible"].to_numpy(), bool)
     vf = truth["frame"].to_numpy()[vis]
@@ -66,63 +70,73 @@ def _points_by_frame(est: pd.DataFrame, truth: pd.DataFrame):
     ef = est["frame"].to_numpy()[ok]
     et = est["track_id"].to_numpy(np.int64)[ok]
     eq = np.stack([ex[ok], ey[ok]], 1)
+    if boxes:
+        vb, eb = boxes_of(truth, vis), boxes_of(est, ok)
     ov, oe = np.argsort(vf, kind="stable"), np.argsort(ef, kind="stable")
     vf_s, ef_s = vf[ov], ef[oe]
     for f in np.union1d(vf, ef):
         iv = ov[np.searchsorted(vf_s, f, "left"):np.searchsorted(vf_s, f, "right")]
         ie = oe[np.searchsorted(ef_s, f, "left"):np.searchsorted(ef_s, f, "right")]
-        yield f, vv[iv], vp[iv], et[ie], eq[ie]
+        if boxes:
+            yield f, vv[iv], vp[iv], et[ie], eq[ie], vb[iv], eb[ie]
+        else:
+            yield f, vv[iv], vp[iv], et[ie], eq[ie]
 
 
 def _mot_frames(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float):
     """Frame by frame CLEAR-MOT correspondences (Bernardin and Stiefelhagen 2008, sec. 2.1.1).
 
-    Yields ``(frame, vehicle_ids, track_ids, D, match)`` for every frame that has
-    a visible vehicle or a finite estimate: ``D`` (V, T) Euclidean distances
-    between true centres ``x_px, y_px`` and filtered estimates ``x_filt_px,
-    y_filt_px``; ``match`` maps row -> column. A pair farther than ``gate_px``
-    never corresponds. A vehicle's last correspondence (of any earlier frame) is
-    kept while the same track is present and within the gate; the rest are
-    matched by the Hungarian method on distance. ``switch`` flags: the
+    Yields ``(frame, vehicle_ids, track_ids, D, match, switch, feasible)`` for every frame
+    that has a visible vehicle or a finite estimate: ``D`` (V, T) Euclidean distances
+    between true centres ``x_px, y_px`` and filtered estimates ``x_filt_px, y_filt_px``;
+    ``feasible`` (V, T) where a pair may correspond, by the box-aware rules of
+    :func:`harness.metrics.matching.correspondence` (IoU >= 0.5 for a boxed track on a
+    boxed vehicle, the point inside the box for a point track, ``gate_px`` for a vehicle
+    without a box); ``match`` maps row -> column. A vehicle's last correspondence (of
+    any earlier frame) is kept while the same track is present and feasible; the rest
+    are matched by the Hungarian method on the rules' cost. ``switch`` flags: the
     vehicle's track differs from its last matched track.
     """
     if not gate_px > 0:
         raise ValueError(f"gate_px: expected > 0, got {gate_px}")
     last: dict[int, int] = {}   # vehicle -> last matched track ever (Bernardin's M_{t-1}, carried on)
-    for f, vids, P, tids, Q in _points_by_frame(est, truth):
-        D = position_error_px(P[:, None, 0], P[:, None, 1], Q[None, :, 0], Q[None, :, 1]).reshape(len(P), len(Q))
+    for f, vids, P, tids, Q, TB, EB in _points_by_frame(est, truth, boxes=True):
+        D, ok, C, _ = correspondence(P, TB, Q, EB, gate_px=gate_px)
         match: dict[int, int] = {}
         switch: dict[int, bool] = {}
         for a, vid in enumerate(vids):
             t = last.get(int(vid))
             if t is not None and t in tids:
                 b = int(np.flatnonzero(tids == t)[0])
-                if D[a, b] <= gate_px and b not in match.values():
+                if ok[a, b] and b not in match.values():
                     match[a], switch[a] = b, False
         ra = [a for a in range(len(vids)) if a not in match]
         rb = [b for b in range(len(tids)) if b not in match.values()]
         if ra and rb:
-            sub = D[np.ix_(ra, rb)]
-            big = 1e6 * (1.0 + float(np.nanmax(sub, initial=0.0)))
-            ia, ib = _linear_sum_assignment(np.where(sub <= gate_px, sub, big))
+            sub, sub_ok = C[np.ix_(ra, rb)], ok[np.ix_(ra, rb)]
+            big = 1e6 * (1.0 + float(np.max(sub, initial=0.0, where=sub_ok)))
+            ia, ib = _linear_sum_assignment(np.where(sub_ok, sub, big))
             for x, y in zip(ia, ib):
-                if sub[x, y] <= gate_px:
+                if sub_ok[x, y]:
                     a, b = ra[x], rb[y]
                     match[a] = b
                     switch[a] = int(vids[a]) in last and last[int(vids[a])] != int(tids[b])
         for a, b in match.items():
             last[int(vids[a])] = int(tids[b])
-        yield f, vids, tids, D, match, switch
+        yield f, vids, tids, D, match, switch, ok
 
 
 def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0) -> pd.DataFrame:
     """Match estimated tracks to visible vehicles frame by frame (CLEAR-MOT, Bernardin 2008).
 
     In each frame a vehicle's last correspondence is kept while that track is
-    present and within ``gate_px``; the remaining tracks and vehicles are
-    matched by the Hungarian method on Euclidean distance, pairs farther than
-    ``gate_px`` rejected (the rules of py-motmetrics' ``MOTAccumulator``).
-    Positions: estimated ``x_filt_px, y_filt_px`` vs truth ``x_px, y_px``.
+    present and may still correspond; the remaining tracks and vehicles are
+    matched by the Hungarian method on the cost of
+    :func:`harness.metrics.matching.correspondence`, pairs that may not correspond
+    rejected (the rules of py-motmetrics' ``MOTAccumulator``). Where the truth has a
+    box (``bbox_*_px``) a boxed track corresponds at IoU >= 0.5 and a point track
+    inside the box; elsewhere within ``gate_px`` of the centre. ``dist_px``:
+    estimated ``x_filt_px, y_filt_px`` vs truth ``x_px, y_px``.
 
     Returns
     -------
@@ -130,7 +144,7 @@ def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float =
     the vehicle's track differs from its last matched track).
     """
     out = []
-    for f, vids, tids, D, match, switch in _mot_frames(est, truth, gate_px=gate_px):
+    for f, vids, tids, D, match, switch, _ in _mot_frames(est, truth, gate_px=gate_px):
         for a, b in sorted(match.items()):
             out.append({"frame": int(f), "vehicle_id": int(vids[a]), "track_id": int(tids[b]),
                         "dist_px": float(D[a, b]), "switch": bool(switch[a])})

@@ -77,6 +77,31 @@ def test_kitti_fixture_round_trip(tmp_path):
     assert df[df["metric"] == "epe_mean"]["count"].tolist() == [v.sum() for _, v in flows]
 
 
+
+def test_a_pooled_p95_above_100_px_is_the_true_one_not_the_overflow_bin(tmp_path):
+    # issue 23: eval-flow printed epe_p95 100.0000 on KITTI where the true p95 was 182.3 px
+    from harness.metrics import aggregate
+
+    root = tmp_path / "kitti"
+    rng = np.random.default_rng(3)
+    true = []
+    for i in range(2):
+        flow = np.round(rng.uniform(60, 260, size=(6, 9, 2)) * 64) / 64
+        valid = rng.random((6, 9)) > 0.2
+        D.write_kitti_flow(root / "flow_occ" / f"{i:06d}_10.png", flow, valid)
+        for k in (10, 11):
+            write_png(root / "image_2" / f"{i:06d}_{k}.png", rng.integers(0, 255, (6, 9, 3), dtype=np.uint8))
+        f32 = flow[valid].astype(np.float32).astype(np.float64)
+        true.append(np.hypot(f32[:, 0], f32[:, 1]))
+    pooled = np.sort(np.concatenate(true))
+    table = D.evaluate_flow_dataset(root, format="kitti", method=zero_flow)
+    summary = aggregate(table, by=["pipeline"]).set_index("metric")["value"]
+    for metric, q in (("epe_p95", 0.95), ("epe_median", 0.5)):
+        expected = pooled[int(np.ceil(q * pooled.size)) - 1]
+        assert expected > 100.0
+        assert summary[metric] == pytest.approx(expected, abs=0.005), metric
+
+
 def test_kitti_decoding_follows_the_devkit(tmp_path):
     img = np.zeros((2, 2, 3), np.uint16)
     img[..., 0] = 2 ** 15 + 64 * 3    # u = 3 px

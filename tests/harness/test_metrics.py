@@ -201,6 +201,38 @@ def test_histogram_round_trip_and_overflow():
     assert math.isnan(M.hist_quantile(np.zeros_like(h), 0.5))
 
 
+
+def _overflow_frames():
+    """Two frames of 1-D EPEs (px) whose pooled 95th percentile and median lie above 100 px."""
+    return [np.r_[np.full(90, 1.0), np.full(10, 182.3)], np.r_[np.full(5, 0.5), np.full(95, 250.0)]]
+
+
+def _nearest_rank(x, q):
+    return np.sort(x)[max(1, math.ceil(q * x.size)) - 1]
+
+
+@pytest.mark.parametrize("path", ["flow_rows", "score_flow"])
+def test_an_aggregated_quantile_in_the_overflow_bin_is_read_from_its_samples_not_floored(path):
+    # issue 23: eval-flow printed epe_p95 100.0000 on KITTI where the pooled p95 is 182.3 px
+    frames = []
+    for f, epe in enumerate(_overflow_frames()):
+        flow_true = np.zeros((1, epe.size, 2), np.float32)
+        flow_est = np.stack([epe, np.zeros_like(epe)], -1).astype(np.float32)[None]
+        valid = np.ones((1, epe.size), bool)
+        rows = (M.flow_rows(flow_est, flow_true, valid, frame=f) if path == "flow_rows"
+                else M.score_flow(flow_est, flow_true, valid, regions=("all",), frame=f))
+        frames.append(rows_to_frame(rows, cell_id="c", status="ok"))
+    pooled = np.concatenate([np.float64(np.float32(e)) for e in _overflow_frames()])
+    agg = M.aggregate(pd.concat(frames), by=[]).set_index("metric")["value"]
+    for metric, q in (("epe_p95", 0.95), ("epe_median", 0.5)):
+        assert _nearest_rank(pooled, q) > M.HIST_MAX_PX
+        assert agg[metric] == pytest.approx(_nearest_rank(pooled, q), abs=M.HIST_BIN_PX / 2), metric
+    # a histogram that lost its overflow samples (written before they were kept) still reads the floor
+    h = M.epe_histogram(pooled)
+    assert M.hist_quantile(h, 0.95) == M.HIST_MAX_PX
+    assert M.hist_quantile(h, 0.5, tail=M.overflow_tail(pooled)) == pytest.approx(182.305)
+
+
 @pytest.mark.parametrize("bins", [[], [0], [M.HIST_NBINS - 1], [0, M.HIST_NBINS - 1], [7, 8, 300]])
 def test_encoded_histogram_stores_its_first_to_last_non_empty_bin(bins):
     h = np.zeros(M.HIST_NBINS, np.int64)
@@ -212,6 +244,41 @@ def test_encoded_histogram_stores_its_first_to_last_non_empty_bin(bins):
     fmt, width, lo, n = struct.unpack_from("<BBII", data)
     assert (fmt, width, lo, n) == (1, 4, min(bins), max(bins) - min(bins) + 1)
     np.testing.assert_array_equal(M.decode_hist(data), h)
+
+
+
+
+def test_a_row_written_before_tails_were_kept_leaves_a_pooled_quantile_above_100_px_at_the_floor():
+    # a format-1 histogram (overflow count, no samples) pooled with a format-2 one: the tail is incomplete
+    epe = np.full(10, 150.0)
+    old = {"metric": "epe_p95", "value": 150.0, "sum": float("nan"), "count": 10.0, "hist": M.encode_hist(
+        M.epe_histogram(epe))}
+    new = {**old, "hist": M.encode_hist(M.epe_histogram(epe), tail=M.overflow_tail(epe))}
+    assert old["hist"][0] == 1 and new["hist"][0] == 2
+    agg = M.aggregate(rows_to_frame([old, new]), by=[]).set_index("metric")
+    assert agg.loc["epe_p95", "value"] == M.HIST_MAX_PX
+    assert M.aggregate(rows_to_frame([new, new]), by=[]).set_index("metric").loc["epe_p95", "value"] == \
+        pytest.approx(150.005)
+
+
+def test_a_histogram_with_a_tail_round_trips_and_a_tail_that_is_not_the_overflow_is_refused():
+    epe = np.array([0.5, 100.0, 100.004, 250.0, 250.001, 3e20])
+    h, tail = M.epe_histogram(epe), M.overflow_tail(epe)
+    np.testing.assert_array_equal(tail[0], [10000, 25000, 2 ** 62])  # 100.004 shares 100's bin; 3e20 clamped
+    np.testing.assert_array_equal(tail[1], [2, 2, 1])
+    data = M.encode_hist(h, tail=tail)
+    assert data[0] == 2 and M.encode_hist(h)[0] == 1  # format 2 only with a tail: old bytes unchanged
+    np.testing.assert_array_equal(M.decode_hist(data), h)
+    for a, b in zip(M.decode_tail(data), tail):
+        np.testing.assert_array_equal(a, b)
+    assert M.decode_tail(M.encode_hist(h))[0].size == 0
+    merged = M.merge_tails([tail, M.overflow_tail(np.array([250.0, 400.0]))])
+    np.testing.assert_array_equal(merged[0], [10000, 25000, 40000, 2 ** 62])
+    np.testing.assert_array_equal(merged[1], [2, 3, 1, 1])
+    with pytest.raises(ValueError, match="tail: expected the 5 samples of the overflow bin, got 4"):
+        M.encode_hist(h, tail=(tail[0], tail[1] - np.array([0, 1, 0])))
+    with pytest.raises(ValueError, match="tail: expected ascending unique bins >= 10000"):
+        M.encode_hist(h, tail=(tail[0][::-1], tail[1]))
 
 
 def test_registry_describes_every_metric():
