@@ -146,14 +146,18 @@ class SceneGenerator:
         """Light collected over the exposure centred on ``t_s``: the mean of the sub-frame renders.
 
         Returns rgb (uint8 for one render, float32 for a mean), the depth and pose of the
-        middle render (at ``t_s``: the truth's instant) and the vehicle matrices then.
+        middle render (at ``t_s``: the truth's instant) and the vehicle matrices then. Under sun
+        light with shadow maps the frame's first render draws the map, the others reuse it
+        (``_fresh_shadow_map``): moving shadows are where the vehicles were at that render,
+        under 1 px away at ``realistic``'s exposure and read-out (14 ms, 28 m/s at most, 0.22 m a px).
         """
         acc = None
         for offset in self.subframe_offsets_s:
             t = t_s + float(offset)
             R, C = self.pose_at(t)
             Ms = self.vehicle_matrices(t)
-            rgb, depth = render(R, C, Ms)
+            rgb, depth = render(R, C, Ms, shadow_map=self._fresh_shadow_map)
+            self._fresh_shadow_map = False
             if offset == 0:
                 mid = (depth, R, C, Ms)
             if len(self.subframe_offsets_s) == 1:
@@ -202,6 +206,7 @@ class SceneGenerator:
         if self.banded:
             raise RuntimeError("render_frame: this spec has a rolling shutter or lens distortion; use frames()")
         t = float(self.path.t_s[i])
+        self._fresh_shadow_map = True
         rgb, depth, R, C, Ms = self._expose(self.renderer.render, t)
         surf = self.truth.surface(depth, R, C, Ms)
         return self._light(rgb, depth, t, self.path.K), surf
@@ -213,11 +218,13 @@ class SceneGenerator:
         canvas_h = int(self.edges[-1])
         rgb = depth = None
         Rs, Cs, Ms_per_band = [], [], []
+        self._fresh_shadow_map = True
         for b, t_b in enumerate(times):
             r0, r1 = int(self.edges[b]), int(self.edges[b + 1])
 
-            def render(R, C, Ms, r0=r0):
-                return self.renderer.render_view(R, C, Ms, cx_px=float(K[0, 2]), cy_px=float(K[1, 2]) - r0)
+            def render(R, C, Ms, *, shadow_map, r0=r0):
+                return self.renderer.render_view(R, C, Ms, cx_px=float(K[0, 2]), cy_px=float(K[1, 2]) - r0,
+                                                 shadow_map=shadow_map)
 
             band_rgb, band_depth, R, C, Ms = self._expose(render, float(t_b))
             if rgb is None:

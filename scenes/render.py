@@ -10,6 +10,7 @@ from __future__ import annotations
 import atexit
 import os
 import sys
+import weakref
 
 import numpy as np
 
@@ -59,6 +60,7 @@ def get_renderer(width_px: int, height_px: int):
                 f"Headless rendering needs EGL with Mesa: apt-get install {GL_SYSTEM_PACKAGES}; "
                 "and PYOPENGL_PLATFORM=egl") from err
         _install_frame_reader(r)
+        _install_shadow_switch(r)
         _RENDERERS[key] = r
         if not _GL_INFO:
             _GL_INFO.update(_query_gl_strings())
@@ -90,6 +92,28 @@ def _install_frame_reader(offscreen) -> None:
         return _read_frame(self, cam.znear, cam.zfar)
 
     inner._read_main_framebuffer = types.MethodType(read, inner)
+
+
+def _install_shadow_switch(offscreen) -> None:
+    """Let :meth:`SceneRenderer.render` skip pyrender's shadow-map pass (``inner.skip_shadow_pass``).
+
+    pyrender renders every shadow map again on every call: the whole world into a 2048 x 2048
+    depth texture, for each band and motion-blur sub-frame of a frame. The forward pass samples
+    the light's shadow texture as it stands, so a map drawn once per frame serves its renders.
+    """
+    import types
+
+    inner = getattr(offscreen, "_renderer", None)
+    original = getattr(inner, "_shadow_mapping_pass", None)
+    if original is None:
+        return
+    inner.skip_shadow_pass = False
+
+    def shadow_pass(self, scene, light_node, flags):
+        if not self.skip_shadow_pass:
+            original(scene, light_node, flags)
+
+    inner._shadow_mapping_pass = types.MethodType(shadow_pass, inner)
 
 
 def _read_frame(inner, znear: float, zfar: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -226,6 +250,7 @@ def _ground_tiles(pyrender, world: World) -> list:
 FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
 CROWN_SEGMENTS = 10
 SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+CULL_MARGIN_PX = 4.0  # a vehicle this far outside the view is still drawn (multisampling, rounding)
 
 
 def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
@@ -474,12 +499,24 @@ class SceneRenderer:
                                                              color_0=m["colours"], indices=m["indices"],
                                                              material=self._vehicle_material)]))
         self._moving_parts = _merge(moving_shadows + moving_bodies) if moving_bodies else None
+        # the 8 corners of each moving road user's box (shadow quad included) in its own frame, for
+        # culling: (V, 8, 3), zeros for parked ones (never culled: their mesh is one static draw)
+        self._vehicle_corners = np.zeros((len(vehicles), 8, 3))
+        if self._moving_parts is not None:
+            m = self._moving_parts
+            for k in self._moving:
+                pts = m["positions"][m["owner"] == k].astype(np.float64)
+                lo_hi = np.stack([pts.min(axis=0), pts.max(axis=0)])
+                self._vehicle_corners[k] = [[bx, by, bz] for bx in lo_hi[:, 0] for by in lo_hi[:, 1]
+                                            for bz in lo_hi[:, 2]]
+        self.culled = 0  # moving road users left out of the last render (outside its view)
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
         cam = pyrender.IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5, znear=znear_m, zfar=zfar_m)
         self.camera_node = self.scene.add(cam, pose=np.eye(4))
         self.flags = pyrender.RenderFlags.FLAT if self.flat else pyrender.RenderFlags.NONE
+        self.has_shadow_maps = not self.flat and bool(light.shadows)  # pyrender draws them before each render
         if not self.flat:
             z = sun  # a light shines along its -z
             x = np.cross([0.0, 0.0, 1.0], z)
@@ -493,31 +530,91 @@ class SceneRenderer:
             if light.shadows:
                 self.flags |= pyrender.RenderFlags.SHADOWS_DIRECTIONAL
 
-    def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``."""
+    def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
+               shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``.
+
+        ``shadow_map=False`` reuses the shadow map the last render of this scene drew (the
+        shadows of the vehicles where they were then; static shadows are the same): the sub-frames
+        and bands of one frame share the map of its first render. Only the look of moving
+        shadows depends on it, never the ground truth (shadows are light, not surfaces).
+        """
         pose = np.eye(4)
         pose[:3, :3] = R_wc
         pose[:3, 3] = C_w
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
+        inner = getattr(self.renderer, "_renderer", None)
+        switch = inner is not None and hasattr(inner, "skip_shadow_pass")
+        # only while this scene was the last one drawn: rendering another scene frees this one's map
+        skip = (switch and not shadow_map and self.has_shadow_maps
+                and getattr(inner, "last_scene", lambda: None)() is self.scene)
         if self._moving_parts is not None:
-            self._place_moving(vehicle_poses)
-        rgb, depth = self.renderer.render(self.scene, flags=self.flags)
+            # a shadow map drawn now needs every vehicle; otherwise those outside the view are not drawn
+            drawn = self._in_view(R_wc, C_w, vehicle_poses) if skip or not self.has_shadow_maps else None
+            self._place_moving(vehicle_poses, drawn)
+        if switch:
+            inner.skip_shadow_pass = skip
+        try:
+            rgb, depth = self.renderer.render(self.scene, flags=self.flags)
+        finally:
+            if switch:
+                inner.skip_shadow_pass = False
+                inner.last_scene = weakref.ref(self.scene)
         return np.ascontiguousarray(rgb[..., :3]), depth
 
-    def _place_moving(self, vehicle_poses: list[np.ndarray]) -> None:
-        """Replace the moving vehicles' mesh by one with every vertex at its vehicle's pose."""
+    def _place_moving(self, vehicle_poses: list[np.ndarray], drawn: np.ndarray | None = None) -> None:
+        """Replace the moving vehicles' mesh by one with every vertex at its vehicle's pose, of the road
+        users ``drawn`` (bool per vehicle; None: all of them)."""
         m = self._moving_parts
-        M = np.asarray(vehicle_poses, np.float64)[m["owner"]]  # (n, 4, 4) per vertex
-        pos = np.einsum("nij,nj->ni", M[:, :3, :3], m["positions"].astype(np.float64)) + M[:, :3, 3]
-        nrm = np.einsum("nij,nj->ni", M[:, :3, :3], m["normals"].astype(np.float64))
-        prim = self._pyrender.Primitive(positions=pos.astype(np.float32), normals=nrm.astype(np.float32),
-                                        color_0=m["colours"], indices=m["indices"], material=self._vehicle_material)
+        owner, positions, normals, colours = m["owner"], m["positions"], m["normals"], m["colours"]
+        indices = m["indices"]
+        self.culled = 0
+        if drawn is not None:
+            keep = drawn[owner]
+            self.culled = len(self._moving) - int(np.count_nonzero(drawn[self._moving]))
+            if not keep.all():
+                new_index = np.cumsum(keep) - 1
+                tri = indices[keep[indices[:, 0]]]  # a triangle's vertices share their owner
+                owner, positions, normals, colours = owner[keep], positions[keep], normals[keep], colours[keep]
+                indices = new_index[tri].astype(np.uint32)
         if self._moving_node is not None:
             self.scene.remove_node(self._moving_node)
+            self._moving_node = None
+        if not len(indices):
+            return
+        M = np.asarray(vehicle_poses, np.float64)[owner]  # (n, 4, 4) per vertex
+        pos = np.einsum("nij,nj->ni", M[:, :3, :3], positions.astype(np.float64)) + M[:, :3, 3]
+        nrm = np.einsum("nij,nj->ni", M[:, :3, :3], normals.astype(np.float64))
+        prim = self._pyrender.Primitive(positions=pos.astype(np.float32), normals=nrm.astype(np.float32),
+                                        color_0=colours, indices=indices, material=self._vehicle_material)
         self._moving_node = self.scene.add(self._pyrender.Mesh([prim]))
 
+    def _in_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> np.ndarray:
+        """Which road users to draw (bool per vehicle): not those whose mesh (shadow quad included)
+        projects wholly outside the view.
+
+        llvmpipe pays for every vertex of the moving mesh, placed and uploaded for each render, and
+        a band of a rolling shutter sees a few of the road users. The box of the mesh's corners is
+        the hull of its image when all lie in front of the camera; a road user with a corner behind
+        it is kept. The pixels are those of drawing every road user.
+        """
+        cam = self.camera_node.camera
+        fx, fy, cx, cy = cam.fx, cam.fy, cam.cx - 0.5, cam.cy - 0.5
+        Ms = np.asarray(vehicle_poses, np.float64)[: len(self._vehicle_corners)]
+        world = np.einsum("vij,vkj->vki", Ms[:, :3, :3], self._vehicle_corners) + Ms[:, None, :3, 3]
+        Xc = (world - np.asarray(C_w, np.float64)) @ np.asarray(R_wc, np.float64)  # R^T (X - C), per row
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = fx * Xc[..., 0] / z + cx
+            y = fy * Xc[..., 1] / z + cy
+        m = CULL_MARGIN_PX
+        outside = ((x.max(axis=1) < -m) | (x.min(axis=1) > self.width_px - 1 + m)
+                   | (y.max(axis=1) < -m) | (y.min(axis=1) > self.height_px - 1 + m))
+        outside &= (z > 0).all(axis=1)
+        return ~outside
+
     def render_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
-                    cx_px: float, cy_px: float) -> tuple[np.ndarray, np.ndarray]:
+                    cx_px: float, cy_px: float, shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`render` with the principal point at ``(cx_px, cy_px)`` (integer pixel centres).
 
         An off-axis view: a band of rows ``r0..`` of a taller image is the same camera with
@@ -525,4 +622,4 @@ class SceneRenderer:
         """
         cam = self.camera_node.camera
         cam.cx, cam.cy = cx_px + 0.5, cy_px + 0.5  # pyrender's pixel centres are at half-integers
-        return self.render(R_wc, C_w, vehicle_poses)
+        return self.render(R_wc, C_w, vehicle_poses, shadow_map=shadow_map)
