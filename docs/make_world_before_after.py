@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 OVERRIDES = {"camera.altitude_m": 78.0, "image.n_frames": 2, "vehicles.count": 14, "world.trees.density_per_ha": 20.0,
              "world.wood_fraction": 0.2, "world.built_fraction": 0.3, "seed": 3}
-CROP = (slice(40, 280), slice(0, 320))  # rows, columns of the 640x480 frame
+CROP = (slice(120, 360), slice(60, 380))  # rows, columns of the 640x480 frame
 KIT_CROP = (slice(150, 390), slice(120, 440))
 
 
