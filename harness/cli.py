@@ -6,7 +6,7 @@ input (one line on stderr, no traceback; set ``AEROBENCH_DEBUG=1`` for the trace
 ::
 
     aerobench list [--full]
-    aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo]
+    aerobench render SCENE --out DIR [--set key=value ...] [--flow-format npz|flo] [--quiet]
     aerobench run SUITE --out DIR [--workers N] [--resume] [--executor process|dask|dask-local]
                         [--scheduler ADDR] [--cache DIR] [--no-report] [--quiet]
     aerobench report RUN_DIR [--baseline FILE] [--gate VERDICT_JSON] [--rules FILE] [--workers N] [--quiet]
@@ -239,7 +239,22 @@ def cmd_render(args: argparse.Namespace) -> int:
     spec = load_scene_spec(args.scene, overrides=_parse_set(args.set))
     if out.exists() and any(out.iterdir()):
         raise UsageError(f"{out}: the output folder is not empty")
-    render_sequence(spec, out, flow_format=args.flow_format)
+    from tqdm import tqdm
+
+    from harness.scheduling import kernels_to_compile
+
+    label = Path(args.scene).stem if args.scene.endswith((".yaml", ".yml")) else args.scene
+    # the frames' PNG encoder runs in every render (the truth's kernels not under a rolling shutter,
+    # the flow decoder's only when reading): cold, the first frame waits for numba to compile them all
+    cold = kernels_to_compile("scenes", modules={"scenes._codec_kernels"}) if not args.quiet else []
+    if any(k.endswith((".avg_filter", ".deflate_huffman")) for k in cold):
+        print("compiling numerical kernels (first run only, a few seconds)...", file=sys.stderr, flush=True)
+    with tqdm(total=spec.image.n_frames, desc=f"rendering {label}", unit="frame", file=sys.stderr,
+              disable=args.quiet, dynamic_ncols=True) as bar:
+        def progress(done: int, total: int) -> None:
+            bar.update(done - bar.n)
+
+        render_sequence(spec, out, flow_format=args.flow_format, progress=progress)
     print(f"wrote {out} (preview: {out / 'preview.png'})")
     return EXIT_OK
 
@@ -630,6 +645,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--flow-format", choices=("npz", "flo"), default="npz",
                    help="ground-truth flow files: compact lossless flow/NNNNNN.npz (default) or Middlebury "
                         ".flo in flow/ and flow_camera/ (about 10x larger)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_render)
 
     s = sub.add_parser("run", help="run a suite into a run folder",

@@ -11,7 +11,10 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+import shutil
 import sys
+import tempfile
+import threading
 from collections.abc import Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
@@ -21,7 +24,7 @@ from typing import Any
 from harness.suites import Cell, SceneVariant, Suite
 from harness.tasks import cell_payload, cell_task, cells_task, render_task
 
-__all__ = ["RETRY_ROUNDS", "execute", "cell_cost", "scene_cost", "cell_groups", "groups_per_scene", "say"]
+__all__ = ["RETRY_ROUNDS", "execute", "compile_ahead", "kernels_to_compile", "read_render_progress", "cell_cost", "scene_cost", "cell_groups", "groups_per_scene", "say"]
 
 
 def say(progress: bool, msg: str) -> None:
@@ -134,9 +137,24 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
     cache.mkdir(parents=True, exist_ok=True)
     bar = tqdm(total=len(variants) + len(todo), desc="scenes+cells", unit="task",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    # render tasks write their frames done here (local workers only: elsewhere the writes fail quietly)
+    progress_dir = tempfile.mkdtemp(prefix="aerobench-progress-") if progress else None
     ctx = {"cells_dir": cells_dir, "cache": cache, "provenance": provenance, "imports": imports,
            "import_paths": import_paths(suite),
-           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress, "read": read}
+           "variants": variants, "by_scene": by_scene, "bar": bar, "progress": progress, "read": read,
+           "progress_dir": progress_dir}
+    try:
+        return _execute(ctx, todo, executor, workers, scheduler)
+    finally:
+        bar.close()
+        if progress_dir is not None:
+            shutil.rmtree(progress_dir, ignore_errors=True)
+
+
+def _execute(ctx: dict, todo: list[Cell], executor: str, workers: int | None,
+             scheduler: str | None) -> tuple[int, int, int]:
+    variants, by_scene, bar, progress = ctx["variants"], ctx["by_scene"], ctx["bar"], ctx["progress"]
+    ctx["kernels_ready"] = compile_ahead(todo, ctx, local=executor != "dask")
     work = _Work(renders=list(variants), cells=[])
     for mode in RETRY_ROUNDS:
         if not work.renders and not work.cells:
@@ -170,8 +188,102 @@ def execute(todo: list[Cell], cells_dir: Path, cache: Path, provenance: dict, su
         payload["render_error"] = render.get("error") or f"{lost_msg} cell"
         cell_task(payload)  # records the failure (in this process: it raises before any work)
         bar.update(1)
-    bar.close()
     return work.rendered, work.reused, work.render_failed
+
+
+# modules whose kernels every pipeline runs (besides its flow and global-motion methods')
+PIPELINE_KERNEL_MODULES = ("algorithms.pipeline", "algorithms.filters", "algorithms.tracking")
+
+
+def pipeline_kernel_modules(specs: list[Any]) -> set[str]:
+    """The modules whose numba kernels the pipelines ``specs`` (resolved dicts) run: their flow and
+    global-motion methods' modules and :data:`PIPELINE_KERNEL_MODULES`."""
+    import algorithms.pipeline  # noqa: F401  (registers every built-in stage)
+    from algorithms.registry import STAGES
+
+    modules = set(PIPELINE_KERNEL_MODULES)
+    for spec in specs:
+        for kind in ("flow", "global_motion"):
+            stage = spec.get(kind) if isinstance(spec, Mapping) else None
+            fn = STAGES.get(kind, {}).get(stage.get("method")) if isinstance(stage, Mapping) else None
+            if fn is not None:
+                modules.add(fn.__module__)
+    return modules
+
+
+def kernels_to_compile(package: str = "algorithms", *, modules: set[str] | None = None) -> list[str]:
+    """Names of the numba kernels of ``package`` (``"algorithms"`` or ``"scenes"``; only those of
+    ``modules`` when given) that numba's on-disk cache lacks (or holds for another version of
+    their source): what a first run compiles (the pipelines' kernels about a minute of CPU, the
+    scenes' about ten seconds).
+
+    Reads numba's cache index through its caching module; if that changes, nothing is reported.
+    """
+    import importlib
+
+    for module in {"algorithms": ("algorithms.pipeline",),  # imports every built-in stage and its kernels
+                   "scenes": ("scenes._truth_kernels", "scenes._codec_kernels")}[package]:
+        importlib.import_module(module)
+    try:
+        from numba.core.registry import CPUDispatcher
+    except ImportError:
+        return []
+    cold = []
+    for name, module in sorted(sys.modules.items()):
+        if not name.startswith(f"{package}.") or module is None or (modules is not None and name not in modules):
+            continue
+        for attr, obj in vars(module).items():
+            if not isinstance(obj, CPUDispatcher) or getattr(obj, "__module__", name) != name:
+                continue
+            if obj.targetoptions.get("inline") == "always":  # compiled into its callers, never cached alone
+                continue
+            cache = getattr(obj, "_cache", None)
+            try:
+                if not cache._cache_file._load_index():  # {} when absent or stale
+                    cold.append(f"{name}.{attr}")
+            except Exception:  # noqa: BLE001 - another numba: say nothing rather than guess
+                return []
+    return cold
+
+
+def compile_ahead(todo: list[Cell], ctx: dict, *, local: bool) -> threading.Event:
+    """Compile the numba kernels once in this process while the workers render, if the cache is cold.
+
+    Only the kernels of the modules these pipelines run count (:func:`pipeline_kernel_modules`: a
+    suite without TV-L1 never compiles its kernels). Without this every worker compiled the same
+    kernels at its first cell (the first smoke run
+    sat at ``4/24`` for over a minute, saying nothing). Here the pipelines of ``todo`` run once
+    on a tiny sequence (``harness.cell_scoring.warm_up``) in a thread, numba writes its cache,
+    and cells are handed out when the returned event is set (renders go on meanwhile); the
+    workers then load the kernels from the cache. Set at once when the cache is warm, or the
+    workers are not on this machine (``local=False``).
+    """
+    ready = threading.Event()
+    specs = {c.pipeline_hash: c.pipeline_spec for c in todo}
+    cold = (kernels_to_compile(modules=pipeline_kernel_modules(list(specs.values()))) if local and todo
+            else [])
+    if not cold:
+        ready.set()
+        return ready
+    if ctx["progress"]:
+        ctx["bar"].write(f"compiling numerical kernels (first run only: {len(cold)} numba kernels, about a "
+                         "minute); the scenes render meanwhile", file=sys.stderr)
+
+    def run() -> None:
+        from algorithms.pipeline import Pipeline
+        from harness.cell_scoring import warm_up
+
+        try:
+            for spec in specs.values():
+                try:
+                    warm_up(Pipeline.from_dict(spec))
+                except Exception:  # noqa: BLE001 - the cell reports its own error
+                    pass
+        finally:
+            ready.set()
+
+    threading.Thread(target=run, name="aerobench-compile-ahead", daemon=True).start()
+    return ready
 
 
 def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
@@ -181,6 +293,41 @@ def _cell_payload(c: Cell, render: dict, ctx: dict) -> dict:
         payload["render_error"] = render["error"]
         payload["render_traceback"] = render.get("traceback", "")
     return payload
+
+
+PROGRESS_POLL_S = 0.5  # how often the bar shows the frames of the renders in flight
+
+
+def _progress_file(ctx: dict, key: str) -> str | None:
+    """Where a render task writes its frames done (``render_task``'s ``progress_file``), or None."""
+    folder = ctx.get("progress_dir")
+    return None if folder is None else str(Path(folder) / f"{key}.txt")
+
+
+def read_render_progress(path: str | None) -> tuple[int, int] | None:
+    """(frames done, total) a render task last wrote to ``path``; None before it wrote or if unreadable."""
+    if path is None:
+        return None
+    try:
+        done, total = Path(path).read_text().split()
+        return int(done), int(total)
+    except (OSError, ValueError):
+        return None
+
+
+def _render_status(pending: dict, ctx: dict) -> str:
+    """The bar's postfix: each render in flight with its frames (``rendering realistic 23/60``)."""
+    parts = []
+    for kind, item in pending.values():
+        if kind != "render":
+            continue
+        got = read_render_progress(_progress_file(ctx, item))
+        label = ctx["variants"][item].label
+        parts.append(f"{label} {got[0]}/{got[1]}" if got else f"{label} starting")
+    status = ("rendering " + ", ".join(parts)) if parts else ""
+    if not ctx["kernels_ready"].is_set():
+        status = "; ".join(x for x in (status, "compiling numerical kernels (first run only)") if x)
+    return status
 
 
 def _in_flight_limit(executor: str, workers: int | None) -> int | None:
@@ -241,15 +388,17 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                     return
                 if renders:
                     submit("render", renders.pop(0))
-                else:
+                elif ctx["kernels_ready"].is_set():
                     submit("cells", heapq.heappop(ready)[2])
+                else:  # cells wait for the kernels compiled ahead (compile_ahead)
+                    return
 
         def submit(kind: str, item: Any) -> None:
             try:
                 if kind == "render":
                     v = ctx["variants"][item]
                     fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"],
-                                      ctx["import_paths"])
+                                      ctx["import_paths"], _progress_file(ctx, item))
                 else:
                     fut = pool.submit(cells_task, [_cell_payload(c, r, ctx) for c, r in item])
             except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor
@@ -258,8 +407,22 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
             pending[fut] = (kind, item)
 
         fill()
-        while pending:
-            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+        while pending or ready:
+            if not pending:  # only cells left, waiting for the kernels compiled ahead
+                ctx["kernels_ready"].wait(PROGRESS_POLL_S)
+                if ctx["progress"]:
+                    bar.set_postfix_str(_render_status(pending, ctx), refresh=True)
+                fill()
+                continue
+            # poll while there is a bar to update, or cells wait for the kernels (a free worker
+            # must not idle behind a long render once they are ready)
+            polling = ctx["progress"] or (ready and not ctx["kernels_ready"].is_set())
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED, timeout=PROGRESS_POLL_S if polling else None)
+            if ctx["progress"]:
+                bar.set_postfix_str(_render_status(pending, ctx), refresh=True)
+            if not done:
+                fill()  # the kernels may be ready now
+                continue
             for fut in done:
                 kind, item = pending.pop(fut)
                 try:

@@ -45,19 +45,39 @@ def _import_plugins(modules: Iterable[str], folders: Iterable[str] | None = None
     import_modules(list(modules), source="worker", folders=None if folders is None else list(folders))
 
 
+def render_progress_writer(path: str | None):
+    """A ``progress(done, total)`` callback that writes ``"done total"`` into ``path`` (replaced whole,
+    so a reader never sees half a line), or None without a path. Errors are ignored: progress only."""
+    if path is None:
+        return None
+
+    def progress(done: int, total: int) -> None:
+        try:
+            tmp = f"{path}.{os.getpid()}.tmp"
+            with open(tmp, "w") as fh:
+                fh.write(f"{done} {total}")
+            os.replace(tmp, path)
+        except OSError:
+            pass
+
+    return progress
+
+
 def render_task(variant_key: str, spec: Any, cache_dir: str, imports: Iterable[str] = (),
-                import_paths: Iterable[str] | None = None) -> dict:
+                import_paths: Iterable[str] | None = None, progress_file: str | None = None) -> dict:
     """Render one scene variant into the cache (or find it there); returns where and whether reused.
 
     ``imports`` are looked up in ``import_paths`` after the installed packages
-    (:func:`harness.suites.import_paths`; default: the worker's working folder)."""
+    (:func:`harness.suites.import_paths`; default: the worker's working folder). With
+    ``progress_file``, the frames rendered so far are written there as ``"done total"`` (the parent
+    shows them in its progress bar)."""
     _prepare_worker()
     t0 = time.perf_counter()
     try:
         _import_plugins(imports, import_paths)
         from scenes import cached_sequence_result
 
-        result = cached_sequence_result(spec, cache_dir)
+        result = cached_sequence_result(spec, cache_dir, progress=render_progress_writer(progress_file))
     except Exception as exc:  # the cells of this scene are recorded as failed, the run goes on
         return {"key": variant_key, "path": None, "reused": False,
                 "error": f"rendering failed: {type(exc).__name__}: {exc}",

@@ -606,7 +606,8 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike) -> Path:
 
     One line per visible row of a vehicle that is not parked: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
     ``bb_width = x1 - x0 + 1``, ``bb_height = y1 - y0 + 1`` (the inverse of the reader's
-    conversion, written with every digit of the float64, so the boxes come back bit for bit),
+    conversion, written with every digit of the float64, so the boxes come back to an ulp or two:
+    ``x0 + 1`` and the reader's ``- 1`` each round),
     flag 1, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
     3 without a class column), visibility (``visible_fraction``, 1 without it). A real reading
     takes the box centre as the vehicle's position, which for a rendered vehicle differs from

@@ -54,6 +54,9 @@ SURFACE_TOL_ABS_M = 0.02
 # occlusion test at t+1: a point may lie this far behind the rendered surface
 OCCLUSION_TOL_REL = 5e-3
 OCCLUSION_TOL_ABS_M = 0.05
+# visible fractions: an occluder is this much nearer than the vehicle's surface (a vehicle's own
+# parts differ by less: a car's cabin 0.7 m, a truck's cargo over its cab 0.8 m)
+OCCLUDER_GAP_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -274,6 +277,41 @@ class GroundTruth:
                 b_wins = both & (err_b[sb] < err_a[sa])
                 hit_a[sa] &= ~b_wins
                 hit_b[sb] &= ~(both & ~b_wins)
+
+    def visible_fractions(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list,
+                          bboxes: list) -> np.ndarray:
+        """Per vehicle, the share (V,) float64 of its unoccluded projection that the frame shows.
+
+        The unoccluded projection is every pixel centre, inside the image or not, whose ray hits
+        the vehicle's boxes; a pixel shows the vehicle when it is inside the image and the render
+        has nothing more than OCCLUDER_GAP_M nearer than the box there: a tree crown or a bridge
+        deck (both stand higher than that above every road user) or another vehicle in front hides
+        it; the render's anti-aliased silhouette (the ground's depth, or the vehicle's own cabin a
+        sub-pixel away) does not. 0 where nothing projects (behind the camera, or smaller than a
+        pixel between the pixel centres).
+        """
+        D = np.asarray(depth, np.float32)
+        out = np.zeros(len(vehicle_M))
+        for v, ((bbox, _), boxes, M) in enumerate(zip(bboxes, self.vehicle_boxes, vehicle_M)):
+            x0, y0, x1, y1 = bbox
+            if not np.isfinite(x0):
+                continue
+            cols = np.arange(int(np.floor(x0)), int(np.ceil(x1)) + 1)
+            rows = np.arange(int(np.floor(y0)), int(np.ceil(y1)) + 1)
+            Zv = ray_boxes_depth(R, C, M, boxes, ((cols - self.cx) / self.fx)[None, :],
+                                 ((rows - self.cy) / self.fy)[:, None])
+            hit = np.isfinite(Zv)
+            n = int(hit.sum())
+            if not n:
+                continue
+            inside = ((cols >= 0) & (cols < self.w))[None, :] & ((rows >= 0) & (rows < self.h))[:, None]
+            seen = hit & inside
+            rr, cc = np.nonzero(seen)
+            d = D[rows[rr], cols[cc]].astype(np.float64)
+            z = Zv[rr, cc]
+            front = (d > 0) & (d < z - OCCLUDER_GAP_M)
+            out[v] = (rr.size - int(front.sum())) / n
+        return out
 
     # -- per pair -----------------------------------------------------------------------
     def _project_affine(self, Z: np.ndarray, A: np.ndarray, b: np.ndarray, rows: np.ndarray, cols: np.ndarray):

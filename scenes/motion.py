@@ -177,10 +177,19 @@ def polyline_arc_lengths(points_m: np.ndarray) -> np.ndarray:
 class VehiclePath:
     """A vehicle driving along ``route_m``, a polyline on a road (curves, turns at junctions), with a speed profile.
 
-    ``kind`` is one of ``parked``, ``constant``, ``accelerating``, ``stopping``. At time
-    ``t`` the vehicle is at arc length ``s0_m + distance(t)`` along the route, heading along
+    ``kind`` is one of ``parked``, ``constant``, ``accelerating``, ``stopping``, ``profile``. At
+    time ``t`` the vehicle is at arc length ``s0_m + distance(t)`` along the route, heading along
     the route's tangent (interpolated between the vertices' tangents, so it turns smoothly).
     Beyond either end of the route it continues straight.
+
+    ``profile`` (simulated traffic, :mod:`scenes.traffic`): the arc length is piecewise
+    quadratic in time, one constant acceleration per knot interval: from knot k,
+    ``S(t) = S_k + v_k (t - t_k) + a_k (t - t_k)^2 / 2``; before the first knot it runs at
+    ``v_0``, after the last knot with the last knot's acceleration (0 by construction). The
+    positions at any t (rolling-shutter bands, motion-blur sub-frames) come from the same
+    closed form the truth uses, so the truth is exact between frames too.
+    ``vclass`` is the road user's class (``car, van, truck, bus, motorbike, cyclist, pedestrian``);
+    its shape is :func:`scenes.traffic.vehicle_shape`.
     """
 
     vehicle_id: int
@@ -195,6 +204,11 @@ class VehiclePath:
     size_m: tuple[float, float, float] = (4.5, 1.9, 1.5)
     body_rgb: tuple[int, int, int] = (200, 30, 30)
     cabin_rgb: tuple[int, int, int] = (60, 60, 60)
+    vclass: str = "car"
+    profile_t_s: np.ndarray | None = None  # (K,) knot times, increasing
+    profile_s_m: np.ndarray | None = None  # (K,) arc length at each knot (S(0) = s0_m)
+    profile_v_mps: np.ndarray | None = None  # (K,) speed at each knot, >= 0
+    profile_a_mps2: np.ndarray | None = None  # (K,) acceleration from each knot to the next
     _s: np.ndarray = field(init=False, repr=False)
     _heading: np.ndarray = field(init=False, repr=False)
 
@@ -211,6 +225,27 @@ class VehiclePath:
         mid = 0.5 * (seg_heading[:-1] + seg_heading[1:])
         self._heading = np.concatenate([[seg_heading[0]], mid, [seg_heading[-1]]])
         self._s = s
+        if self.kind == "profile":
+            knots = [np.asarray(a, np.float64) for a in (self.profile_t_s, self.profile_s_m, self.profile_v_mps,
+                                                         self.profile_a_mps2) if a is not None]
+            if len(knots) != 4 or not all(k.ndim == 1 and k.size == knots[0].size and k.size >= 1 for k in knots):
+                raise ValueError("profile: expected profile_t_s, profile_s_m, profile_v_mps, profile_a_mps2 of one "
+                                 "length >= 1")
+            if np.any(np.diff(knots[0]) <= 0):
+                raise ValueError("profile_t_s: expected strictly increasing knot times")
+            self.profile_t_s, self.profile_s_m, self.profile_v_mps, self.profile_a_mps2 = knots
+            self._profile_s0 = self._profile_at(0.0)[0]
+
+    def _profile_at(self, t_s: float) -> tuple[float, float]:
+        """(S(t), speed(t)) of a ``profile`` vehicle."""
+        tk = self.profile_t_s
+        k = int(np.searchsorted(tk, t_s, side="right")) - 1
+        if k < 0:
+            v = float(self.profile_v_mps[0])
+            return float(self.profile_s_m[0]) + v * (t_s - float(tk[0])), v
+        dt = t_s - float(tk[k])
+        v, a = float(self.profile_v_mps[k]), float(self.profile_a_mps2[k])
+        return float(self.profile_s_m[k]) + v * dt + 0.5 * a * dt * dt, max(0.0, v + a * dt)
 
     @property
     def parked(self) -> bool:
@@ -219,6 +254,8 @@ class VehiclePath:
     def speed(self, t_s: float) -> float:
         if self.kind == "parked":
             return 0.0
+        if self.kind == "profile":
+            return self._profile_at(t_s)[1]
         if self.kind == "accelerating":
             return min(self.v0_mps + self.accel_mps2 * t_s, max(self.v_max_mps, self.v0_mps))
         if self.kind == "stopping":
@@ -230,6 +267,8 @@ class VehiclePath:
         v0, a = self.v0_mps, self.accel_mps2
         if self.kind == "parked":
             return 0.0
+        if self.kind == "profile":
+            return self._profile_at(t_s)[0] - self._profile_s0
         if self.kind == "accelerating":
             v1 = max(self.v_max_mps, v0)
             t1 = (v1 - v0) / a if a > 0 else math.inf

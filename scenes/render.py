@@ -10,10 +10,14 @@ from __future__ import annotations
 import atexit
 import os
 import sys
+import weakref
 
 import numpy as np
 
-from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction, vehicle_boxes
+from scenes import car_paint
+from scenes.traffic import PAINTED_CLASSES, vehicle_parts
+from scenes.vegetation import CROWN_BASES, sun_shading, trunk_size, unit_cone
+from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -56,6 +60,7 @@ def get_renderer(width_px: int, height_px: int):
                 f"Headless rendering needs EGL with Mesa: apt-get install {GL_SYSTEM_PACKAGES}; "
                 "and PYOPENGL_PLATFORM=egl") from err
         _install_frame_reader(r)
+        _install_shadow_switch(r)
         _RENDERERS[key] = r
         if not _GL_INFO:
             _GL_INFO.update(_query_gl_strings())
@@ -87,6 +92,28 @@ def _install_frame_reader(offscreen) -> None:
         return _read_frame(self, cam.znear, cam.zfar)
 
     inner._read_main_framebuffer = types.MethodType(read, inner)
+
+
+def _install_shadow_switch(offscreen) -> None:
+    """Let :meth:`SceneRenderer.render` skip pyrender's shadow-map pass (``inner.skip_shadow_pass``).
+
+    pyrender renders every shadow map again on every call: the whole world into a 2048 x 2048
+    depth texture, for each band and motion-blur sub-frame of a frame. The forward pass samples
+    the light's shadow texture as it stands, so a map drawn once per frame serves its renders.
+    """
+    import types
+
+    inner = getattr(offscreen, "_renderer", None)
+    original = getattr(inner, "_shadow_mapping_pass", None)
+    if original is None:
+        return
+    inner.skip_shadow_pass = False
+
+    def shadow_pass(self, scene, light_node, flags):
+        if not self.skip_shadow_pass:
+            original(scene, light_node, flags)
+
+    inner._shadow_mapping_pass = types.MethodType(shadow_pass, inner)
 
 
 def _read_frame(inner, znear: float, zfar: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -223,6 +250,7 @@ def _ground_tiles(pyrender, world: World) -> list:
 FLAT_FACE_SHADE = {"top": 1.0, "side": 0.72}
 CROWN_SEGMENTS = 10
 SHADOW_QUAD_LIFT_M = 0.03  # a vehicle's flat-light shadow lies this far above the ground (ground truth: ground)
+CULL_MARGIN_PX = 4.0  # a vehicle this far outside the view is still drawn (multisampling, rounding)
 
 
 def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
@@ -233,7 +261,16 @@ def _face_colours(mesh: dict, rgb, *, flat: bool) -> np.ndarray:
     if flat:
         up = mesh["normals"][:, 2]
         col[:, :3] *= np.where(up > 0.5, FLAT_FACE_SHADE["top"], FLAT_FACE_SHADE["side"])[:, None]
-    return col
+    return col if flat else _to_linear(col)
+
+
+def _to_linear(col: np.ndarray) -> np.ndarray:
+    """Vertex colours (n, 4) for sun light: pyrender multiplies the lit colour in linear light by the
+    vertex colour and then writes ``c ** (1 / 2.2)``, so a colour meant as seen (sRGB) goes in as
+    ``c ** 2.2`` (textures it decodes itself; flat light writes colours as they are)."""
+    out = np.array(col, np.float32, copy=True)
+    out[:, :3] **= 2.2
+    return out
 
 
 def _merge(meshes: list[dict]) -> dict:
@@ -259,7 +296,7 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
 
     Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
     walls, roofs = [], []
-    for b in world.buildings:
+    for b in world.buildings + world.overpasses:
         tint = np.asarray(ROOF_TINTS[b.roof_variant])
         for p, part in enumerate(b.parts):
             m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
@@ -299,38 +336,46 @@ def _unit_crown() -> dict:
             "indices": np.asarray(faces, np.uint32), "texcoords": 0.5 + 0.5 * v[:, :2]}
 
 
-def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list:
-    """Crowns instanced per colour variant (one draw each), trunks instanced once."""
-    crown = _unit_crown()
-    if flat:  # baked sky shading: tops light, flanks and undersides darker (the same from every side,
-        # since hedge bushes are turned along their rows; painted shadows give the sun's direction)
-        k = (0.5 + 0.5 * np.clip(0.3 + 0.8 * crown["normals"][:, 2], 0.0, 1.0)).astype(np.float32)
-        col = np.column_stack([k, k, k, np.ones_like(k)])
-    else:
-        col = np.ones((crown["positions"].shape[0], 4), np.float32)
+def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray, ambient: float) -> list:
+    """Every crown lobe and conifer cone in one draw (a merged mesh: per-vertex colour, so each variant and
+    each tree its own tint, which instancing cannot give; llvmpipe pays per vertex either way, pyrender
+    per draw), trunks instanced once, and the woods' canopies in one draw. Under flat light the sun's
+    shading is baked into the vertex colours (trees are never turned, so the baked light keeps its
+    direction)."""
+    crown, cone = _unit_crown(), unit_cone(CROWN_SEGMENTS)
+
+    def shade(normals):
+        if not flat:
+            return np.ones(len(normals), np.float32)
+        return sun_shading(normals, sun, ambient)
+
     meshes = []
-    for v, tex in enumerate(world.crown_textures):
-        trees = [t for t in world.trees if t.variant == v]
-        if not trees:
-            continue
-        poses = np.zeros((len(trees), 4, 4), np.float32)
-        for n, t in enumerate(trees):
-            c, s_ = np.cos(t.yaw_rad), np.sin(t.yaw_rad)
-            Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
-            poses[n, :3, :3] = Rz @ np.diag([t.crown_radius_m * t.stretch, t.crown_radius_m, t.crown_half_height_m])
-            poses[n, :3, 3] = (t.x_m, t.y_m, t.height_m - t.crown_half_height_m)
-            poses[n, 3, 3] = 1.0
-        mat = _textured_material(pyrender, tex, repeat=False)
-        meshes.append(pyrender.Mesh([pyrender.Primitive(positions=crown["positions"], normals=crown["normals"],
-                                                        texcoord_0=crown["texcoords"], color_0=col,
-                                                        indices=crown["indices"], material=mat, poses=poses)]))
+    parts = []
+    for t in world.trees:
+        unit = cone if t.conifer else crown
+        tint = np.asarray(CROWN_BASES[t.variant], np.float32) / 255.0
+        for dx, dy, z, rx, ry, rz in t.lobes:
+            scale = np.array([rx, ry, rz], np.float32)
+            nrm = unit["normals"] / scale  # normals of a scaled surface: by the inverse scale
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            col = np.empty((len(nrm), 4), np.float32)
+            col[:, :3] = tint * shade(nrm)[:, None]
+            col[:, 3] = 1.0
+            if not flat:
+                col = _to_linear(col)
+            parts.append({"positions": unit["positions"] * scale + np.array([t.x_m + dx, t.y_m + dy, z], np.float32),
+                          "normals": nrm, "texcoords": unit["texcoords"], "colours": col, "indices": unit["indices"]})
+    if parts:
+        m = _merge(parts)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.crown_textures[0], repeat=False))]))
     trunks = [t for t in world.trees if not t.bush]
     if trunks:
         unit = box_mesh(Box(centre=(0.0, 0.0, 0.0), size=(1.0, 1.0, 1.0)))
         poses = np.zeros((len(trunks), 4, 4), np.float32)
         for n, t in enumerate(trunks):
-            h = t.height_m - 2 * t.crown_half_height_m + 0.3 * t.crown_half_height_m
-            w = max(0.25, 0.08 * t.crown_radius_m)
+            w, h = trunk_size(t)
             poses[n] = np.diag([w, w, h, 1.0])
             poses[n, :3, 3] = (t.x_m, t.y_m, h / 2)
         col = _face_colours(unit, (92, 74, 56), flat=flat)
@@ -338,7 +383,35 @@ def _tree_meshes(pyrender, world: World, *, flat: bool, sun: np.ndarray) -> list
         meshes.append(pyrender.Mesh([pyrender.Primitive(positions=unit["positions"], normals=unit["normals"],
                                                         color_0=col, indices=unit["indices"], material=mat,
                                                         poses=poses)]))
+    if world.canopies:
+        parts = []
+        for c in world.canopies:
+            col = np.column_stack([c["tint"] * shade(c["normals"])[:, None], np.ones(len(c["tint"]), np.float32)])
+            parts.append({k: c[k] for k in ("positions", "normals", "texcoords", "indices")}
+                         | {"colours": col if flat else _to_linear(col)})
+        m = _merge(parts)
+        meshes.append(pyrender.Mesh([pyrender.Primitive(
+            positions=m["positions"], normals=m["normals"], texcoord_0=m["texcoords"], color_0=m["colours"],
+            indices=m["indices"], material=_textured_material(pyrender, world.canopy_texture, repeat=True))]))
     return meshes
+
+
+def _road_user_parts(v, *, flat: bool) -> list[dict]:
+    """Mesh parts (positions, normals, indices, colours) of road user ``v`` in its own frame: the boxes of
+    :func:`scenes.traffic.vehicle_parts` (the truth's shape), coloured. Cars, vans, trucks and buses are
+    painted (:func:`scenes.car_paint.vehicle_parts`): the tops of their body-coloured boxes glossy, with
+    the sky highlight painted under flat light; glass and cargo matt. Motorbikes, cyclists and
+    pedestrians are plain boxes shaded like buildings."""
+    boxes_rgb = vehicle_parts(v)
+    if v.vclass not in PAINTED_CLASSES:
+        return [{**m, "colours": _face_colours(m, rgb, flat=flat)} for m, rgb in
+                ((box_mesh(b), rgb) for b, rgb in boxes_rgb)]
+    boxes, colours = zip(*boxes_rgb)
+    body = tuple(int(c) for c in v.body_rgb)
+    glossy = tuple(tuple(int(c) for c in rgb) == body for rgb in colours)
+    parts = car_paint.vehicle_parts(boxes, colours, glossy=glossy, paint_highlight=flat,
+                                    side_shade=FLAT_FACE_SHADE["side"] if flat else 1.0)
+    return parts if flat else [{**p, "colours": _to_linear(p["colours"])} for p in parts]
 
 
 class SceneRenderer:
@@ -369,22 +442,34 @@ class SceneRenderer:
         self.scene = pyrender.Scene(bg_color=(0.0, 0.0, 0.0, 1.0), ambient_light=ambient)
 
         self.scene.add(pyrender.Mesh(_ground_tiles(pyrender, world)))
-        if world.buildings:
+        if world.buildings or world.overpasses:
             self.scene.add(pyrender.Mesh(_building_prims(pyrender, world, flat=self.flat)))
-        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun):
+        for mesh in _tree_meshes(pyrender, world, flat=self.flat, sun=sun, ambient=light.ambient):
             self.scene.add(mesh)
 
-        # Each vehicle is one draw: body, glass cabin and roof merged, with vertex colours. Under flat
+        # All vehicles are two draws: the parked ones one static mesh, the moving ones one mesh whose
+        # vertices are placed on the CPU for every render (pyrender costs about 0.5 ms of CPU a draw,
+        # and a city has a hundred road users: one draw each cost more than the rest of the scene).
+        # Each road user is its boxes (scenes.traffic.vehicle_parts) with vertex colours. Under flat
         # light it also carries its shadow: a translucent dark quad (vertex alpha, blended), its
         # footprint moved away from the sun by the shadow of the car's middle height, turned into the
         # vehicle frame at mid-sequence (on a curve the shadow turns a little with the car). The quad
         # lies SHADOW_QUAD_LIFT_M above the ground, within the truth's depth tolerance: it is ground.
-        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow.
-        self.vehicle_nodes = []
+        # Ground truth is the motion field of surfaces, not the apparent motion of a shadow. Every
+        # shadow quad comes before every body in its mesh, so the blending order cannot darken a car.
+        self._pyrender = pyrender
+        self._moving = [k for k, v in enumerate(vehicles) if not v.parked]
+        self._moving_node = None
         shadow = self.flat and light.shadows
         away = -sun[:2] / max(1e-9, sun[2])
         t_mid_s = 0.5 * (spec.image.n_frames - 1) / spec.image.fps
-        for v in vehicles:
+        # one material for all road users (a draw each costs): glossy under sun light (car paint's
+        # specular highlight; pedestrians' and cyclists' few pixels take it too), matt under flat light
+        self._vehicle_material = pyrender.MetallicRoughnessMaterial(
+            metallicFactor=0.0, roughnessFactor=1.0 if self.flat else car_paint.GLOSS_ROUGHNESS,
+            alphaMode="BLEND" if shadow else "OPAQUE")
+        parked_shadows, parked_bodies, moving_shadows, moving_bodies = [], [], [], []
+        for k, v in enumerate(vehicles):
             parts = []
             if shadow:
                 th = v.pose(t_mid_s)[2]
@@ -396,21 +481,42 @@ class SceneRenderer:
                 parts.append({"positions": pos, "normals": np.tile(np.float32([[0, 0, 1]]), (4, 1)),
                               "indices": np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
                               "colours": np.tile(np.float32([[0, 0, 0, 1.0 - light.ambient]]), (4, 1))})
-            for b, rgb in zip(vehicle_boxes(*v.size_m), (v.body_rgb, v.cabin_rgb, v.body_rgb)):
-                m = box_mesh(b)
-                parts.append({**m, "colours": _face_colours(m, rgb, flat=self.flat)})
-            m = _merge(parts)
-            mat = pyrender.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=1.0,
-                                                     alphaMode="BLEND" if shadow else "OPAQUE")
-            prim = pyrender.Primitive(positions=m["positions"], normals=m["normals"], color_0=m["colours"],
-                                      indices=m["indices"], material=mat)
-            self.vehicle_nodes.append(self.scene.add(pyrender.Mesh([prim]), pose=np.eye(4)))
+            parts += _road_user_parts(v, flat=self.flat)
+            for p in parts:
+                p["owner"] = np.full(len(p["positions"]), k, np.int64)
+            if v.parked:
+                M = v.matrix(0.0)
+                parts = [{**p, "positions": (p["positions"] @ M[:3, :3].T + M[:3, 3]).astype(np.float32),
+                          "normals": (p["normals"] @ M[:3, :3].T).astype(np.float32)} for p in parts]
+                parked_shadows += parts[:1] if shadow else []
+                parked_bodies += parts[1:] if shadow else parts
+            else:
+                moving_shadows += parts[:1] if shadow else []
+                moving_bodies += parts[1:] if shadow else parts
+        if parked_bodies:
+            m = _merge(parked_shadows + parked_bodies)
+            self.scene.add(pyrender.Mesh([pyrender.Primitive(positions=m["positions"], normals=m["normals"],
+                                                             color_0=m["colours"], indices=m["indices"],
+                                                             material=self._vehicle_material)]))
+        self._moving_parts = _merge(moving_shadows + moving_bodies) if moving_bodies else None
+        # the 8 corners of each moving road user's box (shadow quad included) in its own frame, for
+        # culling: (V, 8, 3), zeros for parked ones (never culled: their mesh is one static draw)
+        self._vehicle_corners = np.zeros((len(vehicles), 8, 3))
+        if self._moving_parts is not None:
+            m = self._moving_parts
+            for k in self._moving:
+                pts = m["positions"][m["owner"] == k].astype(np.float64)
+                lo_hi = np.stack([pts.min(axis=0), pts.max(axis=0)])
+                self._vehicle_corners[k] = [[bx, by, bz] for bx in lo_hi[:, 0] for by in lo_hi[:, 1]
+                                            for bz in lo_hi[:, 2]]
+        self.culled = 0  # moving road users left out of the last render (outside its view)
 
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         # pyrender puts pixel centres at half-integers: shift the principal point by half a pixel
         cam = pyrender.IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5, znear=znear_m, zfar=zfar_m)
         self.camera_node = self.scene.add(cam, pose=np.eye(4))
         self.flags = pyrender.RenderFlags.FLAT if self.flat else pyrender.RenderFlags.NONE
+        self.has_shadow_maps = not self.flat and bool(light.shadows)  # pyrender draws them before each render
         if not self.flat:
             z = sun  # a light shines along its -z
             x = np.cross([0.0, 0.0, 1.0], z)
@@ -424,19 +530,91 @@ class SceneRenderer:
             if light.shadows:
                 self.flags |= pyrender.RenderFlags.SHADOWS_DIRECTIONAL
 
-    def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``."""
+    def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
+               shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``.
+
+        ``shadow_map=False`` reuses the shadow map the last render of this scene drew (the
+        shadows of the vehicles where they were then; static shadows are the same): the sub-frames
+        and bands of one frame share the map of its first render. Only the look of moving
+        shadows depends on it, never the ground truth (shadows are light, not surfaces).
+        """
         pose = np.eye(4)
         pose[:3, :3] = R_wc
         pose[:3, 3] = C_w
         self.scene.set_pose(self.camera_node, pose @ _CV_TO_GL)
-        for node, M in zip(self.vehicle_nodes, vehicle_poses):
-            self.scene.set_pose(node, M)
-        rgb, depth = self.renderer.render(self.scene, flags=self.flags)
+        inner = getattr(self.renderer, "_renderer", None)
+        switch = inner is not None and hasattr(inner, "skip_shadow_pass")
+        # only while this scene was the last one drawn: rendering another scene frees this one's map
+        skip = (switch and not shadow_map and self.has_shadow_maps
+                and getattr(inner, "last_scene", lambda: None)() is self.scene)
+        if self._moving_parts is not None:
+            # a shadow map drawn now needs every vehicle; otherwise those outside the view are not drawn
+            drawn = self._in_view(R_wc, C_w, vehicle_poses) if skip or not self.has_shadow_maps else None
+            self._place_moving(vehicle_poses, drawn)
+        if switch:
+            inner.skip_shadow_pass = skip
+        try:
+            rgb, depth = self.renderer.render(self.scene, flags=self.flags)
+        finally:
+            if switch:
+                inner.skip_shadow_pass = False
+                inner.last_scene = weakref.ref(self.scene)
         return np.ascontiguousarray(rgb[..., :3]), depth
 
+    def _place_moving(self, vehicle_poses: list[np.ndarray], drawn: np.ndarray | None = None) -> None:
+        """Replace the moving vehicles' mesh by one with every vertex at its vehicle's pose, of the road
+        users ``drawn`` (bool per vehicle; None: all of them)."""
+        m = self._moving_parts
+        owner, positions, normals, colours = m["owner"], m["positions"], m["normals"], m["colours"]
+        indices = m["indices"]
+        self.culled = 0
+        if drawn is not None:
+            keep = drawn[owner]
+            self.culled = len(self._moving) - int(np.count_nonzero(drawn[self._moving]))
+            if not keep.all():
+                new_index = np.cumsum(keep) - 1
+                tri = indices[keep[indices[:, 0]]]  # a triangle's vertices share their owner
+                owner, positions, normals, colours = owner[keep], positions[keep], normals[keep], colours[keep]
+                indices = new_index[tri].astype(np.uint32)
+        if self._moving_node is not None:
+            self.scene.remove_node(self._moving_node)
+            self._moving_node = None
+        if not len(indices):
+            return
+        M = np.asarray(vehicle_poses, np.float64)[owner]  # (n, 4, 4) per vertex
+        pos = np.einsum("nij,nj->ni", M[:, :3, :3], positions.astype(np.float64)) + M[:, :3, 3]
+        nrm = np.einsum("nij,nj->ni", M[:, :3, :3], normals.astype(np.float64))
+        prim = self._pyrender.Primitive(positions=pos.astype(np.float32), normals=nrm.astype(np.float32),
+                                        color_0=colours, indices=indices, material=self._vehicle_material)
+        self._moving_node = self.scene.add(self._pyrender.Mesh([prim]))
+
+    def _in_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray]) -> np.ndarray:
+        """Which road users to draw (bool per vehicle): not those whose mesh (shadow quad included)
+        projects wholly outside the view.
+
+        llvmpipe pays for every vertex of the moving mesh, placed and uploaded for each render, and
+        a band of a rolling shutter sees a few of the road users. The box of the mesh's corners is
+        the hull of its image when all lie in front of the camera; a road user with a corner behind
+        it is kept. The pixels are those of drawing every road user.
+        """
+        cam = self.camera_node.camera
+        fx, fy, cx, cy = cam.fx, cam.fy, cam.cx - 0.5, cam.cy - 0.5
+        Ms = np.asarray(vehicle_poses, np.float64)[: len(self._vehicle_corners)]
+        world = np.einsum("vij,vkj->vki", Ms[:, :3, :3], self._vehicle_corners) + Ms[:, None, :3, 3]
+        Xc = (world - np.asarray(C_w, np.float64)) @ np.asarray(R_wc, np.float64)  # R^T (X - C), per row
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = fx * Xc[..., 0] / z + cx
+            y = fy * Xc[..., 1] / z + cy
+        m = CULL_MARGIN_PX
+        outside = ((x.max(axis=1) < -m) | (x.min(axis=1) > self.width_px - 1 + m)
+                   | (y.max(axis=1) < -m) | (y.min(axis=1) > self.height_px - 1 + m))
+        outside &= (z > 0).all(axis=1)
+        return ~outside
+
     def render_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
-                    cx_px: float, cy_px: float) -> tuple[np.ndarray, np.ndarray]:
+                    cx_px: float, cy_px: float, shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`render` with the principal point at ``(cx_px, cy_px)`` (integer pixel centres).
 
         An off-axis view: a band of rows ``r0..`` of a taller image is the same camera with
@@ -444,4 +622,4 @@ class SceneRenderer:
         """
         cam = self.camera_node.camera
         cam.cx, cam.cy = cx_px + 0.5, cy_px + 0.5  # pyrender's pixel centres are at half-integers
-        return self.render(R_wc, C_w, vehicle_poses)
+        return self.render(R_wc, C_w, vehicle_poses, shadow_map=shadow_map)

@@ -11,7 +11,8 @@ The effects, in the order they are applied (each off at its spec default):
 4. **lens distortion**: Brown-Conrady radial ``x_d = x_u (1 + k1 r^2 + k2 r^4)`` on normalised
    coordinates, the distorted image resampled from an undistorted render, then the optics'
    Gaussian **blur**;
-5. **noise**: Poisson shot noise on ``full_well_e`` photo-electrons at gray 255, then
+5. **noise**: Poisson shot noise on ``full_well_e`` photo-electrons at gray 255 (Gaussian with the
+   same mean and variance above 100 electrons), then
    Gaussian read noise, then rounding to 8 bits;
 6. **compression** through a real encoder: JPEG (OpenCV) or H.264 (libx264 through PyAV).
 
@@ -253,16 +254,36 @@ def apply_haze(img: np.ndarray, distance_m: np.ndarray, *, extinction_per_km: fl
     return img
 
 
+POISSON_EXACT_BELOW_E = 100.0
+
+
 def add_noise(img: np.ndarray, rng: np.random.Generator, *, gaussian_std: float, full_well_e: float) -> np.ndarray:
     """Shot noise then read noise on gray levels (float32, 0..255, modified in place).
 
-    Shot noise: ``n_e ~ Poisson(I / 255 * full_well_e)``, ``I = n_e * 255 / full_well_e``
-    (0 = off). Read noise: ``+ N(0, gaussian_std^2)`` gray levels (0 = off).
+    Shot noise: ``n_e ~ Poisson(lambda)``, ``lambda = I / 255 * full_well_e``, ``I = n_e * 255 /
+    full_well_e`` (0 = off); drawn exactly where ``lambda < POISSON_EXACT_BELOW_E`` and as
+    ``N(lambda, lambda)`` above, the same mean and variance (the Poisson law's skewness there is
+    ``lambda^-1/2 < 0.1``, and one electron is under 0.1 gray level at a full well of 4000), drawn
+    with the read noise as one Gaussian of variance ``I 255 / full_well_e + gaussian_std^2``:
+    about four times cheaper than numpy's Poisson sampler on a bright frame. Read noise:
+    ``+ N(0, gaussian_std^2)`` gray levels (0 = off).
     """
     if full_well_e > 0:
-        scale = full_well_e / 255.0
-        electrons = rng.poisson(np.clip(img, 0, None).astype(np.float64) * scale)
-        img[...] = (electrons / scale).astype(np.float32)
+        scale = np.float32(full_well_e / 255.0)
+        signal = np.clip(img, 0, None)
+        dark = signal * scale < POISSON_EXACT_BELOW_E
+        # bright: shot and read noise in one Gaussian draw, variance I / scale + read^2 (gray levels)
+        std = signal * np.float32(1.0 / scale)
+        std += np.float32(gaussian_std) ** 2
+        np.sqrt(std, out=std)
+        noise = rng.standard_normal(img.shape, dtype=np.float32)
+        noise *= std
+        img[...] = signal + noise
+        if dark.any():
+            electrons = rng.poisson(signal[dark].astype(np.float64) * float(scale))
+            read = rng.standard_normal(electrons.shape, dtype=np.float32) * np.float32(gaussian_std)
+            img[dark] = (electrons / float(scale)).astype(np.float32) + read
+        return img
     if gaussian_std > 0:
         img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(gaussian_std)
     return img

@@ -517,9 +517,16 @@ class Sequence:
 
     @property
     def tracks(self) -> pd.DataFrame | None:
-        """tracks.csv; None where it is absent (real footage without a ground-truth file)."""
+        """tracks.csv; None where it is absent (real footage without a ground-truth file). A folder written
+        before the ``class`` and ``visible_fraction`` columns reads as all ``car`` with ``visible_fraction``
+        = ``visible``."""
         if self._tracks is None and (self.source != "real" or self.has_track_truth):
-            self._tracks = pd.read_csv(self.path / "tracks.csv")
+            df = pd.read_csv(self.path / "tracks.csv")
+            if "class" not in df.columns:
+                df["class"] = "car"
+            if "visible_fraction" not in df.columns and "visible" in df.columns:
+                df["visible_fraction"] = df["visible"].astype(float)
+            self._tracks = df
         return self._tracks
 
     @property

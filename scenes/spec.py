@@ -32,6 +32,8 @@ __all__ = [
     "TreesSpec",
     "WorldSpec",
     "VehiclesSpec",
+    "ClassMixSpec",
+    "TrafficSpec",
     "LightSpec",
     "MotionBlurSpec",
     "RollingShutterSpec",
@@ -50,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.0.0"
+GENERATOR_VERSION = "2.2.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -152,6 +154,7 @@ class TreesSpec(_Model):
     hedge_fraction: float = Field(0.35, ge=0, le=1, description="share of field and grass block sides with a hedge")
     crown_diameter_range_m: tuple[float, float] = (3.5, 8.0)
     height_range_m: tuple[float, float] = (5.0, 14.0)
+    conifer_fraction: float = Field(0.15, ge=0, le=1, description="share of single trees that are conifers")
 
     @model_validator(mode="after")
     def _ranges(self) -> "TreesSpec":
@@ -176,6 +179,8 @@ class WorldSpec(_Model):
     built_fraction: float = Field(0.2, ge=0, le=1, description="share of blocks that are built-up yards "
                                                                  "(where buildings stand)")
     wood_fraction: float = Field(0.1, ge=0, le=1, description="share of blocks that are woods")
+    crosswalk_fraction: float = Field(0.5, ge=0, le=1, description="share of junctions with zebra crossings "
+                                                                    "on every road into them")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
     trees: TreesSpec = Field(default_factory=TreesSpec)
 
@@ -209,6 +214,67 @@ class VehiclesSpec(_Model):
             raise ValueError(
                 "turning_fraction + accelerating_fraction + stopping_fraction: expected <= 1, "
                 f"got {total:g}")
+        return self
+
+
+class ClassMixSpec(_Model):
+    """Shares of the vehicle classes in moving traffic (relative weights; sizes in scenes/traffic.py CLASS_SIZES_M)."""
+
+    car: float = Field(0.82, ge=0, le=1)
+    van: float = Field(0.1, ge=0, le=1)
+    truck: float = Field(0.03, ge=0, le=1)
+    bus: float = Field(0.03, ge=0, le=1)
+    motorbike: float = Field(0.02, ge=0, le=1)
+
+    @model_validator(mode="after")
+    def _some(self) -> "ClassMixSpec":
+        total = self.car + self.van + self.truck + self.bus + self.motorbike
+        if total <= 0:
+            raise ValueError("car + van + truck + bus + motorbike: expected > 0 (some class must drive), got 0")
+        return self
+
+
+class TrafficSpec(_Model):
+    """Simulated city traffic (scenes/traffic.py), beside the ``vehicles:`` placed one by one.
+
+    Moving vehicles follow each other (Intelligent Driver Model, a hard minimum gap), queue at
+    traffic lights at junctions, turn and change lanes; parked cars stand along kerbs and in
+    parking lots; pedestrians walk on footpaths, cyclists ride in the kerb lane. Street trees
+    overhang the roads and footbridges cross them (occluders). Everything defaults to off (0).
+    """
+
+    density_per_lane_km: float = Field(0.0, ge=0, le=150,
+                                       description="moving (or queued) vehicles per km of lane; 0 = no traffic; "
+                                                   "free urban flow 10-25, dense city 30-60, jam 100+")
+    classes: ClassMixSpec = Field(default_factory=ClassMixSpec)
+    speed_range_mps: tuple[float, float] = Field((8.0, 14.0), description="desired speeds, drawn per vehicle")
+    turn_speed_mps: float = Field(6.0, gt=0, le=20, description="speed through a turn at a junction")
+    acceleration_mps2: float = Field(1.5, gt=0, le=6, description="IDM maximum acceleration a")
+    deceleration_mps2: float = Field(2.5, gt=0, le=9, description="IDM comfortable deceleration b")
+    min_gap_m: float = Field(2.0, ge=0.5, le=10, description="IDM jam distance s0 (bumper to bumper, standing)")
+    time_headway_s: float = Field(1.2, ge=0.3, le=5, description="IDM safe time headway T")
+    junctions: Literal["lights", "none"] = Field("lights", description="traffic lights (two phases: one axis "
+                                                                      "green, then the other; left turns give way) "
+                                                                      "or uncontrolled")
+    green_s: float = Field(15.0, ge=2, le=120, description="green time of each phase")
+    clearance_s: float = Field(3.0, ge=0, le=20, description="amber and all-red between two phases")
+    turning_fraction: float = Field(0.3, ge=0, le=1, description="share of junction crossings that turn")
+    lane_change_fraction: float = Field(0.2, ge=0, le=1, description="share of multi-lane legs with a lane change")
+    warmup_s: float = Field(20.0, ge=0, le=300, description="simulated before frame 0 (queues form)")
+    kerb_parking_per_km: float = Field(0.0, ge=0, le=160, description="parked vehicles per km of kerb (each side "
+                                                                       "of roads wide enough for a parking lane)")
+    lot_fill_fraction: float = Field(0.0, ge=0, le=1, description="share of parking-lot stalls taken")
+    pedestrians_per_km: float = Field(0.0, ge=0, le=400, description="pedestrians per km of footpath")
+    cyclists_per_lane_km: float = Field(0.0, ge=0, le=40, description="cyclists per km of kerb lane")
+    street_trees_per_km: float = Field(0.0, ge=0, le=80, description="trees per km of kerb whose crowns "
+                                                                      "overhang the road")
+    bridges: int = Field(0, ge=0, le=3, description="footbridges across roads in view")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "TrafficSpec":
+        lo, hi = self.speed_range_mps
+        if not 0 < lo <= hi:
+            raise ValueError(f"speed_range_mps: expected 0 < low <= high, got ({lo}, {hi})")
         return self
 
 
@@ -324,6 +390,7 @@ class SceneSpec(_Model):
     camera: CameraSpec = Field(default_factory=CameraSpec)
     world: WorldSpec = Field(default_factory=WorldSpec)
     vehicles: VehiclesSpec = Field(default_factory=VehiclesSpec)
+    traffic: TrafficSpec = Field(default_factory=TrafficSpec)
     light: LightSpec = Field(default_factory=LightSpec)
     sensor: SensorSpec = Field(default_factory=SensorSpec)
 
@@ -397,6 +464,15 @@ class SceneSpec(_Model):
             raise ValueError(
                 f"sensor.compression.codec: h264 (4:2:0) needs an even image size, got "
                 f"{img.width_px}x{img.height_px}")
+        tr = self.traffic
+        if tr.density_per_lane_km or tr.cyclists_per_lane_km:
+            step_px = tr.speed_range_mps[1] / img.fps / gsd
+            limit_px = MAX_VEHICLE_STEP_FRACTION * side_px
+            if step_px > limit_px:
+                raise ValueError(
+                    f"traffic.speed_range_mps: a vehicle at {tr.speed_range_mps[1]:g} m/s moves {step_px:.1f} px "
+                    f"per frame at {img.fps:g} fps and {gsd:.3f} m/px; expected <= {limit_px:.1f} px "
+                    f"({MAX_VEHICLE_STEP_FRACTION:g} of the image's smaller side): too fast for the scene")
         v = self.vehicles
         if v.count:
 

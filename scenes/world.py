@@ -27,7 +27,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from scenes.car_paint import GLASS_RGB, car_colour
 from scenes.motion import CameraPath, VehiclePath, polyline_arc_lengths
+from scenes.textures import TILE_PX, MaterialPattern, material_tile
+from scenes.vegetation import (CONIFER_VARIANTS, CROWN_BASES, canopy_mesh, canopy_texture, conifer_lobe, crown_lobes,
+                               crown_texture, hedge_lobes, tree_shadow_shapes)
 
 __all__ = [
     "Box",
@@ -51,15 +55,12 @@ __all__ = [
 TEXELS_PER_PIXEL = 1.5
 MAX_TEXTURE_PX = 4096  # per ground tile uploaded to GL
 MAX_GROUND_TEXELS = 60_000_000
-ROAD_RGB = (84, 84, 88)
+ROAD_RGB = (108, 108, 112)  # aged asphalt, lighter than new (KIT AIS roads: about 125)
 MARK_RGB = (212, 212, 204)
-# muted colours, as a camera sees them through some air: nothing fully saturated
-CAR_COLOURS = [(225, 225, 222), (232, 232, 228), (30, 30, 34), (45, 47, 52), (150, 152, 156), (175, 176, 180),
-               (160, 40, 38), (40, 62, 130), (52, 84, 60), (200, 170, 60), (110, 80, 60), (200, 110, 40)]
-GLASS_RGB = (38, 44, 52)
+KERB_RGB = (170, 168, 160)
 # every building shares one facade and one roof texture (one draw each); roofs differ by a tint
 ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92))
-N_CROWN_VARIANTS = 2  # crown colours: each one instanced draw
+N_CROWN_VARIANTS = len(CROWN_BASES)  # crown colours (the last ones conifers'), all in one draw
 ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
 ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
 BUILDING_GAP_M = 1.5  # between two buildings' footprints
@@ -105,8 +106,10 @@ class Building:
 
 @dataclass(frozen=True)
 class Tree:
-    """A tree or hedge bush: crown an ellipsoid of radius ``crown_radius_m`` and vertical semi-axis
-    ``crown_half_height_m`` whose top is at ``height_m``; trunk under it. Always above the ground."""
+    """A tree or hedge bush: a crown reaching ``crown_radius_m`` across and ``crown_half_height_m`` down
+    from its top at ``height_m``, made of ``lobes`` ``(dx, dy, zc, rx, ry, rz)`` (ellipsoids in the tree's
+    frame; for a conifer one cone: base height, radii, length: :mod:`scenes.vegetation`); trunk under it.
+    Always above the ground."""
 
     x_m: float
     y_m: float
@@ -117,6 +120,9 @@ class Tree:
     bush: bool = False
     yaw_rad: float = 0.0  # hedge bushes are stretched along their row
     stretch: float = 1.0  # radius along the row / crown_radius_m
+    lobes: tuple = ()
+    conifer: bool = False
+    overhangs_road: bool = False  # a street tree (scenes.traffic): its crown reaches over the road, high up
 
     @property
     def reach_m(self) -> float:
@@ -137,12 +143,16 @@ class World:
     stalls: list[tuple[float, float, float]] = field(default_factory=list)  # parking: x, y, theta
     wall_textures: list[np.ndarray] = field(default_factory=list)
     roof_textures: list[np.ndarray] = field(default_factory=list)
-    crown_textures: list[np.ndarray] = field(default_factory=list)
+    crown_textures: list[np.ndarray] = field(default_factory=list)  # one: gray leaves, tinted per crown
+    canopies: list[dict] = field(default_factory=list)  # woods: height-field meshes (scenes.vegetation)
+    canopy_texture: np.ndarray | None = None
+    overpasses: list[Building] = field(default_factory=list)  # footbridges over roads (scenes.traffic)
 
     @property
     def top_m(self) -> float:
         """Height of the highest static thing (0 for a bare ground)."""
-        return max([b.top_m for b in self.buildings] + [t.height_m for t in self.trees], default=0.0)
+        return max([b.top_m for b in self.buildings + self.overpasses] + [t.height_m for t in self.trees]
+                   + [c["top_m"] for c in self.canopies], default=0.0)
 
     def adjacency(self) -> dict[int, list[tuple[int, int]]]:
         """node -> [(road index, other node)] over the road graph."""
@@ -239,8 +249,10 @@ def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
 
 # value-noise octaves (cell size in metres, weight) that shade the ground: weak at 40 m (no cloudy
 # blotches: photographs of fields are fairly even), strongest at 1 m and at the pixel (grain to track)
-NOISE_OCTAVES_M = ((40.0, 0.1), (10.0, 0.12), (3.0, 0.12), (1.0, 0.12))
-GRAIN_AMP = 0.1
+# (the materials of scenes/textures.py carry each surface's own detail; this shade adds light and soil
+# moisture over everything, weaker than it was at 40 m, and the smooth grain that flow needs)
+NOISE_OCTAVES_M = ((40.0, 0.05), (10.0, 0.04), (3.0, 0.04), (1.0, 0.1))
+GRAIN_AMP = 0.08
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
 _DRAW_ROWS = 1024  # noise lattices are drawn this many rows at a time (no float64 copy of a big one)
@@ -318,7 +330,8 @@ class _Rows:
 class _Paint:
     """Paint ``value`` on the texels ``[rows, cols]`` (slices), through ``alpha`` (uint8 coverage over
     those texels, or None for all of them). ``mode`` ``set`` blends toward ``value`` (an RGB triple,
-    a grey level, or a pattern ``f(X, Y) -> (h, w, 3)``); ``mul`` multiplies by it (shadows)."""
+    a grey level, or a pattern ``f(X, Y) -> (..., 3)`` of texel centres' coordinates in metres, any
+    shape); ``mul`` multiplies by it (shadows)."""
 
     rows: slice
     cols: slice
@@ -334,6 +347,24 @@ class _Paint:
             return
         local = slice(a - r0, b - r0)
         value = self.value
+        if callable(value) and self.alpha is not None and (
+                4 * np.count_nonzero(alpha := self.alpha[a - self.rows.start:b - self.rows.start]) < alpha.size):
+            # a sparse shape's pattern is evaluated on the covered texels only (a diagonal road's box is
+            # mostly empty); a dense one's on its whole box, below
+            rr, cc = np.nonzero(alpha)
+            if not len(rr):
+                return
+            v = value(xs[self.cols][cc], ys[a:b][rr]).astype(np.float32)
+            w = alpha[rr, cc].astype(np.float32)[:, None]
+            w *= np.float32(1 / 255)
+            region = buf[local, self.cols]
+            if self.mode == "mul":
+                region[rr, cc] *= 1 + w * (v - 1)
+            else:
+                px = region[rr, cc]
+                px += w * (v - px)
+                region[rr, cc] = px
+            return
         if callable(value):
             X, Y = np.meshgrid(xs[self.cols], ys[a:b])
             value = value(X, Y).astype(np.float32)
@@ -384,14 +415,48 @@ class _Canvas:
         if mask.any():
             self.ops.append(_Paint(slice(r0, r1), slice(c0, c1), value, mask, mode))
 
-    def polygon(self, polys_m: list[np.ndarray], value, *, mode: str = "set", opacity: float = 1.0) -> None:
-        crop = self._crop(np.vstack(polys_m), 0.0)
+    def polygon(self, polys_m: list[np.ndarray], value, *, mode: str = "set", opacity: float = 1.0,
+                feather_m: float = 0.0) -> None:
+        """Fill polygons; ``feather_m`` > 0 softens their edges (a Gaussian of that sigma on the coverage),
+        so that one patch of ground blends into the next."""
+        crop = self._crop(np.vstack(polys_m), 3.0 * feather_m)
         if crop is None:
             return
         r0, r1, c0, c1 = crop
         mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
         cv2.fillPoly(mask, [self._fixed(p, r0, c0) for p in polys_m], 255, cv2.LINE_AA, self.SHIFT)
+        if feather_m > 0:
+            mask = cv2.GaussianBlur(mask, (0, 0), feather_m / self.texel)
         self._add(crop, mask, value, mode, opacity)
+
+    def union(self, value, *, polys_m: list[np.ndarray] = (), ellipses=None, mode: str = "set",
+              opacity: float = 1.0) -> None:
+        """Polygons and ellipses ``(centres (E, 2), semi-axes (E, 2), angles (E,) degrees)`` as one shape:
+        where they overlap they are painted once (a shadow cast by two things is no darker)."""
+        pts = [np.asarray(p, np.float64).reshape(-1, 2) for p in polys_m]
+        pad = 0.0
+        if ellipses is not None and len(ellipses[0]):
+            pad = float(np.max(ellipses[1]))
+            pts.append(np.asarray(ellipses[0], np.float64).reshape(-1, 2))
+        if not pts:
+            return
+        crop = self._crop(np.vstack(pts), pad)
+        if crop is None:
+            return
+        r0, r1, c0, c1 = crop
+        mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
+        for p in polys_m:  # one by one: fillPoly of several contours would leave their overlaps out
+            cv2.fillPoly(mask, [self._fixed(p, r0, c0)], 255, cv2.LINE_AA, self.SHIFT)
+        if ellipses is not None:
+            self._draw_ellipses(mask, r0, c0, *ellipses)
+        self._add(crop, mask, value, mode, opacity)
+
+    def _draw_ellipses(self, mask, r0, c0, centres_m, axes_m, angles_deg) -> None:
+        one = 1 << self.SHIFT
+        for c, ax, an in zip(self._fixed(np.asarray(centres_m, np.float64).reshape(-1, 2), r0, c0),
+                             np.asarray(axes_m).reshape(-1, 2), angles_deg):
+            axes = (max(1, int(round(ax[0] / self.texel * one))), max(1, int(round(ax[1] / self.texel * one))))
+            cv2.ellipse(mask, (int(c[0]), int(c[1])), axes, float(an), 0, 360, 255, -1, cv2.LINE_AA, self.SHIFT)
 
     def lines(self, lines_m: list[np.ndarray], width_m: float, value, *, mode: str = "set",
               opacity: float = 1.0) -> None:
@@ -418,10 +483,7 @@ class _Canvas:
             return
         r0, r1, c0, c1 = crop
         mask = np.zeros((r1 - r0, c1 - c0), np.uint8)
-        one = 1 << self.SHIFT
-        for c, ax, an in zip(self._fixed(centres_m, r0, c0), np.asarray(axes_m).reshape(-1, 2), angles_deg):
-            axes = (max(1, int(round(ax[0] / self.texel * one))), max(1, int(round(ax[1] / self.texel * one))))
-            cv2.ellipse(mask, (int(c[0]), int(c[1])), axes, float(an), 0, 360, 255, -1, cv2.LINE_AA, self.SHIFT)
+        self._draw_ellipses(mask, r0, c0, centres_m, axes_m, angles_deg)
         self._add(crop, mask, value, mode, opacity)
 
 
@@ -586,10 +648,12 @@ def field_rows(rng: np.random.Generator, base: np.ndarray, along_rad: float) -> 
     return _Rows(np.asarray(base, np.float64), period, float(ang), amp, waves)
 
 
+GROUND_MATERIALS = ("grass", "meadow", "soil", "gravel", "yard", "wood", "lawn", "verge", "paving", "asphalt",
+                    "crop")
 LAND = {
     "wheat": (160, 148, 106), "crop": (104, 120, 72), "young": (126, 132, 88), "ploughed": (116, 98, 80),
     "grass": (94, 110, 72), "meadow": (112, 118, 80), "soil": (128, 110, 88), "wood": (64, 74, 50),
-    "concrete": (136, 134, 128), "asphalt": (90, 90, 94),
+    "concrete": (136, 134, 128), "asphalt": (108, 108, 112),
 }
 
 
@@ -627,6 +691,13 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
         return (poly[:, 0].max() > box[0] and poly[:, 0].min() < box[2]
                 and poly[:, 1].max() > box[1] and poly[:, 1].min() < box[3])
 
+    # -- materials: one tile each, sampled by every block with its own offset and tint -----------
+    tiles = {name: material_tile(name, rng, texel) for name in GROUND_MATERIALS}
+
+    def material(name: str, gain=(1.0, 1.0, 1.0), under=None) -> MaterialPattern:
+        off = tuple(int(v) for v in rng.integers(0, TILE_PX, 2))
+        return MaterialPattern(tiles[name], x0, y0, texel, off, tuple(float(g) for g in gain), under)
+
     # -- land use, block by block ------------------------------------------------------------
     stalls: list[tuple[float, float, float]] = []
     kinds: dict[tuple[int, int], str] = {}
@@ -647,63 +718,68 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
         if kind == "field":
             crop = ["wheat", "crop", "young", "ploughed"][int(rng.integers(0, 4))]
             e = poly[np.argmax(np.hypot(*(poly - poly[0]).T))] - poly[0]
-            canvas.polygon([poly], field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0])))
+            rows = field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0]))
+            canvas.polygon([poly], material("crop", under=rows), feather_m=0.5)
         elif kind == "parking":
-            canvas.polygon([poly], np.asarray(LAND["concrete"]) * jitter)
+            canvas.polygon([poly], material("yard", jitter), feather_m=0.5)
             yaw = math.atan2(*(poly[1] - poly[0])[::-1])
             rect = _inner_rect(poly, yaw, w_major / 2 + 1.0)
             if rect is not None:
-                stalls += _parking_lot(canvas, rect, yaw, rng)
+                stalls += _parking_lot(canvas, rect, yaw, rng, material("asphalt", rng.uniform(0.9, 1.1) * np.ones(3)))
         elif kind == "yard":
-            canvas.polygon([poly], np.asarray(LAND["concrete"]) * jitter)
-            # lawns: irregular blobs, not discs
-            blobs = []
+            canvas.polygon([poly], material("yard", jitter), feather_m=0.5)
+            # lawns and gravel: irregular blobs with soft edges, not discs
             for _ in range(int(rng.integers(1, 4))):
-                centre = poly.mean(axis=0) + rng.uniform(-0.3, 0.3, 2) * (poly.max(0) - poly.min(0))
-                ang = np.sort(rng.uniform(0, 2 * math.pi, 9))
-                rad = rng.uniform(4, 12) * rng.uniform(0.6, 1.0, 9)
-                blobs.append(centre + np.column_stack([np.cos(ang), np.sin(ang)]) * rad[:, None])
-            canvas.polygon(blobs, np.asarray(LAND["grass"]) * rng.uniform(0.85, 1.05))
+                what = "gravel" if rng.uniform() < 0.25 else "lawn"
+                canvas.polygon([_blob(poly, rng, 4, 12)], material(what, rng.uniform(0.88, 1.05) * np.ones(3)),
+                               feather_m=float(rng.uniform(0.3, 0.9)))
         else:
-            canvas.polygon([poly], np.asarray(LAND[kind]) * jitter)
+            canvas.polygon([poly], material(kind, jitter), feather_m=0.5)
+            if kind in ("grass", "meadow", "soil"):
+                # patches of the neighbouring materials (worn, overgrown, damp), blending in over metres
+                others = [m for m in ("grass", "meadow", "soil") if m != kind]
+                for _ in range(int(rng.integers(0, 4))):
+                    other = others[int(rng.integers(0, len(others)))]
+                    canvas.polygon([_blob(poly, rng, 5, 16)], material(other, jitter),
+                                   opacity=float(rng.uniform(0.5, 0.9)), feather_m=float(rng.uniform(1.0, 3.0)))
 
-    # -- buildings, trees, hedges -------------------------------------------------------------
+    # -- buildings, trees, hedges, woods ----------------------------------------------------------
     buildings = _place_buildings(ws.buildings, cells, kinds, seen, road_index, phi, rng)
     trees = _place_trees(ws, cells, kinds, edges, road_index, buildings, extent, rng)
+    overpasses: list[Building] = []
+    if spec.traffic.street_trees_per_km > 0 or spec.traffic.bridges > 0:
+        from scenes.traffic import street_furniture  # scenes.traffic builds on this module
 
-    # -- roads on top: asphalt, patches, worn markings, junctions -------------------------------
-    for r in roads:
-        canvas.lines([r.centre_m], r.width_m, ROAD_RGB)
-    for r in roads:
-        n = int(rng.poisson(polyline_arc_lengths(r.centre_m)[-1] / 40.0))
-        if n:
-            at = r.centre_m[rng.integers(0, len(r.centre_m), n)] + rng.uniform(-1, 1, (n, 2)) * r.width_m / 4
-            canvas.ellipses(at, rng.uniform(0.6, 2.2, (n, 2)), rng.uniform(0, 180, n),
-                            np.asarray(ROAD_RGB) * rng.uniform(0.8, 1.15), opacity=0.8)
-    for r in roads:
-        if not r.major:
-            continue
-        edge = r.width_m / 2 - 0.35
-        canvas.lines([_offset_right(r.centre_m, edge), _offset_right(r.centre_m, -edge)], 0.2, MARK_RGB,
-                     opacity=float(rng.uniform(0.55, 0.8)))
-        s = polyline_arc_lengths(r.centre_m)
-        dashes = []
-        for a in np.arange(rng.uniform(0, 9), s[-1] - 3.0, 9.0):  # 3 m dash, 6 m gap
-            t = np.linspace(a, a + 3.0, 4)
-            dashes.append(np.stack([np.interp(t, s, r.centre_m[:, 0]), np.interp(t, s, r.centre_m[:, 1])], axis=1))
-        canvas.lines(dashes, 0.15, MARK_RGB, opacity=float(rng.uniform(0.5, 0.8)))
-    # junctions: plain asphalt over the ends of the markings
-    deg = np.bincount(np.array([r.nodes for r in roads]).ravel(), minlength=len(nodes)) if roads else []
-    junctions = [k for k in range(len(nodes)) if deg[k] >= 3]
-    if junctions:
-        radius = [0.55 * max(r.width_m for k, r in enumerate(roads) if n in r.nodes) for n in junctions]
-        canvas.ellipses(nodes[junctions], np.repeat(np.array(radius)[:, None], 2, axis=1), np.zeros(len(junctions)),
-                        ROAD_RGB)
+        # its own stream (the seed's sixth child), so the rest of the world does not change with it
+        rng_street = np.random.Generator(np.random.PCG64(np.random.SeedSequence(spec.seed).spawn(6)[5]))
+        trees, overpasses = street_furniture(spec, roads, buildings, trees, seen, rng_street)
+    canopies = []
+    if ws.trees.wood_density_per_ha > 0:
+        for key, kind in kinds.items():
+            if kind == "wood":
+                c = canopy_mesh(cells[key][0], rng, inset_m=ws.road_width_m / 2 + 2.5,
+                                density_per_ha=ws.trees.wood_density_per_ha,
+                                crown_diameter_range_m=ws.trees.crown_diameter_range_m,
+                                height_range_m=ws.trees.height_range_m)
+                if c is not None:
+                    canopies.append(c)
+
+    # -- verges, sidewalks, roads, kerbs, markings, junctions (scenes.streets) ---------------------
+    from scenes.streets import paint_streets  # here: scenes.streets builds on this module's helpers
+
+    paint_streets(canvas, roads=roads, nodes_m=nodes, cells=cells, kinds=kinds, edges=edges,
+                  widths_m=(w_major, w_minor), material=material, crosswalk_fraction=ws.crosswalk_fraction,
+                  rng=rng)
 
     # -- painted shadows of the static world (flat light only: sun light casts real ones) ------
     light = spec.light
     if light.mode == "flat" and light.shadows:
-        _paint_shadows(canvas, buildings, trees, light)
+        bridge_shadows = []
+        if overpasses:
+            from scenes.traffic import overpass_shadow_polygons
+
+            bridge_shadows = overpass_shadow_polygons(overpasses, light)
+        _paint_shadows(canvas, buildings, trees, canopies, light, extra_polys_m=bridge_shadows)
 
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
@@ -713,16 +789,28 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     del shade
 
     wall_textures, roof_textures = _building_textures(rng, texel)
-    crown_textures = [_crown_texture(rng, base) for base in ((58, 82, 44), (82, 98, 56))]
+    crown_textures = [crown_texture(rng, (255, 255, 255))]  # leaves in gray: each crown's colour comes on top
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
-                 wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures)
+                 wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures,
+                 canopies=canopies, canopy_texture=canopy_texture(rng) if canopies else None,
+                 overpasses=overpasses)
 
 
-def _parking_lot(canvas: _Canvas, rect, yaw: float, rng: np.random.Generator) -> list[tuple[float, float, float]]:
-    """Asphalt, rows of perpendicular stalls 2.6 m x 5 m either side of 6.5 m aisles, worn lines."""
+def _blob(poly: np.ndarray, rng: np.random.Generator, r_lo_m: float, r_hi_m: float) -> np.ndarray:
+    """An irregular blob (9, 2) somewhere in the block ``poly``, radii ``r_lo_m``-``r_hi_m``."""
+    centre = poly.mean(axis=0) + rng.uniform(-0.3, 0.3, 2) * (poly.max(0) - poly.min(0))
+    ang = np.sort(rng.uniform(0, 2 * math.pi, 9))
+    rad = rng.uniform(r_lo_m, r_hi_m) * rng.uniform(0.6, 1.0, 9)
+    return centre + np.column_stack([np.cos(ang), np.sin(ang)]) * rad[:, None]
+
+
+def _parking_lot(canvas: _Canvas, rect, yaw: float, rng: np.random.Generator,
+                 asphalt) -> list[tuple[float, float, float]]:
+    """Asphalt (the paint value ``asphalt``), rows of perpendicular stalls 2.6 m x 5 m either side of
+    6.5 m aisles, worn lines."""
     cx, cy, sx, sy = rect
-    canvas.polygon([_rect_corners(cx, cy, sx, sy, yaw)], np.asarray(LAND["asphalt"]) * rng.uniform(0.9, 1.1))
+    canvas.polygon([_rect_corners(cx, cy, sx, sy, yaw)], asphalt)
     c, s = math.cos(yaw), math.sin(yaw)
     ex, ey = np.array([c, s]), np.array([-s, c])
     origin = np.array([cx, cy]) - ex * sx / 2 - ey * sy / 2
@@ -801,27 +889,35 @@ def _building_parts(sx: float, sy: float, h: float, rng: np.random.Generator) ->
 
 def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: list[Building], extent,
                  rng: np.random.Generator) -> list[Tree]:
-    """Trees in woods (dense) and on grass and yards (sparse); hedges of bushes along some field and
-    grass block sides. Each trunk keeps clear of roads and buildings by the crown's radius."""
+    """Single trees on grass, meadows and yards (deciduous with lobed crowns, or conifers); hedges of
+    bushes along some field and grass block sides. (Woods are canopies: :func:`scenes.vegetation.canopy_mesh`.)
+    Each trunk keeps clear of roads and buildings by the crown's reach."""
     ts = ws.trees
     x0, y0, x1, y1 = extent
-    cand: list[tuple] = []  # x, y, height, radius, half height, variant, bush, yaw, stretch
+    cand: list[dict] = []
+    n_leafy = N_CROWN_VARIANTS - len(CONIFER_VARIANTS)
     for key, kind in kinds.items():
         poly, ks = cells[key]
         area_ha = abs(cv2.contourArea(poly.astype(np.float32))) / 1e4
-        density = {"wood": ts.wood_density_per_ha, "grass": ts.density_per_ha, "meadow": ts.density_per_ha,
-                   "yard": ts.density_per_ha}.get(kind, 0.0)
+        density = ts.density_per_ha if kind in ("grass", "meadow", "yard") else 0.0
         n = int(rng.poisson(density * area_ha))
         lo, hi = poly.min(axis=0), poly.max(axis=0)
-        variant_base = int(rng.integers(0, N_CROWN_VARIANTS))
         for _ in range(n):
             x, y = rng.uniform(lo, hi)
             d = float(rng.uniform(*ts.crown_diameter_range_m))
             h = float(rng.uniform(max(ts.height_range_m[0], 0.6 * d), max(ts.height_range_m[1], 0.6 * d)))
-            v = variant_base if kind == "wood" and rng.uniform() < 0.7 else int(rng.integers(0, N_CROWN_VARIANTS))
-            if kind == "wood":  # a closed canopy of big crowns
-                d *= 1.3
-            cand.append((x, y, h, d / 2, min(max(0.5 * d, 0.36 * h), 0.45 * h), v, False, 0.0, 1.0))
+            if rng.uniform() < ts.conifer_fraction:  # narrow and tall, the crown down to near the ground
+                r, base = 0.3 * d, float(rng.uniform(0.4, 2.0))
+                h = 1.2 * h
+                cand.append(dict(x_m=float(x), y_m=float(y), height_m=h, crown_radius_m=r,
+                                 crown_half_height_m=(h - base) / 2,
+                                 variant=int(CONIFER_VARIANTS[int(rng.integers(0, len(CONIFER_VARIANTS)))]),
+                                 lobes=conifer_lobe(height_m=h, radius_m=r, crown_base_m=base), conifer=True))
+            else:
+                half = min(max(0.5 * d, 0.36 * h), 0.45 * h)
+                cand.append(dict(x_m=float(x), y_m=float(y), height_m=h, crown_radius_m=d / 2, crown_half_height_m=half,
+                                 variant=int(rng.integers(0, n_leafy)),
+                                 lobes=crown_lobes(rng, height_m=h, radius_m=d / 2, half_height_m=half)))
         if kind in ("field", "grass", "meadow"):
             for side in range(4):
                 if rng.uniform() >= ts.hedge_fraction:
@@ -833,50 +929,48 @@ def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: lis
                 s = polyline_arc_lengths(row)
                 if s[-1] < 5:
                     continue
-                # bushes 1.6-2.4 m wide, stretched to 2.2x along the row, 2.4 m apart: a closed hedge
+                # bushes 1.6-2.4 m wide, 2.2x as long along the row, 2.4 m apart: a closed hedge of lobes
                 at = np.arange(0.0, s[-1], 2.4)
                 hx, hy = np.interp(at, s, row[:, 0]), np.interp(at, s, row[:, 1])
                 tx, ty = np.gradient(hx), np.gradient(hy)
+                v = int(rng.integers(0, n_leafy))
                 for x, y, dx, dy in zip(hx, hy, tx, ty):
                     d = float(rng.uniform(1.6, 2.4))
                     h = float(rng.uniform(1.6, 2.6))
-                    cand.append((float(x), float(y), h, d / 2, 0.45 * h, int(rng.integers(0, N_CROWN_VARIANTS)), True,
-                                 math.atan2(dy, dx), 2.2))
+                    yaw = math.atan2(dy, dx)
+                    cand.append(dict(x_m=float(x), y_m=float(y), height_m=h, crown_radius_m=d / 2,
+                                     crown_half_height_m=0.45 * h, variant=v, bush=True, yaw_rad=yaw, stretch=2.2,
+                                     lobes=hedge_lobes(rng, height_m=h, radius_m=d / 2, length_m=2.2 * d, yaw_rad=yaw)))
     if not cand:
         return []
-    arr = np.array([(c[0], c[1], c[2], c[3] * max(1.0, c[8])) for c in cand])
+    arr = np.array([(c["x_m"], c["y_m"], c["crown_radius_m"] * max(1.0, c.get("stretch", 1.0))) for c in cand])
     inside = (arr[:, 0] > x0) & (arr[:, 0] < x1) & (arr[:, 1] > y0) & (arr[:, 1] < y1)
-    ok = inside & (road_index.clearance(arr[:, :2]) > arr[:, 3] + 0.5)
+    ok = inside & (road_index.clearance(arr[:, :2]) > arr[:, 2] + 0.5)
     for b in buildings:
-        ok &= point_rect_distance(arr[:, :2], b.corners_xy()) > arr[:, 3] + 0.5
-    return [Tree(x_m=c[0], y_m=c[1], height_m=c[2], crown_radius_m=c[3], crown_half_height_m=c[4], variant=c[5],
-                 bush=c[6], yaw_rad=c[7], stretch=c[8]) for c, keep in zip(cand, ok) if keep]
+        ok &= point_rect_distance(arr[:, :2], b.corners_xy()) > arr[:, 2] + 0.5
+    return [Tree(**c) for c, keep in zip(cand, ok) if keep]
 
 
-def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree], light) -> None:
-    """Darken the ground where the sun's light is blocked by a building or a tree crown (flat light)."""
+def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree], canopies: list[dict],
+                   light, *, extra_polys_m=()) -> None:
+    """Darken the ground to ``light.ambient`` of its sunlit value where a building, a tree (crown lobes
+    and trunk, from the trunk's base on: :func:`scenes.vegetation.tree_shadow_shapes`), a wood's canopy
+    or one of ``extra_polys_m`` (ground polygons (P, 2): footbridges' shadows) blocks the sun (flat light).
+    All in one mask: where two shadows overlap the ground is no darker."""
     to_sun = sun_direction(light.sun_elevation_deg, light.sun_azimuth_deg)
     away = -to_sun[:2] / max(1e-9, to_sun[2])  # ground offset of a point's shadow per metre of height
-    k = float(light.ambient)
     polys = []
     for b in buildings:
         c = b.corners_xy()
         hull = cv2.convexHull(np.vstack([c, c + away * b.size[2]]).astype(np.float32))[:, 0]
         polys.append(hull.astype(np.float64))
-    if polys:
-        canvas.polygon(polys, k, mode="mul")
-    if trees:
-        centres = np.array([[t.x_m, t.y_m] for t in trees]) + np.array(
-            [away * (t.height_m - t.crown_half_height_m) for t in trees])
-        stretch = min(2.5, 1.0 / max(0.3, to_sun[2]))
-        ang = math.degrees(math.atan2(away[1], away[0])) if np.hypot(*away) > 1e-6 else 0.0
-        round_ = np.array([not t.bush for t in trees])
-        axes = np.array([[t.crown_radius_m * stretch * 0.9, t.crown_radius_m * 0.95] for t in trees])
-        canvas.ellipses(centres[round_], axes[round_], np.full(int(round_.sum()), ang), k, mode="mul")
-        # a hedge bush's shadow: its own ellipse, along its row, moved away from the sun
-        bushes = [t for t in trees if t.bush]
-        canvas.ellipses(centres[~round_], np.array([[t.reach_m, t.crown_radius_m * 1.2] for t in bushes]),
-                        np.array([math.degrees(t.yaw_rad) for t in bushes]), k, mode="mul")
+    for cp in canopies:
+        # the outline swept along the sun by the rim's height: the outline, its shadow, the quads between
+        o, off = cp["outline"], away * cp["edge_height_m"]
+        polys += [o, o + off] + [np.array([o[i], o[(i + 1) % len(o)], o[(i + 1) % len(o)] + off, o[i] + off])
+                                 for i in range(len(o))]
+    ellipses, tree_polys = tree_shadow_shapes(trees, to_sun)
+    canvas.union(float(light.ambient), polys_m=polys + list(extra_polys_m) + tree_polys, ellipses=ellipses, mode="mul")
 
 
 def _building_textures(rng: np.random.Generator, texel: float):
@@ -895,14 +989,6 @@ def _building_textures(rng: np.random.Generator, texel: float):
     g = 1.0 + 0.5 * _multiscale_noise(rng, (n, n), 0.1)
     roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
     return [wall], [roof]
-
-
-def _crown_texture(rng: np.random.Generator, base) -> np.ndarray:
-    """Leafy green noise, 64 x 64, mapped across a crown from above."""
-    n = 64
-    g = 1.0 + 0.9 * _multiscale_noise(rng, (n, n), 0.15)
-    tex = np.asarray(base, np.float32) * np.clip(g, 0.3, 1.8)[..., None]
-    return np.clip(np.rint(tex), 0, 255).astype(np.uint8)
 
 
 # -- vehicles -----------------------------------------------------------------------------
@@ -1081,7 +1167,7 @@ def place_vehicles(spec, world: World, path: CameraPath, rng: np.random.Generato
         k = int(rng.integers(0, img.n_frames))
         t_k = k / img.fps
         target = view_centre[k] + rng.uniform(-1, 1, 2) * np.array([half_w_m, half_h_m])
-        colour = CAR_COLOURS[int(rng.integers(0, len(CAR_COLOURS)))]
+        colour = car_colour(rng)
         common = dict(vehicle_id=i + 1, size_m=(vs.length_m, vs.width_m, vs.height_m),
                       body_rgb=tuple(int(c) for c in colour), cabin_rgb=GLASS_RGB)
         backwards = bool(rng.integers(0, 2))

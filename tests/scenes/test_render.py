@@ -71,3 +71,55 @@ def test_frame_read_back_gives_pyrenders_colour_and_depth_exactly(light):
     assert depth.dtype == np.float32
     np.testing.assert_array_equal(depth, depth_ref)
     assert (depth > 0).mean() > 0.5
+
+
+def _bands_of(gen, r0: int, rows: int):
+    """Render rows r0..r0+rows of frame 1 (a band view) with culling on and with every vehicle drawn."""
+    from scenes.render import SceneRenderer
+
+    R, C = gen.path.R[1], gen.path.C[1]
+    K = gen.path.K
+    Ms = gen.vehicle_matrices(float(gen.path.t_s[1]))
+    band = SceneRenderer(gen.spec, gen.world, gen.vehicles, K, znear_m=0.5, zfar_m=5000.0,
+                         view_size_px=(gen.spec.image.width_px, rows))
+    view = {"cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]) - r0}
+    band.render_view(R, C, Ms, **view)  # draws the shadow map (sun), with every vehicle
+    culled = band.render_view(R, C, Ms, **view, shadow_map=False)
+    hidden = band.culled
+    band._in_view = lambda *a, **k: np.ones(len(Ms), bool)  # every road user drawn
+    drawn = band.render_view(R, C, Ms, **view, shadow_map=False)
+    assert band.culled == 0
+    return culled, drawn, hidden
+
+
+@pytest.mark.parametrize("light", ["flat", "sun"])
+def test_vehicles_outside_a_band_are_not_drawn_and_the_pixels_are_the_same(light):
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 2, "light.mode": light, "vehicles.count": 12,
+                                              "vehicles.parked_fraction": 0.0})
+    gen = SceneGenerator(spec)
+    hidden_any = 0
+    for r0 in range(0, spec.image.height_px, 16):
+        (rgb, depth), (rgb_ref, depth_ref), hidden = _bands_of(gen, r0, 16)
+        np.testing.assert_array_equal(rgb, rgb_ref)
+        np.testing.assert_array_equal(depth, depth_ref)
+        hidden_any += hidden
+    assert hidden_any > 0  # the culling did hide vehicles (else the test shows nothing)
+
+
+def test_a_reused_shadow_map_is_the_one_drawn_and_another_scene_forces_a_new_one():
+    spec = load_scene_spec("tiny", overrides={"image.n_frames": 3, "light.mode": "sun", "light.shadows": True,
+                                              "world.buildings.count": 3})
+    gen = SceneGenerator(spec)
+    other = SceneGenerator(load_scene_spec("tiny", overrides={"image.n_frames": 3, "light.mode": "sun",
+                                                               "seed": 99}))
+    args = (gen.path.R[1], gen.path.C[1], gen.vehicle_matrices(float(gen.path.t_s[1])))
+    fresh = gen.renderer.render(*args)
+    reused = gen.renderer.render(*args, shadow_map=False)
+    np.testing.assert_array_equal(fresh[0], reused[0])
+    # the other scene's render frees this scene's map: a reuse asked for now draws a new one
+    other.renderer.render(other.path.R[0], other.path.C[0], other.vehicle_matrices(0.0))
+    after = gen.renderer.render(*args, shadow_map=False)
+    np.testing.assert_array_equal(fresh[0], after[0])
+    # the switch is off again once a render returns: the next caller's render draws its own map
+    inner = gen.renderer.renderer._renderer
+    assert inner.skip_shadow_pass is False

@@ -357,6 +357,24 @@ def test_shot_noise_variance_grows_with_the_signal_and_read_noise_adds():
         assert abs(out.var() / expected_var - 1) < 0.03, (level, out.var(), expected_var)
 
 
+def test_shot_noise_is_exact_poisson_when_dark_and_matches_its_moments_when_bright():
+    """Below POISSON_EXACT_BELOW_E electrons whole electrons are drawn; above, N(lambda, lambda)."""
+    from scenes.sensor import POISSON_EXACT_BELOW_E
+
+    rng = np.random.default_rng(5)
+    full_well = 4000.0
+    scale = full_well / 255.0
+    dark_level = 0.5 * POISSON_EXACT_BELOW_E / scale  # lambda = 50 electrons
+    img = np.full((300, 300, 1), dark_level, np.float32)
+    electrons = add_noise(img, rng, gaussian_std=0.0, full_well_e=full_well) * np.float32(scale)
+    np.testing.assert_allclose(electrons, np.rint(electrons), atol=1e-3)  # counts
+    assert abs(electrons.mean() - 50.0) < 0.1 and abs(electrons.var() / 50.0 - 1) < 0.03
+    for lam in (POISSON_EXACT_BELOW_E * 1.01, 3000.0):
+        img = np.full((300, 300, 1), lam / scale, np.float32)
+        e = add_noise(img, rng, gaussian_std=0.0, full_well_e=full_well).astype(np.float64) * scale
+        assert abs(e.mean() / lam - 1) < 1e-3 and abs(e.var() / lam - 1) < 0.03, (lam, e.mean(), e.var())
+
+
 def _texture(seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     img = cv2.GaussianBlur(rng.random((120, 160, 3)).astype(np.float32), (0, 0), 1.5)

@@ -24,7 +24,7 @@ CAMERA_COLUMNS = ["frame", "t_s", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz", "
                   "cy_px", "jitter_x_px", "jitter_y_px", "global_dx_px", "global_dy_px", "k1", "k2",
                   "line_delay_s", "exposure_s"]
 TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
-                 "bbox_y1_px", "visible", "speed_mps", "parked"]
+                 "bbox_y1_px", "visible", "speed_mps", "parked", "class", "visible_fraction"]
 
 
 def test_folder_follows_the_contract(tiny_sequence):

@@ -63,6 +63,8 @@ def _write(tmp_path, text):
         ("world: {trees: {crown_diameter_range_m: [6.0, 2.0]}}\n",
          r"world\.trees: crown_diameter_range_m: expected 0 < low <= high, got \(6.0, 2.0\)"),
         ("world: {trees: {leaf_colour: red}}\n", r"world\.trees\.leaf_colour: unknown key"),
+        ("world: {trees: {conifer_fraction: 1.5}}\n", r"world\.trees\.conifer_fraction: .*less than or equal to 1"),
+        ("world: {crosswalk_fraction: -0.1}\n", r"world\.crosswalk_fraction: .*greater than or equal to 0"),
     ],
 )
 def test_bad_spec_file_is_rejected_naming_field_and_file_and_nothing_is_written(tmp_path, yaml_text, pattern):

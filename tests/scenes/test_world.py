@@ -62,3 +62,34 @@ def test_multiscale_noise_equals_one_resize_per_octave(monkeypatch):
     assert got.dtype == np.float32
     np.testing.assert_array_equal(got, expected)
     assert rng.uniform() == ref_rng.uniform()
+
+
+def test_overlapping_shadows_darken_the_ground_once_to_the_ambient_level():
+    # two buildings whose shadows overlap, and a tree whose shadow falls into theirs: the ground in
+    # every shadow, overlaps included, keeps the ambient fraction of its light (a single fillPoly of
+    # several contours would leave an overlap lit; separate shapes would darken it to ambient^2)
+    from types import SimpleNamespace
+
+    from scenes.world import Building, Tree, _paint_shadows
+    from scenes.vegetation import crown_lobes
+
+    light = SimpleNamespace(sun_elevation_deg=45.0, sun_azimuth_deg=90.0, ambient=0.45)  # sun in the east
+    blocks = [Building(centre=(x, 0.0, 4.0), size=(6.0, 6.0, 8.0), yaw_rad=0.0, parts=(), roof_variant=0)
+              for x in (10.0, 6.0)]
+    rng = np.random.default_rng(0)
+    tree = Tree(x_m=9.0, y_m=-6.0, height_m=8.0, crown_radius_m=3.0, crown_half_height_m=2.5, variant=0,
+                lobes=crown_lobes(rng, height_m=8.0, radius_m=3.0, half_height_m=2.5))
+    texel = 0.1
+    canvas = world_mod._Canvas(-20.0, -15.0, texel, 400, 300)
+    _paint_shadows(canvas, blocks, [tree], [], light)
+    xs = -20.0 + (np.arange(400, dtype=np.float32) + 0.5) * texel
+    ys = -15.0 + (np.arange(300, dtype=np.float32) + 0.5) * texel
+    lit = np.full((300, 400), 1.0, np.float32)
+    tex = world_mod._paint_ground([world_mod._Paint(slice(0, 300), slice(0, 400), (200.0, 200.0, 200.0))] + canvas.ops,
+                                  lit, xs, ys)[..., 0].astype(float) / 200.0
+    # the two shadows overlap west of the western building (x 0..3 m at y = 0): one level, ambient
+    r = int((0.0 + 15.0) / texel)
+    for x in (-2.0, 0.5, 2.0):
+        assert abs(tex[r, int((x + 20.0) / texel)] - 0.45) < 0.02, x
+    assert abs(np.median(tex[tex < 0.9]) - 0.45) < 0.02
+    assert tex.min() > 0.43  # nowhere ambient^2

@@ -120,6 +120,13 @@ def test_same_seed_same_world_other_seed_other_world():
     np.testing.assert_array_equal(a.ground_texture, b.ground_texture)
     assert a.trees == b.trees and a.buildings == b.buildings and len(a.roads) == len(b.roads)
     assert all(np.array_equal(r.centre_m, q.centre_m) for r, q in zip(a.roads, b.roads))
+    assert len(a.canopies) == len(b.canopies)
+    for p, q in zip(a.canopies, b.canopies):
+        for key in ("positions", "tint", "indices", "outline"):
+            np.testing.assert_array_equal(p[key], q[key])
+    for p, q in zip(a.crown_textures + [a.canopy_texture] * bool(a.canopies),
+                    b.crown_textures + [b.canopy_texture] * bool(b.canopies)):
+        np.testing.assert_array_equal(p, q)
     assert a.ground_texture.shape != c.ground_texture.shape or not np.array_equal(a.ground_texture, c.ground_texture)
 
 

@@ -1,0 +1,499 @@
+"""How close synthetic footage is to real aerial video: image and scene statistics, synthetic / real.
+
+    python benchmarks/realism.py [SEQ ...] [--frames N] [--real DIR] [--image PNG]
+
+``SEQ`` is a preset name or a scene YAML (rendered into ``$AEROBENCH_CACHE`` first, ``--frames``
+frames, default 20) or a sequence folder (any: another branch's world, a real clip written as a
+sequence folder); default ``realistic``. The real side is the three KIT AIS sequences in
+``--real`` (default ``/work/shared/external/kit_ais``: nadir views of Munich streets, every
+vehicle boxed in YOLO format; see ``SOURCES.md`` there).
+
+Statistics (each a small pure function below, tested in ``tests/benchmarks/test_realism.py``):
+
+image, no ground truth needed, per frame on gray levels 0..255 (the median over frames):
+  - ``spectrum_slope``: slope of the radially averaged power spectrum in log-log between 1/64
+    and 1/4 cycles per pixel (natural images: about -2);
+  - ``gradient_median``, ``gradient_p90``: gradient magnitude (central differences), gray levels a px;
+  - ``local_contrast``: median over the image of the standard deviation in 15 x 15 windows;
+  - ``saturation``: mean HSV saturation ``(max - min) / max`` of the RGB frame;
+  - ``noise_sigma``: Immerkaer's (1996) second-difference mask, ``sqrt(pi / 2)`` x the mean absolute
+    response / 6, over the flatter half of the image (gray levels);
+  - ``blockiness``: mean absolute difference across the 8 x 8 block boundaries over the mean
+    inside the blocks (1 = none; JPEG / H.264 blocking raises it);
+scene, from the boxes (KIT AIS labels; synthetic ``tracks.csv``, visible vehicles):
+  - ``vehicles_per_mpx``: vehicles in view per megapixel;
+  - ``moving_fraction``: synthetic: vehicles not parked; real: of the boxes matched to a box of the
+    next frame after registering the two frames by their global shift (phase correlation of the
+    whole frames, refined by ECC where it stays within half a pixel of it), those whose residual displacement exceeds ``MOVING_THRESHOLD_PX`` (3 px at the
+    real frames' own scale: the boxes' own jitter is 1-2 px);
+  - ``vehicle_length_px``: median of the longer box side;
+  - ``speed_px_per_frame``: median displacement of moving vehicles relative to the ground (synthetic:
+    the track minus the camera's global shift; real: the residual of the matched boxes).
+
+Compared at the same vehicle size: the side whose median vehicle is longer is scaled down
+(``cv2.INTER_AREA``) until the two medians agree, and the size-dependent statistics (spectrum,
+gradients, local contrast, saturation, vehicles per megapixel, speeds) are computed on the scaled
+frames; noise and blockiness belong to the pixel grid of the sensor and its codec and are measured
+at each side's own resolution. Each statistic is reported as synthetic / real with PASS when the
+ratio lies within +/-25 % (``TOLERANCE``). A side-by-side crop (synthetic left, real right, at the
+matched scale) is written to ``--image`` for people.
+
+Figures on main's ``realistic`` and this one's, and why each failing statistic fails: ``docs/realism.md``
+(4 of 11 within +/-25 %: noise, blockiness, vehicle length by construction, and the median gradient).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+TOLERANCE = 0.25
+MOVING_THRESHOLD_PX = 3.0
+MATCH_GATE_PX = 25.0
+KIT_AIS = Path("/work/shared/external/kit_ais")
+SPECTRUM_BAND_CYCLES_PER_PX = (1.0 / 64.0, 0.25)
+CONTRAST_WINDOW_PX = 15
+BLOCK_PX = 8
+
+
+# --------------------------------------------------------------------------- image statistics
+
+
+def as_gray(img: np.ndarray) -> np.ndarray:
+    """(H, W) float64 gray levels 0..255 of a (H, W) or (H, W, 3) RGB image (BT.601 weights)."""
+    img = np.asarray(img)
+    if img.ndim == 3 and img.shape[2] == 3:
+        return img.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    if img.ndim == 2:
+        return img.astype(np.float64)
+    raise ValueError(f"expected an (H, W) or (H, W, 3) image, got shape {img.shape}")
+
+
+def spectrum_slope(gray: np.ndarray, *, band_cycles_per_px: tuple[float, float] = SPECTRUM_BAND_CYCLES_PER_PX
+                   ) -> float:
+    """Slope of the radially averaged power spectrum ``P(f)`` against ``f`` in log-log.
+
+    Parameters
+    ----------
+    gray : (H, W) float, gray levels; H, W >= 32
+    band_cycles_per_px : (f_lo, f_hi), the frequencies fitted, cycles per pixel (below 1/64 the
+        Hann window's leakage, above 1/4 noise and compression dominate)
+
+    Returns
+    -------
+    float, the least-squares slope of ``log P`` on ``log f`` over the band (1/f^2 power: -2).
+    """
+    g = np.asarray(gray, np.float64)
+    if g.ndim != 2 or min(g.shape) < 32:
+        raise ValueError(f"spectrum_slope: expected an (H, W) image with H, W >= 32, got shape {g.shape}")
+    h, w = g.shape
+    win = np.outer(np.hanning(h), np.hanning(w))
+    F = np.fft.fft2((g - g.mean()) * win)
+    P = np.abs(F) ** 2
+    fy = np.fft.fftfreq(h)[:, None]
+    fx = np.fft.fftfreq(w)[None, :]
+    f = np.hypot(fx, fy)
+    lo, hi = band_cycles_per_px
+    edges = np.geomspace(lo, hi, 25)  # log-spaced rings: every octave weighs the same in the fit
+    which = np.digitize(f.ravel(), edges) - 1
+    ok = (which >= 0) & (which < len(edges) - 1)
+    sums = np.bincount(which[ok], weights=P.ravel()[ok], minlength=len(edges) - 1)
+    counts = np.bincount(which[ok], minlength=len(edges) - 1)
+    fsum = np.bincount(which[ok], weights=f.ravel()[ok], minlength=len(edges) - 1)
+    keep = counts > 0
+    slope, _ = np.polyfit(np.log(fsum[keep] / counts[keep]), np.log(sums[keep] / counts[keep]), 1)
+    return float(slope)
+
+
+def gradient_magnitude(gray: np.ndarray) -> np.ndarray:
+    """(H-2, W-2) float64 |grad I| by central differences, gray levels per pixel."""
+    g = np.asarray(gray, np.float64)
+    gx = 0.5 * (g[1:-1, 2:] - g[1:-1, :-2])
+    gy = 0.5 * (g[2:, 1:-1] - g[:-2, 1:-1])
+    return np.hypot(gx, gy)
+
+
+def gradient_stats(gray: np.ndarray) -> tuple[float, float]:
+    """(median, 90th percentile) of the gradient magnitude, gray levels per pixel."""
+    m = gradient_magnitude(gray)
+    return float(np.median(m)), float(np.percentile(m, 90))
+
+
+def local_contrast(gray: np.ndarray, *, window_px: int = CONTRAST_WINDOW_PX) -> float:
+    """Median over the image of the standard deviation of gray levels in ``window_px`` square windows."""
+    if window_px < 2:
+        raise ValueError(f"local_contrast: window_px expected >= 2, got {window_px}")
+    g = np.asarray(gray, np.float32)
+    mean = cv2.blur(g, (window_px, window_px), borderType=cv2.BORDER_REFLECT)
+    sq = cv2.blur(g * g, (window_px, window_px), borderType=cv2.BORDER_REFLECT)
+    var = np.maximum(sq.astype(np.float64) - mean.astype(np.float64) ** 2, 0.0)
+    r = window_px // 2
+    return float(np.median(np.sqrt(var[r:-r or None, r:-r or None])))
+
+
+def saturation(rgb: np.ndarray) -> float:
+    """Mean HSV saturation ``(max - min) / max`` of an (H, W, 3) RGB image (0 where max = 0), 0..1."""
+    a = np.asarray(rgb, np.float64)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"saturation: expected an (H, W, 3) RGB image, got shape {a.shape}")
+    mx, mn = a.max(axis=2), a.min(axis=2)
+    s = np.divide(mx - mn, mx, out=np.zeros_like(mx), where=mx > 0)
+    return float(s.mean())
+
+
+# the mask of Immerkaer (1996), "Fast noise variance estimation": the difference of two Laplacians;
+# it cancels every linear ramp, and white noise of std sigma comes out with std 6 sigma
+IMMERKAER_MASK = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float64)
+
+
+def noise_sigma(gray: np.ndarray, *, flat_fraction: float = 0.5) -> float:
+    """Standard deviation of white noise in an image, gray levels (a robust Immerkaer estimate).
+
+    The mask's response ``r`` is taken where the image is flattest (the ``flat_fraction`` of
+    pixels with the smallest gradient, edges and texture excluded) and turned into a sigma as
+    Immerkaer does, ``sqrt(pi / 2) mean|r| / 6`` (a median of ``|r|`` would be robust too, but on
+    8-bit frames it moves in steps of a quarter gray level). On real footage texture finer than
+    the mask counts as noise.
+    """
+    g = np.asarray(gray, np.float64)
+    if g.ndim != 2 or min(g.shape) < 8:
+        raise ValueError(f"noise_sigma: expected an (H, W) image with H, W >= 8, got shape {g.shape}")
+    if not 0 < flat_fraction <= 1:
+        raise ValueError(f"noise_sigma: flat_fraction expected in (0, 1], got {flat_fraction}")
+    r = cv2.filter2D(g, cv2.CV_64F, IMMERKAER_MASK, borderType=cv2.BORDER_REFLECT)[2:-2, 2:-2]
+    smooth = cv2.GaussianBlur(g, (0, 0), 2.0)
+    grad = gradient_magnitude(smooth)[1:-1, 1:-1]
+    flat = grad <= np.quantile(grad, flat_fraction)
+    return float(np.sqrt(np.pi / 2) * np.abs(r[flat]).mean() / 6.0)
+
+
+def blockiness(gray: np.ndarray, *, block_px: int = BLOCK_PX) -> float:
+    """Mean |difference| of neighbours across block boundaries over the mean inside blocks (1 = none).
+
+    Horizontal and vertical neighbours together; the grid starts at pixel 0 (as JPEG and H.264 place it).
+    """
+    g = np.asarray(gray, np.float64)
+    if g.ndim != 2 or min(g.shape) < 2 * block_px:
+        raise ValueError(f"blockiness: expected an (H, W) image of at least {2 * block_px} px a side, "
+                         f"got shape {g.shape}")
+    dx = np.abs(np.diff(g, axis=1))  # dx[:, j] = |I[:, j+1] - I[:, j]|: across a boundary when j+1 % 8 == 0
+    dy = np.abs(np.diff(g, axis=0))
+    bx = (np.arange(dx.shape[1]) + 1) % block_px == 0
+    by = (np.arange(dy.shape[0]) + 1) % block_px == 0
+    across = np.concatenate([dx[:, bx].ravel(), dy[by, :].ravel()])
+    inside = np.concatenate([dx[:, ~bx].ravel(), dy[~by, :].ravel()])
+    return float(across.mean() / max(inside.mean(), 1e-9))
+
+
+# --------------------------------------------------------------------------- scene statistics
+
+
+ECC_MAX_STEP_PX = 0.5
+
+
+def global_shift_px(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, float]:
+    """(dx, dy) px that frame 1 is moved by relative to frame 0: a ground point at p in frame 0 is at
+    p + (dx, dy) in frame 1.
+
+    Phase correlation (Hann window), refined by ECC for a translation (Evangelidis and Psarakis
+    2008) when ECC converges within ``ECC_MAX_STEP_PX`` of it: phase correlation's sub-pixel peak
+    is off by up to half a pixel on smooth texture, and ECC alone locks onto lane markings a
+    period away on some KIT AIS frames (2-3 px off on MunichStreet02).
+    """
+    a = np.asarray(gray0, np.float32)
+    b = np.asarray(gray1, np.float32)
+    win = cv2.createHanningWindow((a.shape[1], a.shape[0]), cv2.CV_32F)
+    (dx, dy), _ = cv2.phaseCorrelate(a, b, win)
+    warp = np.float32([[1, 0, dx], [0, 1, dy]])
+    try:
+        _, warp = cv2.findTransformECC(a, b, warp, cv2.MOTION_TRANSLATION,
+                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4), None, 5)
+    except cv2.error:
+        return float(dx), float(dy)
+    ex, ey = float(warp[0, 2]), float(warp[1, 2])
+    if np.hypot(ex - dx, ey - dy) > ECC_MAX_STEP_PX:
+        return float(dx), float(dy)
+    return ex, ey
+
+
+def match_boxes(c0: np.ndarray, c1: np.ndarray, shift_px: tuple[float, float], *,
+                gate_px: float = MATCH_GATE_PX) -> list[tuple[int, int, float]]:
+    """Mutual nearest neighbours between box centres of two frames after the global shift.
+
+    Parameters
+    ----------
+    c0 : (N, 2), c1 : (M, 2) float, box centres (x, y) px in frame 0 and frame 1
+    shift_px : (dx, dy), the ground's motion from frame 0 to frame 1
+    gate_px : pairs farther apart than this (after the shift) are not matched
+
+    Returns
+    -------
+    list of (i, j, residual_px): box i of frame 0 is box j of frame 1, moved ``residual_px``
+    relative to the ground.
+    """
+    c0 = np.asarray(c0, np.float64).reshape(-1, 2)
+    c1 = np.asarray(c1, np.float64).reshape(-1, 2)
+    if not len(c0) or not len(c1):
+        return []
+    d = np.linalg.norm(c0[:, None, :] + np.asarray(shift_px)[None, None, :] - c1[None, :, :], axis=2)
+    best1, best0 = d.argmin(axis=1), d.argmin(axis=0)
+    return [(i, int(j), float(d[i, j])) for i, j in enumerate(best1) if best0[j] == i and d[i, j] <= gate_px]
+
+
+@dataclass
+class SceneBoxes:
+    """The vehicles of one frame: centres (N, 2) and sizes (N, 2) = (w, h) px.
+
+    ``moving`` (N,) bool where ``moving_known`` (N,) bool (a real box matched in the next frame),
+    None when nothing is known; ``speeds_px`` the moving vehicles' displacement to the next frame
+    relative to the ground, px.
+    """
+
+    centres: np.ndarray
+    sizes: np.ndarray
+    moving: np.ndarray | None = None
+    moving_known: np.ndarray | None = None
+    speeds_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def read_yolo_boxes(path: Path, width_px: int, height_px: int) -> SceneBoxes:
+    """Boxes of a YOLO label file (``class cx cy w h`` as fractions of the image) in pixels."""
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip()]
+    a = np.array([[float(v) for v in r[1:5]] for r in rows], np.float64).reshape(-1, 4)
+    scale = np.array([width_px, height_px])
+    return SceneBoxes(centres=a[:, :2] * scale, sizes=a[:, 2:4] * scale)
+
+
+# --------------------------------------------------------------------------- the two sides
+
+
+@dataclass
+class Side:
+    """Frames (RGB uint8) and their boxes, of one side (synthetic or real)."""
+
+    name: str
+    frames: list[np.ndarray]
+    boxes: list[SceneBoxes]
+
+
+def real_side(root: Path) -> list[Side]:
+    """The KIT AIS sequences under ``root``: frames in name order, boxes, and motion from box matching."""
+    import re
+
+    sides = []
+    for seq in sorted(p for p in root.iterdir() if p.is_dir()):
+        pngs = sorted(seq.glob("*.png"), key=lambda p: int(re.findall(r"(\d+)\.png$", p.name)[0]))
+        if not pngs:
+            continue
+        frames, boxes = [], []
+        for png in pngs:
+            bgr = cv2.imread(str(png), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise SystemExit(f"{png}: cannot be read as an image")
+            rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+            frames.append(rgb)
+            label = png.with_suffix(".txt")
+            boxes.append(read_yolo_boxes(label, rgb.shape[1], rgb.shape[0]) if label.is_file()
+                         else SceneBoxes(np.zeros((0, 2)), np.zeros((0, 2))))
+        for k in range(len(frames) - 1):
+            shift = global_shift_px(as_gray(frames[k]), as_gray(frames[k + 1]))
+            pairs = match_boxes(boxes[k].centres, boxes[k + 1].centres, shift)
+            moving = np.full(len(boxes[k].centres), False)
+            known = np.full(len(boxes[k].centres), False)
+            speeds = []
+            for i, _, res in pairs:
+                known[i] = True
+                moving[i] = res > MOVING_THRESHOLD_PX
+                if moving[i]:
+                    speeds.append(res)
+            boxes[k].moving, boxes[k].moving_known = moving, known
+            boxes[k].speeds_px = np.asarray(speeds)
+        sides.append(Side(seq.name, frames, boxes))
+    if not sides:
+        raise SystemExit(f"--real {root}: no sequence folders with PNG frames")
+    return sides
+
+
+def synthetic_side(arg: str, frames: int) -> Side:
+    """A sequence folder, or a preset / scene YAML rendered into the cache first."""
+    from scenes import cached_sequence, load_scene_spec
+    from scenes.sequence import Sequence
+
+    path = Path(arg)
+    if not (path.is_dir() and (path / "frames").is_dir()):
+        spec = load_scene_spec(arg, {"image.n_frames": frames})
+        cache = Path(os.environ.get("AEROBENCH_CACHE", Path.home() / ".cache" / "aerobench"))
+        path = cached_sequence(spec, cache)
+    seq = Sequence(path)
+    n = min(len(seq), frames)
+    imgs = [seq.frame(i) for i in range(n)]
+    boxes = []
+    tracks = seq.tracks if (path / "tracks.csv").is_file() else None
+    cam = seq.camera if (path / "camera.csv").is_file() else None
+    for i in range(n):
+        if tracks is None:
+            boxes.append(SceneBoxes(np.zeros((0, 2)), np.zeros((0, 2))))
+            continue
+        t = tracks[tracks["frame"] == i]
+        if "visible" in t:  # real footage's annotations may not say
+            t = t[t["visible"] > 0]
+        if not {"bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"} <= set(t.columns):
+            boxes.append(SceneBoxes(t[["x_px", "y_px"]].to_numpy(float), np.full((len(t), 2), np.nan)))
+            continue
+        x0, y0, x1, y1 = (t[c].to_numpy(float) for c in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"))
+        b = SceneBoxes(centres=t[["x_px", "y_px"]].to_numpy(float), sizes=np.column_stack([x1 - x0 + 1, y1 - y0 + 1]))
+        if "parked" in t:
+            b.moving, b.moving_known = t["parked"].to_numpy(int) == 0, np.full(len(t), True)
+        if cam is not None and i + 1 < n and b.moving is not None:
+            nxt = tracks[tracks["frame"] == i + 1].set_index("vehicle_id")
+            row = cam[cam["frame"] == i].iloc[0]
+            g = np.array([row["global_dx_px"], row["global_dy_px"]], float)
+            sp = []
+            for vid, x, y, mv in zip(t["vehicle_id"], t["x_px"], t["y_px"], b.moving):
+                if mv and vid in nxt.index and nxt.loc[vid].get("visible", 1) > 0:
+                    sp.append(float(np.hypot(nxt.loc[vid, "x_px"] - x - g[0], nxt.loc[vid, "y_px"] - y - g[1])))
+            b.speeds_px = np.asarray(sp)
+        boxes.append(b)
+    return Side(path.name, imgs, boxes)
+
+
+def median_length_px(sides: list[Side]) -> float:
+    """Median of the longer box side over every box of ``sides``, px (NaN without boxes)."""
+    lengths = np.concatenate([b.sizes.max(axis=1) for s in sides for b in s.boxes if len(b.sizes)] or [np.zeros(0)])
+    lengths = lengths[np.isfinite(lengths)]
+    return float(np.median(lengths)) if lengths.size else float("nan")
+
+
+def scaled(img: np.ndarray, s: float) -> np.ndarray:
+    if s == 1.0:
+        return img
+    h, w = img.shape[:2]
+    return cv2.resize(img, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
+
+
+def side_statistics(sides: list[Side], scale: float) -> dict[str, float]:
+    """Every statistic of one side; ``scale`` the factor its frames are resized by to match vehicle size."""
+    per: dict[str, list[float]] = {k: [] for k in ("spectrum_slope", "gradient_median", "gradient_p90",
+                                                   "local_contrast", "saturation", "noise_sigma", "blockiness")}
+    n_boxes, mpx, moving, known, lengths, speeds = 0, 0.0, 0, 0, [], []
+    for side in sides:
+        for img, b in zip(side.frames, side.boxes):
+            small = scaled(img, scale)
+            g_small, g_native = as_gray(small), as_gray(img)
+            per["spectrum_slope"].append(spectrum_slope(g_small))
+            med, p90 = gradient_stats(g_small)
+            per["gradient_median"].append(med)
+            per["gradient_p90"].append(p90)
+            per["local_contrast"].append(local_contrast(g_small))
+            per["saturation"].append(saturation(small))
+            per["noise_sigma"].append(noise_sigma(g_native))
+            per["blockiness"].append(blockiness(g_native))
+            n_boxes += len(b.centres)
+            mpx += small.shape[0] * small.shape[1] / 1e6
+            if len(b.sizes) and np.isfinite(b.sizes).all():
+                lengths.append(b.sizes.max(axis=1) * scale)
+            if b.moving is not None:
+                k = b.moving_known
+                moving += int(b.moving[k].sum())
+                known += int(k.sum())
+            speeds.append(np.asarray(b.speeds_px) * scale)
+    out = {k: float(np.median(v)) for k, v in per.items()}
+    out["vehicles_per_mpx"] = n_boxes / mpx if mpx else float("nan")
+    out["moving_fraction"] = moving / known if known else float("nan")
+    out["vehicle_length_px"] = float(np.median(np.concatenate(lengths))) if lengths else float("nan")
+    sp = np.concatenate(speeds) if speeds else np.zeros(0)
+    out["speed_px_per_frame"] = float(np.median(sp)) if sp.size else float("nan")
+    return out
+
+
+UNITS = {"spectrum_slope": "", "gradient_median": "gray/px", "gradient_p90": "gray/px", "local_contrast": "gray",
+         "saturation": "0..1", "noise_sigma": "gray", "blockiness": "ratio", "vehicles_per_mpx": "1/Mpx",
+         "moving_fraction": "0..1", "vehicle_length_px": "px", "speed_px_per_frame": "px/frame"}
+
+
+def verdict(ratio: float, *, tolerance: float = TOLERANCE) -> str:
+    """PASS when ``ratio`` (synthetic / real) is within ``1 +/- tolerance``; n/a when not a number."""
+    if not np.isfinite(ratio):
+        return "n/a"
+    return "PASS" if abs(ratio - 1.0) <= tolerance else "FAIL"
+
+
+def side_by_side(synthetic: np.ndarray, real: np.ndarray, *, crop_px: int = 256,
+                 centres: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> np.ndarray:
+    """Square crops of the two images (``crop_px`` or smaller), next to each other with a white gap.
+
+    Each crop is centred on the median of that image's vehicle ``centres`` (N, 2) px when given
+    (so that vehicles of the same size stand side by side), else on the image centre.
+    """
+    def crop(img, c):
+        h, w = img.shape[:2]
+        n = min(crop_px, h, w)
+        cx, cy = (np.median(c, axis=0) if c is not None and len(c) else (w / 2, h / 2))
+        x = int(np.clip(round(cx - n / 2), 0, w - n))
+        y = int(np.clip(round(cy - n / 2), 0, h - n))
+        return img[y:y + n, x:x + n]
+
+    a, b = crop(synthetic, centres[0]), crop(real, centres[1])
+    h = max(a.shape[0], b.shape[0])
+    canvas = np.full((h, a.shape[1] + 8 + b.shape[1], 3), 255, np.uint8)
+    canvas[:a.shape[0], :a.shape[1]] = a
+    canvas[:b.shape[0], a.shape[1] + 8:] = b
+    return canvas
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sequences", nargs="*", default=["realistic"],
+                    help="presets, scene YAML files or sequence folders (default: realistic)")
+    ap.add_argument("--frames", type=int, default=20, help="frames of each synthetic sequence (default 20)")
+    ap.add_argument("--real", default=str(KIT_AIS), help="folder of KIT AIS sequences (default %(default)s)")
+    ap.add_argument("--image", default="realism_side_by_side.png", help="the side-by-side crop, PNG")
+    args = ap.parse_args(argv)
+    if args.frames < 2:
+        ap.error(f"--frames: expected at least 2, got {args.frames}")
+    real_root = Path(args.real)
+    if not real_root.is_dir():
+        ap.error(f"--real: {real_root}: no such folder")
+    real = real_side(real_root)
+    synth = [synthetic_side(s, args.frames) for s in args.sequences]
+    L_s, L_r = median_length_px(synth), median_length_px(real)
+    s_syn = min(1.0, L_r / L_s) if np.isfinite(L_s / L_r) else 1.0
+    s_real = min(1.0, L_s / L_r) if np.isfinite(L_s / L_r) else 1.0
+    stats_s, stats_r = side_statistics(synth, s_syn), side_statistics(real, s_real)
+    print(f"synthetic: {', '.join(s.name for s in synth)} ({sum(len(s.frames) for s in synth)} frames), median "
+          f"vehicle {L_s:.1f} px, scaled by {s_syn:.3f}")
+    print(f"real: KIT AIS {', '.join(s.name for s in real)} ({sum(len(s.frames) for s in real)} frames), median "
+          f"vehicle {L_r:.1f} px, scaled by {s_real:.3f}")
+    print("compared at the same median vehicle length; noise_sigma and blockiness at each side's own resolution")
+    print()
+    print(f"| statistic | unit | synthetic | real | synthetic / real | within +/-{TOLERANCE:.0%} |")
+    print("|---|---|---|---|---|---|")
+    failed = []
+    for k in UNITS:
+        a, b = stats_s[k], stats_r[k]
+        ratio = a / b if np.isfinite(a) and np.isfinite(b) and b != 0 else float("nan")
+        v = verdict(ratio)
+        if v == "FAIL":
+            failed.append(k)
+        print(f"| {k} | {UNITS[k]} | {a:.3f} | {b:.3f} | {ratio:.3f} | {v} |")
+    print()
+    print(f"{len(UNITS) - len(failed)} of {len(UNITS)} within +/-{TOLERANCE:.0%}"
+          + (f"; failing: {', '.join(failed)}" if failed else ""))
+    pic = side_by_side(scaled(synth[0].frames[0], s_syn), scaled(real[0].frames[0], s_real),
+                       centres=(synth[0].boxes[0].centres * s_syn, real[0].boxes[0].centres * s_real))
+    cv2.imwrite(args.image, cv2.cvtColor(pic, cv2.COLOR_RGB2BGR))
+    print(f"side by side (synthetic left, real right, same vehicle size): {args.image}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
