@@ -79,7 +79,7 @@ class _Pool:
     def submit(self, fn, *args):
         fut: Future = Future()
         if fn is tasks.render_task:
-            key, spec, progress_file = args[0], args[1], args[4]
+            key, spec, progress_file = args[0], args[1], args[5]  # (key, spec, cache, imports, import_paths, progress_file)
             if progress_file is not None:
                 tasks.render_progress_writer(progress_file)(2, spec.image.n_frames)
             self.progress_seen.append(scheduling.read_render_progress(progress_file))
