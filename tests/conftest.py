@@ -44,12 +44,15 @@ def _group(item: pytest.Item) -> str | None:
     return module_group
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the marks into the node ids
+def pytest_itemcollected(item: pytest.Item) -> None:
+    # here, not in pytest_collection_modifyitems: xdist's own modifyitems hook reads the marks into the
+    # node ids, and a conftest's modifyitems hook may run after it (tryfirst notwithstanding)
+    group = _group(item)
+    if group is not None:
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
-        group = _group(item)
-        if group is not None:
-            item.add_marker(pytest.mark.xdist_group(group))
     if os.environ.get("PYTEST_XDIST_WORKER"):
         # xdist hands out the groups first (largest first), then single tests in this order: the
         # slow ones (end-to-end runs, renders) first, so that no long test is left to run alone at the end
