@@ -53,6 +53,15 @@ def pytest_itemcollected(item: pytest.Item) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER") and config.getvalue("loadgroup"):
+        # xdist 3.8 names the group in item._nodeid, which pytest 9 no longer reads (the id is
+        # item._id): give the scheduler the "<nodeid>@<group>" it expects ourselves
+        from _pytest.nodeid import NodeId
+
+        for item in items:
+            mark = item.get_closest_marker("xdist_group")
+            if mark is not None and "@" not in item.nodeid and hasattr(item, "_id"):
+                item._id = NodeId.parse(f"{item.nodeid}@{mark.args[0]}")
     if os.environ.get("PYTEST_XDIST_WORKER"):
         # xdist hands out the groups first (largest first), then single tests in this order: the
         # slow ones (end-to-end runs, renders) first, so that no long test is left to run alone at the end
