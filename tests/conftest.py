@@ -44,12 +44,24 @@ def _group(item: pytest.Item) -> str | None:
     return module_group
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook, which reads the marks into the node ids
+def pytest_itemcollected(item: pytest.Item) -> None:
+    # here, not in pytest_collection_modifyitems: xdist's own modifyitems hook reads the marks into the
+    # node ids, and a conftest's modifyitems hook may run after it (tryfirst notwithstanding)
+    group = _group(item)
+    if group is not None:
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
-        group = _group(item)
-        if group is not None:
-            item.add_marker(pytest.mark.xdist_group(group))
+    if os.environ.get("PYTEST_XDIST_WORKER") and config.getvalue("loadgroup"):
+        # xdist 3.8 names the group in item._nodeid, which pytest 9 no longer reads (the id is
+        # item._id): give the scheduler the "<nodeid>@<group>" it expects ourselves
+        from _pytest.nodeid import NodeId
+
+        for item in items:
+            mark = item.get_closest_marker("xdist_group")
+            if mark is not None and "@" not in item.nodeid and hasattr(item, "_id"):
+                item._id = NodeId.parse(f"{item.nodeid}@{mark.args[0]}")
     if os.environ.get("PYTEST_XDIST_WORKER"):
         # xdist hands out the groups first (largest first), then single tests in this order: the
         # slow ones (end-to-end runs, renders) first, so that no long test is left to run alone at the end
