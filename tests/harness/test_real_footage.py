@@ -80,10 +80,15 @@ def test_eval_video_bad_gt_exits_2_and_writes_nothing(tmp_path, capsys, render_c
 
 
 @pytest.mark.skipif(not (KIT_AIS / "MOS74-93").is_dir(), reason="../shared/external/kit_ais is not beside the clone")
-def test_kit_ais_suite_file_resolves():
+def test_kit_ais_suite_files_resolve():
     suite = load_suite(ROOT / "benchmarks" / "suites" / "kit-ais.yaml")
     assert [Path(s.real).name for s in suite.scenes] == ["MOS74-93", "MOS155-179", "MunichStreet02-MOS74-93"]
     assert all(Path(s.real).is_dir() for s in suite.scenes)
+    # the synthetic scenes beside the same three clips, for the report's 'Synthetic vs real'
+    mixed = load_suite(ROOT / "benchmarks" / "suites" / "synthetic-vs-real.yaml")
+    real = [s for s in mixed.scenes if getattr(s, "real", None)]
+    assert [Path(s.real).name for s in real] == ["MOS74-93", "MOS155-179", "MunichStreet02-MOS74-93"]
+    assert len(mixed.scenes) - len(real) == 2  # realistic and city
 
 
 def _aggregate(table: pd.DataFrame) -> pd.DataFrame:
