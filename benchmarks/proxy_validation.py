@@ -27,7 +27,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -36,39 +35,9 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 from harness.metrics import aggregate  # noqa: E402
 from harness.runner import run_suite  # noqa: E402
 from harness.suites import parse_suite  # noqa: E402
+from reports.synthetic_vs_real import kendall_tau_b, spearman  # noqa: E402  (one home of the rank correlations)
 
 DEFAULT_PIPELINES = ["thesis-lk", "thesis-hs", "pyramidal-lk", "pyramidal-hs", "dis", "farneback", "tv-l1"]
-
-
-def ranks(x) -> np.ndarray:
-    """1-based ranks of ``x`` (ascending), ties given the mean of the ranks they span."""
-    x = np.asarray(x, np.float64)
-    order = np.argsort(x, kind="stable")
-    r = np.empty(len(x))
-    r[order] = np.arange(1, len(x) + 1)
-    for v in np.unique(x):
-        tie = x == v
-        r[tie] = r[tie].mean()
-    return r
-
-
-def spearman(a, b) -> float:
-    """Spearman's rho: Pearson's correlation of the ranks (NaN when either is constant)."""
-    ra, rb = ranks(a), ranks(b)
-    ra, rb = ra - ra.mean(), rb - rb.mean()
-    den = np.sqrt((ra @ ra) * (rb @ rb))
-    return float(ra @ rb / den) if den > 0 else float("nan")
-
-
-def kendall_tau_b(a, b) -> float:
-    """Kendall's tau-b: (concordant - discordant) / sqrt((n0 - n1)(n0 - n2)) over all pairs i < j."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    i, j = np.triu_indices(len(a), k=1)
-    sa, sb = np.sign(a[i] - a[j]), np.sign(b[i] - b[j])
-    n0 = len(i)
-    n1, n2 = int((sa == 0).sum()), int((sb == 0).sum())
-    den = np.sqrt(float(n0 - n1) * float(n0 - n2))
-    return float((sa * sb).sum() / den) if den > 0 else float("nan")
 
 
 def suite_dict(scenes: list[str], seeds: list[int], frames: int, pipelines: list[str]) -> dict:

@@ -20,7 +20,7 @@ synthetic and on real side by side (how much harder the real footage is), and
 
 Public functions
 ----------------
-spearman(a, b) -> float, kendall_tau_b(a, b) -> float      rank correlations of two score vectors
+ranks(x), spearman(a, b) -> float, kendall_tau_b(a, b) -> float   ranks (ties: mean rank), rank correlations
 unit_totals(rows, pipelines) -> (sums, counts)             (units, pipelines) totals of one side
 compare(table, real_scenes, *, pipelines, metrics, seed, n_boot) -> SyntheticVsReal
 verdict(result) -> str
@@ -37,7 +37,7 @@ import pandas as pd
 
 from harness.metrics import METRICS, reduce_totals
 
-__all__ = ["N_BOOT", "LEVEL", "MetricAgreement", "SyntheticVsReal", "spearman", "kendall_tau_b", "unit_totals",
+__all__ = ["N_BOOT", "LEVEL", "MetricAgreement", "SyntheticVsReal", "ranks", "spearman", "kendall_tau_b", "unit_totals",
            "comparable_views", "compare", "verdict"]
 
 N_BOOT = 2000
@@ -46,48 +46,46 @@ LEVEL = 0.95
 _TOTAL_RULES = {"mean", "rms", "rate", "complement", "total"}
 
 
-def _ranks(x: np.ndarray) -> np.ndarray:
-    """Ranks 1..n of ``x`` along the last axis, ties given their mean rank."""
+def ranks(x: Sequence[float]) -> np.ndarray:
+    """1-based ranks of the 1-D ``x`` (ascending), ties given the mean of the ranks they span."""
     x = np.asarray(x, np.float64)
-    order = np.argsort(x, axis=-1, kind="stable")
-    xs = np.take_along_axis(x, order, axis=-1)
-    n = x.shape[-1]
-    ranks_sorted = np.broadcast_to(np.arange(1, n + 1, dtype=np.float64), x.shape).copy()
-    # mean rank over each run of equal values
-    flat_x, flat_r = xs.reshape(-1, n), ranks_sorted.reshape(-1, n)
-    for row_x, row_r in zip(flat_x, flat_r):
-        i = 0
-        while i < n:
-            j = i
-            while j + 1 < n and row_x[j + 1] == row_x[i]:
-                j += 1
-            if j > i:
-                row_r[i:j + 1] = row_r[i:j + 1].mean()
-            i = j + 1
-    out = np.empty_like(ranks_sorted)
-    np.put_along_axis(out, order, ranks_sorted, axis=-1)
-    return out
+    order = np.argsort(x, kind="stable")
+    r = np.empty(len(x))
+    r[order] = np.arange(1, len(x) + 1)
+    for v in np.unique(x):
+        tie = x == v
+        r[tie] = r[tie].mean()
+    return r
+
+
+def _pair(name: str, a, b) -> tuple[np.ndarray, np.ndarray] | None:
+    """``a, b`` as float64 vectors of one length (ValueError otherwise); None where a correlation is
+    undefined: fewer than 3 items or a value that is not finite."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"{name}: expected two 1-D vectors of one length, got {a.shape} and {b.shape}")
+    if len(a) < 3 or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return None
+    return a, b
 
 
 def spearman(a: Sequence[float], b: Sequence[float]) -> float:
     """Spearman's rho of two score vectors of the same items (NaN with fewer than 3 items or a constant side)."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"spearman: expected two 1-D vectors of one length, got {a.shape} and {b.shape}")
-    if len(a) < 3 or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    ab = _pair("spearman", a, b)
+    if ab is None:
         return float("nan")
-    ra, rb = _ranks(a) - (len(a) + 1) / 2, _ranks(b) - (len(b) + 1) / 2
+    ra, rb = ranks(ab[0]), ranks(ab[1])
+    ra, rb = ra - ra.mean(), rb - rb.mean()
     den = math.sqrt(float((ra ** 2).sum() * (rb ** 2).sum()))
     return float((ra * rb).sum() / den) if den > 0 else float("nan")
 
 
 def kendall_tau_b(a: Sequence[float], b: Sequence[float]) -> float:
     """Kendall's tau-b of two score vectors of the same items (ties on either side handled; NaN below 3 items)."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"kendall_tau_b: expected two 1-D vectors of one length, got {a.shape} and {b.shape}")
-    if len(a) < 3 or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    ab = _pair("kendall_tau_b", a, b)
+    if ab is None:
         return float("nan")
+    a, b = ab
     i, j = np.triu_indices(len(a), k=1)
     sa, sb = np.sign(a[i] - a[j]), np.sign(b[i] - b[j])
     n0 = len(i)
@@ -195,7 +193,7 @@ class SyntheticVsReal:
 
 
 def _rank_best_first(values: np.ndarray, higher_is_better: bool) -> np.ndarray:
-    return _ranks(-values if higher_is_better else values)
+    return ranks(-values if higher_is_better else values)
 
 
 def _interval(samples: np.ndarray, level: float) -> tuple[float, float]:
