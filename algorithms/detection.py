@@ -583,7 +583,6 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             continue
         cx, cy = float(c.xs.mean()), float(c.ys.mean())
         u, v = (float(a) for a in c.velocity)
-        speed = math.hypot(u, v)
         margin = float(area)  # what ranks overlapping regions without frames
         if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0):
             # evidence that the region's texture moved by (u, v): the change it explains, then its margin over

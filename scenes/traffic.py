@@ -511,7 +511,6 @@ def _simulate(net: _Network, agents: list[_Agent], t0_s: float, t1_s: float, ts,
     dt = SIM_DT_S
     for step in range(n_steps + 1):
         t = t0_s + step * dt
-        live = [ag for ag in agents if ag.active]
         occ: dict[tuple[int, int], list[tuple[float, int]]] = {}
         states = {}
         for idx, ag in enumerate(agents):
