@@ -5,7 +5,7 @@
 ``SEQ`` is a preset name or a scene YAML (rendered into ``$AEROBENCH_CACHE`` first, ``--frames``
 frames, default 20) or a sequence folder (any: another branch's world, a real clip written as a
 sequence folder); default ``realistic``. The real side is the three KIT AIS sequences in
-``--real`` (default ``/work/shared/external/kit_ais``: nadir views of Munich streets, every
+``--real`` (default ``../shared/external/kit_ais`` beside the clone: nadir views of Munich streets, every
 vehicle boxed in YOLO format; see ``SOURCES.md`` there).
 
 Statistics (each a small pure function below, tested in ``tests/benchmarks/test_realism.py``):
@@ -59,7 +59,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 TOLERANCE = 0.25
 MOVING_THRESHOLD_PX = 3.0
 MATCH_GATE_PX = 25.0
-KIT_AIS = Path("/work/shared/external/kit_ais")
+KIT_AIS = Path(__file__).resolve().parents[2] / "shared" / "external" / "kit_ais"  # shared/ beside the clone
 SPECTRUM_BAND_CYCLES_PER_PX = (1.0 / 64.0, 0.25)
 CONTRAST_WINDOW_PX = 15
 BLOCK_PX = 8

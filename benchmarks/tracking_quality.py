@@ -17,7 +17,7 @@ centre rule alone, a track point within ``--gate`` px of the vehicle's centre) a
 the vehicles that move (``parked == 0``; what a motion detector can find, the figure
 the targets are about), and against every visible vehicle (``mota_all``). Also the detections per frame and the tracker's output per frame.
 
-KIT AIS (``--kit-ais``, ``/work/shared/external/kit_ais``, or ``--kit-dir``): three
+KIT AIS (``--kit-ais``, ``../shared/external/kit_ais`` beside the clone, or ``--kit-dir``): three
 Munich street sequences, YOLO boxes of every vehicle, parked or moving, without
 identities. Which vehicles move is told from the boxes alone: consecutive frames are
 registered by the global shift (the pipeline's own pass-1 NCC shift, the cumulative
@@ -52,7 +52,7 @@ from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E
 from harness.metrics import mot_counts  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles")
-KIT_DIR = Path("/work/shared/external/kit_ais")
+KIT_DIR = Path(__file__).resolve().parents[2] / "shared" / "external" / "kit_ais"  # shared/ beside the clone
 BOXES = ["bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"]
 
 
