@@ -603,6 +603,11 @@ class _Track:
     confirmed: bool = False
     pending: list = field(default_factory=list)  # rows held until confirmation
     start: np.ndarray | None = None  # ground-fixed centre of its first detection
+    travel: float = 0.0  # farthest its ground-fixed centre has been from start, px
+    path: float = 0.0  # length of the path of its detections' ground-fixed centres, px
+    last_z: np.ndarray | None = None  # ground-fixed centre of its last detection
+    template: np.ndarray | None = None  # the image inside its box at its last detection (float32)
+    held: int = 0  # consecutive frames placed by the template (no detection)
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -611,8 +616,12 @@ class _Track:
 # min_iou: a pair whose boxes overlap at least this much is feasible whatever its distance (a bus's centre
 #   can jump when its region is found whole after being found in part);
 # birth_hits: consecutive detections before a track is confirmed (the detections' minimum persistence);
-# min_travel_px: a track is confirmed only once its ground-fixed centre has moved this far from its first
-#   detection (flow noise, compression artefacts and flicker make regions that recur in place);
+# min_travel_px, min_travel_rel: a track is confirmed only once its ground-fixed centre has moved this far from
+#   its first detection, and this many times its box's larger side (flow noise, compression artefacts, flicker
+#   and a tree crown's sway make regions that recur in place; a vehicle leaves its own box; the rows of the
+#   frames before confirmation are output when it comes, so a slow car loses nothing by the wait);
+# min_straightness: ... and the distance from its first detection is at least this fraction of the length of
+#   the path through its detections (a vehicle drives on; a region that jumps about in place does not);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -620,9 +629,21 @@ class _Track:
 #   prediction of a vehicle that is hidden);
 # use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
 #   new track at the vehicle's speed;
+# hold_min_ncc: a confirmed track without a detection is placed where its template (the image inside its box
+#   at its last detection) matches the frame best, when that normalised cross-correlation reaches this: a
+#   vehicle that slows down and stops (a queue at a light) leaves the motion detector but not the image
+#   (0 turns holding off; needs the frames);
+# hold_search_px: the template is searched within this distance of the prediction and of the last position
+#   (a stopping vehicle falls behind its constant-velocity prediction), and at least half the box's larger side;
+# hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
+#   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
+#   would otherwise be held for ever);
+# hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps);
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
-MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "death_misses": 10, "coast_gate_growth": 0.5,
-                  "report_coasting": False, "use_velocity": True, "sigma_accel_px": 0.5,
+MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
+                  "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
+                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -635,6 +656,19 @@ def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
         box = np.array([d[0], d[1], side, side], dtype=np.float64)
     vel = np.array([d[7], d[8]], dtype=np.float64) if len(d) >= 9 else np.full(2, np.nan)
     return box, vel
+
+
+def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray) -> np.ndarray | None:
+    """The pixels of ``img`` inside the ground-fixed box ``(cx, cy, w, h)`` (image = ground + ``off``), float32;
+    None when it is not wholly inside, under 4 px a side, or without contrast (std under 2 grey levels)."""
+    cx, cy = box[0] + off[0], box[1] + off[1]
+    tw, th = int(round(box[2])), int(round(box[3]))
+    x0, y0 = int(round(cx - (tw - 1) / 2)), int(round(cy - (th - 1) / 2))
+    h, w = img.shape
+    if tw < 4 or th < 4 or x0 < 0 or y0 < 0 or x0 + tw > w or y0 + th > h:
+        return None
+    t = np.ascontiguousarray(img[y0:y0 + th, x0:x0 + tw], dtype=np.float32)
+    return t if float(t.std()) >= 2.0 else None
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -673,14 +707,15 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("birth_hits", "death_misses"):
+        for name in ("birth_hits", "death_misses", "hold_frames"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
         for name in ("report_coasting", "use_velocity"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
-        for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px"):
+        for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
+                     "hold_min_travel_rel"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -688,6 +723,12 @@ class MultiTargetTracker:
             raise ValueError(f"gate_px: expected > 0, got {p['gate_px']}")
         if not 0 < p["min_iou"] <= 1:
             raise ValueError(f"min_iou: expected a number in (0, 1], got {p['min_iou']}")
+        v = p["min_straightness"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"min_straightness: expected a number in [0, 1], got {v!r}")
+        v = p["hold_min_ncc"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"hold_min_ncc: expected a number in [0, 1] (0: no holding), got {v!r}")
         self.params = p
         self.gate_px, self.birth_hits, self.death_misses = float(p["gate_px"]), int(p["birth_hits"]), int(p["death_misses"])
         self._kf_kw = {k: p[k] for k in ("sigma_accel_px", "sigma_size_accel_px", "sigma_meas_px",
@@ -697,20 +738,29 @@ class MultiTargetTracker:
         self._rows: list[dict] = []
         self._next_id = 0
 
-    def step(self, frame: int, detections, *, offset_px=(0.0, 0.0)) -> None:
+    def step(self, frame: int, detections, *, offset_px=(0.0, 0.0), image=None) -> None:
         """Take the detections of ``frame`` (:class:`~algorithms.detection.Detection` s, or ``(x_px, y_px, area_px)``).
 
         ``offset_px`` is the camera path at this frame (ground content displacement
-        since frame 0); tracks live in ``image - offset`` coordinates.
+        since frame 0); tracks live in ``image - offset`` coordinates. ``image``, the gray
+        frame (H, W), lets a confirmed track without a detection be held on its template
+        (``hold_min_ncc``); without it tracks only coast.
         """
         p = self.params
         off = np.asarray(offset_px, dtype=np.float64)
+        img = None
+        if image is not None:
+            img = np.asarray(image)
+            if img.ndim != 2:
+                raise ValueError(f"image: expected a gray frame (H, W), got shape {img.shape}")
+            img = img.astype(np.float32, copy=False)
         parsed = [_box_of(d) for d in detections]
         boxes = np.array([b for b, _ in parsed], dtype=np.float64).reshape(-1, 4)
         boxes[:, :2] -= off
         vels = np.array([v for _, v in parsed], dtype=np.float64).reshape(-1, 2)
         if not p["use_velocity"]:
             vels[:] = np.nan
+        lasts = np.array([t.kf.x[:2] for t in self._tracks]).reshape(-1, 2)  # ground-fixed, before predicting
         # x = F x, P = F P F' + Q for every track (BoxKalman.predict)
         preds = np.array([t.kf.predict() for t in self._tracks]).reshape(-1, 4)
         pairs = []
@@ -728,22 +778,31 @@ class MultiTargetTracker:
             pairs = [(r, c) for r, c in zip(r_idx, c_idx) if feasible[r, c]]
         det_of = dict(pairs)
         taken_d = set(det_of.values())
+        detected = [boxes[c] for c in det_of.values()]
         survivors = []
         for i, trk in enumerate(self._tracks):
             pred = preds[i]
             if i in det_of:
                 c = det_of[i]
                 trk.kf.update(boxes[c], vels[c])
-                trk.hits, trk.misses = trk.hits + 1, 0
+                trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
                 z = boxes[c]
+                trk.travel = max(trk.travel, float(np.hypot(*(trk.kf.x[:2] - trk.start))))
+                trk.path += float(np.hypot(*(z[:2] - trk.last_z))) if trk.last_z is not None else 0.0
+                trk.last_z = z[:2].copy()
+                if img is not None:
+                    trk.template = _crop(img, trk.kf.x[:4], off)
             else:
-                trk.misses += 1
-                if not trk.confirmed or trk.misses >= self.death_misses:
-                    continue
-                z = None
+                z = self._hold(trk, img, lasts[i], pred, off, detected) if img is not None else None
+                if z is not None:
+                    trk.kf.update(z)
+                    trk.held, trk.misses = trk.held + 1, 0
+                else:
+                    trk.misses += 1
+                    if not trk.confirmed or trk.misses >= self.death_misses:
+                        continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
-            if not trk.confirmed and trk.hits >= self.birth_hits and \
-                    float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= p["min_travel_px"]:
+            if not trk.confirmed and trk.hits >= self.birth_hits and self._travelled(trk):
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
@@ -751,24 +810,71 @@ class MultiTargetTracker:
         for c in range(len(boxes)):
             if c not in taken_d:
                 trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
-                             start=boxes[c][:2].copy())
+                             start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy())
                 self._next_id += 1
                 self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
-                if self.birth_hits == 1 and p["min_travel_px"] == 0:
+                if self.birth_hits == 1 and p["min_travel_px"] == 0 and p["min_travel_rel"] == 0:
                     trk.confirmed = True
                     self._rows.extend(trk.pending)
                     trk.pending = []
                 survivors.append(trk)
         self._tracks = survivors
 
-    def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0)) -> None:
-        """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) at the prediction
-        of every confirmed track that had a detection in the frame before: its box moved by its velocity."""
+    def _travelled(self, trk: _Track) -> bool:
+        """Whether a tentative track has moved enough, and straight enough, to be confirmed (``min_travel_px``,
+        ``min_travel_rel``, ``min_straightness``)."""
+        p = self.params
+        net = float(np.hypot(*(trk.last_z - trk.start))) if trk.last_z is not None else 0.0
+        side = float(max(trk.kf.x[2], trk.kf.x[3]))
+        return (float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= max(p["min_travel_px"], p["min_travel_rel"] * side)
+                and net >= p["min_straightness"] * trk.path)
+
+    def _hold(self, trk: _Track, img: np.ndarray, last: np.ndarray, pred: np.ndarray, off: np.ndarray,
+              others: list) -> np.ndarray | None:
+        """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.
+
+        Only a confirmed track that has travelled ``hold_min_travel_rel`` box sides, for at most
+        ``hold_frames`` frames in a row; the search covers ``hold_search_px`` around the
+        prediction and around the last position (at least half the box's larger side); a
+        place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice.
+        """
+        p = self.params
+        if (not p["hold_min_ncc"] > 0 or trk.template is None or not trk.confirmed or trk.held >= p["hold_frames"]
+                or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)):
+            return None
+        th, tw = trk.template.shape
+        last, guess = last + off, pred[:2] + off  # image coordinates
+        r = max(p["hold_search_px"], 0.5 * max(th, tw))
+        cx0, cx1 = min(last[0], guess[0]) - r, max(last[0], guess[0]) + r
+        cy0, cy1 = min(last[1], guess[1]) - r, max(last[1], guess[1]) + r
+        h, w = img.shape
+        xa, ya = int(math.floor(cx0 - (tw - 1) / 2)), int(math.floor(cy0 - (th - 1) / 2))
+        xb, yb = int(math.ceil(cx1 + (tw - 1) / 2)), int(math.ceil(cy1 + (th - 1) / 2))
+        if xa < 0 or ya < 0 or xb >= w or yb >= h:
+            return None  # at the border: the vehicle may be leaving; the track coasts
+        area = img[ya:yb + 1, xa:xb + 1]
+        if area.shape[0] < th or area.shape[1] < tw:
+            return None
+        ncc = cv2.matchTemplate(area, trk.template, cv2.TM_CCOEFF_NORMED)
+        iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+        if not ncc[iy, ix] >= p["hold_min_ncc"]:
+            return None
+        box = np.array([xa + ix + (tw - 1) / 2 - off[0], ya + iy + (th - 1) / 2 - off[1], tw, th])
+        if others and (_iou(box[None], np.asarray(others)) >= 0.5).any():
+            return None
+        return box
+
+    def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:
+        """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) for every confirmed
+        track that had a detection (or was held) in the frame before: where its template matches ``image``
+        (``hold_min_ncc``), else at the prediction, its box moved by its velocity."""
         off = np.asarray(offset_px, dtype=np.float64)
+        img = None if image is None else np.asarray(image).astype(np.float32, copy=False)
         for trk in self._tracks:
             if trk.confirmed and trk.misses == 0:
                 pred = trk.kf.F @ trk.kf.x
-                self._emit(trk, frame, None, pred[:4], pred[:4], off, shown=True)
+                held = self._hold(trk, img, trk.kf.x[:2], pred, off, []) if img is not None else None
+                self._emit(trk, frame, None, pred[:4] if held is None else held, pred[:4], off, shown=True)
 
     def _emit(self, trk: _Track, frame, z, filt, pred, off, *, shown: bool = False) -> None:
         """A row: the detection's centre (NaN when coasting), the filtered centre and box, the prediction."""
