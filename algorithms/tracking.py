@@ -40,9 +40,12 @@ Multi-target tracker (beyond the thesis): the moving regions of
 velocity; each track is a constant-velocity Kalman filter of its box's centre
 and size (:class:`~algorithms.kalman.BoxKalman`); detections are assigned to
 tracks by the Hungarian method on IoU and distance to each track's prediction,
-gated; a track is confirmed after ``birth_hits`` consecutive hits, coasts
-through short occlusions and is dropped after ``death_misses`` consecutive
-misses. It works in a ground-fixed frame: given the camera path (the
+gated; a track is confirmed after ``birth_hits`` consecutive hits once it has
+left a quarter of its box along a straight path (flicker on a tree crown or a
+roof edge recurs in place), is held where its template matches when it loses
+its detection (a vehicle that slows and stops at a light leaves the motion
+detector but not the image), coasts through short occlusions and is dropped
+after ``death_misses`` consecutive misses. It works in a ground-fixed frame: given the camera path (the
 cumulative global shift of frame t), it subtracts it from detections before
 filtering and adds it back to its output, so a car driving straight is a
 constant-velocity target even when the camera sways.
@@ -694,10 +697,12 @@ class MultiTargetTracker:
     a pair feasible when the distance is within the gate (``gate_px``, growing by
     ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
     A new track is confirmed after ``birth_hits`` consecutive hits once it has travelled
-    ``min_travel_px`` over the ground (its rows, from its first frame, are then output; a miss
-    before that deletes it); a confirmed track coasts on its
-    prediction through up to ``death_misses - 1`` frames without a detection (short
-    occlusions) and ends at the ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
+    ``min_travel_px`` and ``min_travel_rel`` box sides over the ground along a path at least
+    ``min_straightness`` straight (its rows, from its first frame, are then output; a miss
+    before that deletes it). A confirmed track without a detection is held where its
+    template matches the frame (``hold_*`` keys, given ``image``), else coasts on its
+    prediction through up to ``death_misses - 1`` frames (short occlusions) and ends at the
+    ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
 
     Use :meth:`step` once per frame, then :meth:`rows`.
     """
