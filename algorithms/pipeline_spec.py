@@ -387,6 +387,7 @@ class MultiSpec(_Section):
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]
     hold_min_travel_rel: float = MULTI_DEFAULTS["hold_min_travel_rel"]
     hold_frames: StrictInt = MULTI_DEFAULTS["hold_frames"]
+    hold_history: StrictInt = MULTI_DEFAULTS["hold_history"]
     sigma_accel_px: float = MULTI_DEFAULTS["sigma_accel_px"]
     sigma_size_accel_px: float = MULTI_DEFAULTS["sigma_size_accel_px"]
     sigma_meas_px: float = MULTI_DEFAULTS["sigma_meas_px"]

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -611,6 +612,8 @@ class _Track:
     last_z: np.ndarray | None = None  # ground-fixed centre of its last detection
     template: np.ndarray | None = None  # the image inside its box at its last detection (float32)
     held: int = 0  # consecutive frames placed by the template (no detection)
+    hist: list = field(default_factory=list)  # (frame, ground-fixed centre) of its detections
+    ground_checked: bool = False  # its template was compared with the place before the vehicle came
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -636,17 +639,23 @@ class _Track:
 #   at its last detection) matches the frame best, when that normalised cross-correlation reaches this: a
 #   vehicle that slows down and stops (a queue at a light) leaves the motion detector but not the image
 #   (0 turns holding off; needs the frames);
-# hold_search_px: the template is searched within this distance of the prediction and of the last position
-#   (a stopping vehicle falls behind its constant-velocity prediction), and at least half the box's larger side;
+# hold_search_px: the template is searched within this distance of the prediction, and at least half the box's
+#   larger side (a stopping vehicle falls behind its constant-velocity prediction by its deceleration, a
+#   fraction of a pixel a frame; searching back to its last place would let a fast car's template, whose box
+#   holds ground, match the ground it left);
 # hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
 #   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
 #   would otherwise be held for ever);
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps);
+# hold_history: frames the tracker keeps to check, before it first holds a track, that the place looked
+#   different before the vehicle came: in the latest kept frame in which the track was a box side or more away,
+#   the template must not match that place (at hold_min_ncc); a template of ground, a roof edge or a tree crown
+#   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "sigma_accel_px": 0.5,
+                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 50, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -661,9 +670,9 @@ def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
     return box, vel
 
 
-def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray) -> np.ndarray | None:
+def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float = 2.0) -> np.ndarray | None:
     """The pixels of ``img`` inside the ground-fixed box ``(cx, cy, w, h)`` (image = ground + ``off``), float32;
-    None when it is not wholly inside, under 4 px a side, or without contrast (std under 2 grey levels)."""
+    None when it is not wholly inside, under 4 px a side, or without contrast (std under ``min_std`` grey levels)."""
     cx, cy = box[0] + off[0], box[1] + off[1]
     tw, th = int(round(box[2])), int(round(box[3]))
     x0, y0 = int(round(cx - (tw - 1) / 2)), int(round(cy - (th - 1) / 2))
@@ -671,7 +680,7 @@ def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray) -> np.ndarray | Non
     if tw < 4 or th < 4 or x0 < 0 or y0 < 0 or x0 + tw > w or y0 + th > h:
         return None
     t = np.ascontiguousarray(img[y0:y0 + th, x0:x0 + tw], dtype=np.float32)
-    return t if float(t.std()) >= 2.0 else None
+    return t if float(t.std()) >= min_std else None
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -712,7 +721,7 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("birth_hits", "death_misses", "hold_frames"):
+        for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
@@ -740,6 +749,7 @@ class MultiTargetTracker:
                                           "sigma_vel_meas_px", "sigma_vel0_px")}
         BoxKalman((0.0, 0.0, 1.0, 1.0), **self._kf_kw)  # its own checks of the noise keys, now
         self._tracks: list[_Track] = []
+        self._seen: deque = deque(maxlen=int(p["hold_history"]))  # (frame, gray image, camera path)
         self._rows: list[dict] = []
         self._next_id = 0
 
@@ -765,7 +775,6 @@ class MultiTargetTracker:
         vels = np.array([v for _, v in parsed], dtype=np.float64).reshape(-1, 2)
         if not p["use_velocity"]:
             vels[:] = np.nan
-        lasts = np.array([t.kf.x[:2] for t in self._tracks]).reshape(-1, 2)  # ground-fixed, before predicting
         # x = F x, P = F P F' + Q for every track (BoxKalman.predict)
         preds = np.array([t.kf.predict() for t in self._tracks]).reshape(-1, 4)
         pairs = []
@@ -795,10 +804,12 @@ class MultiTargetTracker:
                 trk.travel = max(trk.travel, float(np.hypot(*(trk.kf.x[:2] - trk.start))))
                 trk.path += float(np.hypot(*(z[:2] - trk.last_z))) if trk.last_z is not None else 0.0
                 trk.last_z = z[:2].copy()
+                trk.hist.append((int(frame), trk.kf.x[:2].copy()))
+                trk.ground_checked = False
                 if img is not None:
                     trk.template = _crop(img, trk.kf.x[:4], off)
             else:
-                z = self._hold(trk, img, lasts[i], pred, off, detected) if img is not None else None
+                z = self._hold(trk, img, pred, off, detected) if img is not None else None
                 if z is not None:
                     trk.kf.update(z)
                     trk.held, trk.misses = trk.held + 1, 0
@@ -815,7 +826,8 @@ class MultiTargetTracker:
         for c in range(len(boxes)):
             if c not in taken_d:
                 trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
-                             start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy())
+                             start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy(),
+                             hist=[(int(frame), boxes[c][:2].copy())])
                 self._next_id += 1
                 self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
                 if self.birth_hits == 1 and p["min_travel_px"] == 0 and p["min_travel_rel"] == 0:
@@ -824,6 +836,8 @@ class MultiTargetTracker:
                     trk.pending = []
                 survivors.append(trk)
         self._tracks = survivors
+        if img is not None and self.params["hold_min_ncc"] > 0:  # kept as 8 bits: 2 MB a 1080p frame
+            self._seen.append((int(frame), np.clip(img, 0, 255).astype(np.uint8), off.copy()))
 
     def _travelled(self, trk: _Track) -> bool:
         """Whether a tentative track has moved enough, and straight enough, to be confirmed (``min_travel_px``,
@@ -834,13 +848,12 @@ class MultiTargetTracker:
         return (float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= max(p["min_travel_px"], p["min_travel_rel"] * side)
                 and net >= p["min_straightness"] * trk.path)
 
-    def _hold(self, trk: _Track, img: np.ndarray, last: np.ndarray, pred: np.ndarray, off: np.ndarray,
-              others: list) -> np.ndarray | None:
+    def _hold(self, trk: _Track, img: np.ndarray, pred: np.ndarray, off: np.ndarray, others: list) -> np.ndarray | None:
         """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.
 
         Only a confirmed track that has travelled ``hold_min_travel_rel`` box sides, for at most
         ``hold_frames`` frames in a row; the search covers ``hold_search_px`` around the
-        prediction and around the last position (at least half the box's larger side); a
+        prediction (at least half the box's larger side); a
         place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice.
         """
         p = self.params
@@ -848,10 +861,9 @@ class MultiTargetTracker:
                 or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)):
             return None
         th, tw = trk.template.shape
-        last, guess = last + off, pred[:2] + off  # image coordinates
+        guess = pred[:2] + off  # image coordinates
         r = max(p["hold_search_px"], 0.5 * max(th, tw))
-        cx0, cx1 = min(last[0], guess[0]) - r, max(last[0], guess[0]) + r
-        cy0, cy1 = min(last[1], guess[1]) - r, max(last[1], guess[1]) + r
+        cx0, cx1, cy0, cy1 = guess[0] - r, guess[0] + r, guess[1] - r, guess[1] + r
         h, w = img.shape
         xa, ya = int(math.floor(cx0 - (tw - 1) / 2)), int(math.floor(cy0 - (th - 1) / 2))
         xb, yb = int(math.ceil(cx1 + (tw - 1) / 2)), int(math.ceil(cy1 + (th - 1) / 2))
@@ -867,7 +879,29 @@ class MultiTargetTracker:
         box = np.array([xa + ix + (tw - 1) / 2 - off[0], ya + iy + (th - 1) / 2 - off[1], tw, th])
         if others and (_iou(box[None], np.asarray(others)) >= 0.5).any():
             return None
+        if not trk.ground_checked:
+            if self._looked_alike_before(trk, box):
+                trk.template = None  # not a vehicle's: never held
+                return None
+            trk.ground_checked = True
         return box
+
+    def _looked_alike_before(self, trk: _Track, box: np.ndarray) -> bool:
+        """Whether the template matched the ground-fixed ``box``'s place before the track came near it (or no kept
+        frame shows the place without the track: the test cannot be made, and the hold is refused too)."""
+        th, tw = trk.template.shape
+        side = max(th, tw)
+        where = dict(trk.hist)
+        for frame, img, off in reversed(self._seen):
+            c = where.get(frame)
+            if c is None or float(np.hypot(*(c - box[:2]))) < side:
+                continue
+            then = _crop(img.astype(np.float32), np.array([box[0], box[1], tw, th]), off, min_std=0.0)
+            if then is None:
+                return True
+            ncc = cv2.matchTemplate(then, trk.template, cv2.TM_CCOEFF_NORMED)
+            return bool(ncc[0, 0] >= self.params["hold_min_ncc"])
+        return True
 
     def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:
         """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) for every confirmed
@@ -878,7 +912,7 @@ class MultiTargetTracker:
         for trk in self._tracks:
             if trk.confirmed and trk.misses == 0:
                 pred = trk.kf.F @ trk.kf.x
-                held = self._hold(trk, img, trk.kf.x[:2], pred, off, []) if img is not None else None
+                held = self._hold(trk, img, pred, off, []) if img is not None else None
                 self._emit(trk, frame, None, pred[:4] if held is None else held, pred[:4], off, shown=True)
 
     def _emit(self, trk: _Track, frame, z, filt, pred, off, *, shown: bool = False) -> None:

@@ -185,6 +185,29 @@ def test_a_car_that_stops_is_held_on_its_template_and_dropped_without_the_image(
         held.step(40, [], image=np.zeros((4, 4, 3)))
 
 
+def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same_before():
+    # detections slide along a road marking (a bright stripe that does not move) and then stop: the template is
+    # the marking's, which matched the same place before the "vehicle" came, so it is not held
+    import cv2
+
+    rng = np.random.default_rng(4)
+    ground = cv2.GaussianBlur(rng.uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    xs = [30.0 + 3.0 * t for t in range(12)]
+    marking, car = MultiTargetTracker(death_misses=3), MultiTargetTracker(death_misses=3)
+    for t in range(16):
+        dets = [_car_det(xs[t], 40.0, 3.0)] if t < 12 else []
+        marking.step(t, dets, image=ground)
+        car.step(t, dets, image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
+    last = lambda trk: max(r["frame"] for r in trk.rows() if not np.isnan(r["x_filt_px"]))  # noqa: E731
+    assert last(marking) == 11 and last(car) == 15
+    # without kept frames the check cannot be made, and nothing is held
+    blind = MultiTargetTracker(death_misses=3, hold_history=1)
+    for t in range(16):
+        blind.step(t, [_car_det(xs[t], 40.0, 3.0)] if t < 12 else [], image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
+    assert last(blind) == 11
+
+
 def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
     rng = np.random.default_rng(2)
     trk = MultiTargetTracker()
