@@ -614,6 +614,7 @@ class _Track:
     held: int = 0  # consecutive frames placed by the template (no detection)
     hist: list = field(default_factory=list)  # (frame, ground-fixed centre) of its detections
     ground_checked: bool = False  # its template was compared with the place before the vehicle came
+    first: tuple | None = None  # (frame, ground-fixed box, template) of its first detection, to extend it back
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -646,8 +647,12 @@ class _Track:
 # hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
 #   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
 #   would otherwise be held for ever);
-# hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps);
-# hold_history: frames the tracker keeps to check, before it first holds a track, that the place looked
+# hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
+#   most it is followed back from its first detection (a vehicle that waited at a light when the clip began
+#   stood where it was first found: once it has left that place, which then looks different, the kept frames
+#   before are searched for its first template);
+# hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
+#   it first holds a track, that the place looked
 #   different before the vehicle came: in the latest kept frame in which the track was a box side or more away,
 #   the template must not match that place (at hold_min_ncc); a template of ground, a roof edge or a tree crown
 #   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
@@ -655,7 +660,7 @@ class _Track:
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 50, "sigma_accel_px": 0.5,
+                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -828,6 +833,9 @@ class MultiTargetTracker:
                 trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
                              start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy(),
                              hist=[(int(frame), boxes[c][:2].copy())])
+                if img is not None and p["hold_min_ncc"] > 0:
+                    first = _crop(img, boxes[c], off)
+                    trk.first = None if first is None else (int(frame), boxes[c].copy(), first)
                 self._next_id += 1
                 self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
                 if self.birth_hits == 1 and p["min_travel_px"] == 0 and p["min_travel_rel"] == 0:
@@ -836,6 +844,11 @@ class MultiTargetTracker:
                     trk.pending = []
                 survivors.append(trk)
         self._tracks = survivors
+        if img is not None:
+            for trk in survivors:
+                if trk.confirmed and trk.first is not None and \
+                        trk.travel >= p["hold_min_travel_rel"] * max(trk.first[2].shape):
+                    self._extend_back(trk, img, off)
         if img is not None and self.params["hold_min_ncc"] > 0:  # kept as 8 bits: 2 MB a 1080p frame
             self._seen.append((int(frame), np.clip(img, 0, 255).astype(np.uint8), off.copy()))
 
@@ -885,6 +898,43 @@ class MultiTargetTracker:
                 return None
             trk.ground_checked = True
         return box
+
+    def _extend_back(self, trk: _Track, img: np.ndarray, off: np.ndarray) -> None:
+        """Follow a track back from its first detection through the kept frames while its first template matches.
+
+        A vehicle waiting at a light when the clip starts is found only when it drives off; it
+        stood where its first detection was. Once the track has left its first box (by
+        ``hold_min_travel_rel`` sides), the place looks different now (else the template is of the
+        ground, and nothing is added), and the kept frames before the first detection are searched
+        (``hold_search_px`` around the place found in the frame after, ``hold_min_ncc``), newest
+        first, until a frame does not match, a frame is not kept, or ``hold_frames`` are added.
+        """
+        p = self.params
+        f0, box, tpl = trk.first
+        trk.first = None  # once
+        th, tw = tpl.shape
+        now = _crop(img, box, off, min_std=0.0)
+        if now is None or cv2.matchTemplate(now, tpl, cv2.TM_CCOEFF_NORMED)[0, 0] >= p["hold_min_ncc"]:
+            return
+        kept = {f: (g, o) for f, g, o in self._seen}
+        at = box[:2].copy()
+        r = max(p["hold_search_px"], 0.5 * max(th, tw))
+        for frame in range(f0 - 1, max(-1, f0 - 1 - p["hold_frames"]), -1):
+            if frame not in kept:
+                return
+            g, o = kept[frame]
+            cx, cy = at + o
+            xa, ya = int(math.floor(cx - r - (tw - 1) / 2)), int(math.floor(cy - r - (th - 1) / 2))
+            xb, yb = int(math.ceil(cx + r + (tw - 1) / 2)), int(math.ceil(cy + r + (th - 1) / 2))
+            if xa < 0 or ya < 0 or xb >= g.shape[1] or yb >= g.shape[0]:
+                return
+            ncc = cv2.matchTemplate(g[ya:yb + 1, xa:xb + 1].astype(np.float32), tpl, cv2.TM_CCOEFF_NORMED)
+            iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+            if not ncc[iy, ix] >= p["hold_min_ncc"]:
+                return
+            at = np.array([xa + ix + (tw - 1) / 2 - o[0], ya + iy + (th - 1) / 2 - o[1]])
+            found = np.array([at[0], at[1], tw, th])
+            self._emit(trk, frame, found, found, found, o)
 
     def _looked_alike_before(self, trk: _Track, box: np.ndarray) -> bool:
         """Whether the template matched the ground-fixed ``box``'s place before the track came near it (or no kept

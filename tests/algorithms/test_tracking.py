@@ -208,6 +208,28 @@ def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same
     assert last(blind) == 11
 
 
+def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
+    # it waits 10 frames (the motion detector cannot see it), then drives off at 3 px/frame
+    xs = [30.0] * 10 + [30.0 + 3.0 * k for k in range(1, 16)]
+    trk = MultiTargetTracker(death_misses=3)
+    for t, x in enumerate(xs):
+        trk.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
+    rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(len(xs)))
+    waiting = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] < 10])
+    assert np.abs(waiting - [30.0, 40.0]).max() < 1.0
+    # a "car" that is a marking (the place looks the same after it left) is not followed back
+    import cv2
+
+    ground = cv2.GaussianBlur(np.random.default_rng(4).uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    mark = MultiTargetTracker(death_misses=3)
+    for t, x in enumerate(xs):
+        mark.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=ground)
+    assert min(r["frame"] for r in mark.rows()) == 10
+
+
 def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
     rng = np.random.default_rng(2)
     trk = MultiTargetTracker()
