@@ -160,25 +160,31 @@ def _car_det(x_px: float, y_px: float, u_px: float = 0.0):
 
 
 def test_a_car_that_stops_is_held_on_its_template_and_dropped_without_the_image():
-    # 12 frames at 3 px/frame, then it stops at a light for 20 frames: the motion detector loses it
-    xs = [30.0 + 3.0 * t for t in range(12)] + [63.0] * 20
+    # 12 frames at 1.5 px/frame, then it stops at a light for 20 frames: the motion detector loses it
+    xs = [30.0 + 1.5 * t for t in range(12)] + [46.5] * 20
     held, blind = MultiTargetTracker(death_misses=5), MultiTargetTracker(death_misses=5)
     for t, x in enumerate(xs):
-        dets = [_car_det(x, 40.0, 3.0)] if t < 12 else []
+        dets = [_car_det(x, 40.0, 1.5)] if t < 12 else []
         held.step(t, dets, image=_car_scene(80, 160, x, 40.0))
         blind.step(t, dets)
     rows = held.rows()
     assert {r["track_id"] for r in rows} == {0}
     assert [r["frame"] for r in rows] == list(range(len(xs)))   # every stopped frame is output
     stopped = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] >= 16])
-    assert np.abs(stopped - [63.0, 40.0]).max() < 1.0            # on the car, not on its prediction
+    assert np.abs(stopped - [46.5, 40.0]).max() < 1.0            # on the car, not on its prediction
     assert max(r["frame"] for r in blind.rows() if not np.isnan(r["x_filt_px"])) == 11
     # the car drives off behind a wall (the template matches nowhere): the held track ends after death_misses
     gone = MultiTargetTracker(death_misses=3)
     for t, x in enumerate(xs[:14]):
         image = _car_scene(80, 160, x, 40.0) if t < 12 else _car_scene(80, 160, 300.0, 40.0)
-        gone.step(t, [_car_det(x, 40.0, 3.0)] if t < 12 else [], image=image)
+        gone.step(t, [_car_det(x, 40.0, 1.5)] if t < 12 else [], image=image)
     assert max(r["frame"] for r in gone.rows() if not np.isnan(r["x_filt_px"])) == 11
+    # a fast car (6 px/frame) that loses its detection coasts unseen: no template is output for it
+    fast = MultiTargetTracker(death_misses=5)
+    for t in range(16):
+        x = 30.0 + 6.0 * min(t, 11)
+        fast.step(t, [_car_det(x, 40.0, 6.0)] if t < 12 else [], image=_car_scene(80, 160, x, 40.0))
+    assert max(r["frame"] for r in fast.rows() if not np.isnan(r["x_filt_px"])) == 11
     with pytest.raises(ValueError, match="hold_min_ncc: expected a number in"):
         MultiTargetTracker(hold_min_ncc=1.5)
     with pytest.raises(ValueError, match="image: expected a gray frame"):
@@ -193,10 +199,10 @@ def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same
     rng = np.random.default_rng(4)
     ground = cv2.GaussianBlur(rng.uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
     ground[38:42, 10:150] = 230.0
-    xs = [30.0 + 3.0 * t for t in range(12)]
+    xs = [30.0 + 1.5 * t for t in range(12)]
     marking, car = MultiTargetTracker(death_misses=3), MultiTargetTracker(death_misses=3)
     for t in range(16):
-        dets = [_car_det(xs[t], 40.0, 3.0)] if t < 12 else []
+        dets = [_car_det(xs[t], 40.0, 1.5)] if t < 12 else []
         marking.step(t, dets, image=ground)
         car.step(t, dets, image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
     last = lambda trk: max(r["frame"] for r in trk.rows() if not np.isnan(r["x_filt_px"]))  # noqa: E731
@@ -204,16 +210,16 @@ def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same
     # without kept frames the check cannot be made, and nothing is held
     blind = MultiTargetTracker(death_misses=3, hold_history=1)
     for t in range(16):
-        blind.step(t, [_car_det(xs[t], 40.0, 3.0)] if t < 12 else [], image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
+        blind.step(t, [_car_det(xs[t], 40.0, 1.5)] if t < 12 else [], image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
     assert last(blind) == 11
 
 
 def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
-    # it waits 10 frames (the motion detector cannot see it), then drives off at 3 px/frame
-    xs = [30.0] * 10 + [30.0 + 3.0 * k for k in range(1, 16)]
+    # it waits 10 frames (the motion detector cannot see it), then drives off, 1.5 px/frame when first found
+    xs = [30.0] * 10 + [30.0 + 1.5 * k + 0.1 * k * k for k in range(1, 16)]
     trk = MultiTargetTracker(death_misses=3)
     for t, x in enumerate(xs):
-        trk.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
+        trk.step(t, [_car_det(x, 40.0, 1.5)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
     rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
     assert {r["track_id"] for r in rows} == {0}
     assert sorted(r["frame"] for r in rows) == list(range(len(xs)))
@@ -226,7 +232,7 @@ def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame(
     ground[38:42, 10:150] = 230.0
     mark = MultiTargetTracker(death_misses=3)
     for t, x in enumerate(xs):
-        mark.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=ground)
+        mark.step(t, [_car_det(x, 40.0, 1.5)] if t >= 10 else [], image=ground)
     assert min(r["frame"] for r in mark.rows()) == 10
 
 
