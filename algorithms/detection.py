@@ -105,7 +105,8 @@ class Detection(NamedTuple):
 #   their union is judged on the motion of each part that explains the change best, without them the largest
 #   stays; and of two detections whose boxes overlap this much the better-explained one stays (1 keeps all);
 # box_from_frames: the box is that of the pixels the region's motion explains better than the ground's
-#   (_moved_box: the vehicle without the flow's halo; needs the frames), else of the region's fast core;
+#   (_moved_box: the vehicle without the flow's halo; needs the frames; a region with fewer than min_area_px
+#   such pixels is no mover: flow noise, an edge the registration left), else of the region's fast core;
 # box_join: parts of those pixels (a slow car with a uniform roof changes at its front and rear edges only)
 #   join the box when at most this fraction of the pixels between them is static texture (ground between two
 #   vehicles that follow each other; 0: the largest part alone);
@@ -396,7 +397,7 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
 
 
 def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), prev=None, *, join: float = 0.5,
-               margin_px: int = 4, gain_grey: float = 2.0) -> tuple[int, int, int, int] | None:
+               margin_px: int = 4, gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
     """The box of the pixels around the region that its motion explains better than the ground's.
 
     A flow region is larger than its vehicle: the flow window carries the vehicle's motion onto the
@@ -413,7 +414,8 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     texture (warping by the motion makes them worse by ``gain_grey``: ground between two
     vehicles that follow each other; a uniform roof between a car's front and rear edges changes
     neither way). Without ``prev`` the box reaches one motion ahead, taken off, unless the vehicle
-    moved more than its length. None when no pixel qualifies.
+    moved more than its length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
+    of marked pixels in its parts; None when no pixel qualifies.
     """
     g0, g1 = frames
     h, w = g0.shape
@@ -443,6 +445,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     left, top = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
     right, bottom = left + stats[:, cv2.CC_STAT_WIDTH] - 1, top + stats[:, cv2.CC_STAT_HEIGHT] - 1
     bx0, by0, bx1, by1 = left[k], top[k], right[k], bottom[k]
+    count = int(stats[k, cv2.CC_STAT_AREA])
     if join > 0:
         static = gain < -gain_grey
         for j in np.argsort(-votes, kind="stable"):
@@ -452,6 +455,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             between = moved[r0:r1 + 1, c0:c1 + 1] == 0
             if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
                 bx0, by0, bx1, by1 = c0, r0, c1, r1
+                count += int(stats[j, cv2.CC_STAT_AREA])
     bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya
     if prev is None:
         # the marked pixels are the vehicle and the ground it covers next: one motion ahead taken off, unless
@@ -464,7 +468,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     bx0, bx1, by0, by1 = bx0 + 1, bx1 - 1, by0 + 1, by1 - 1
     if bx1 < bx0 or by1 < by0:
         return None
-    return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1))
+    return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
 
 
 def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -> float:
@@ -750,9 +754,12 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         x0, y0, x1, y1 = c.box()
         if frames is not None and p["box_from_frames"]:
             box = _moved_box(c, frames, u, v, ground, prev_frame if p["box_three_frames"] else None, join=p["box_join"])
-            if box is not None:
-                x0, y0, x1, y1 = box
-                cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+            # the evidence of a mover: at least min_area_px pixels that its motion explains better than the
+            # ground's (a region of flow noise, or of an edge the registration left, holds a few)
+            if box is None or box[4] < p["min_area_px"]:
+                continue
+            x0, y0, x1, y1 = box[:4]
+            cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
         evidence_of.append(margin)
     # one detection per mover: a vehicle that moves more than its size leaves a second region where the
