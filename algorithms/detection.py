@@ -3,7 +3,7 @@
 Beyond the thesis (its 4.1 follows seeded pixels; it detects nothing). After the
 global model is compensated, the local flow ``w`` of a pair is the motion the
 camera does not explain: vehicles, and the parallax of whatever stands above the
-ground. :func:`detect_vehicles` turns it into :class:`Detection` s in five steps,
+ground. :func:`detect_vehicles` turns it into :class:`Detection` s in six steps,
 each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section):
 
 1. **mask**: valid pixels with ``|w| >= min_magnitude_px``, opened (``open_px``:
@@ -25,7 +25,16 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    (``min_explained``: an illumination change or a moving shadow edge changes
    the grey values without moving the texture, and noise changes them at
    random, so warping frame t+1 back by the region's flow brings it no closer to
-   frame t than warping by the opposite flow does).
+   frame t than warping by the opposite flow does). Parts whose boxes overlap by
+   ``nms_iou`` are judged as one mover on the motion of the part that explains the
+   change best (a vehicle faster than the flow method follows breaks into parts of
+   different speeds). The frames are compared about the motion the ground fit
+   leaves at the region (a shift compensation leaves the ground a residual);
+6. **box**: the pixels the region's motion explains better than the ground's
+   (``box_from_frames``; with frame t-1, ``box_three_frames``: those that explain
+   the change from t-1 too, the vehicle at t without the ground it covers next),
+   their parts joined unless static texture lies between them (``box_join``); a
+   region with fewer than ``min_area_px`` such pixels is no mover.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
