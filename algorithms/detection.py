@@ -588,13 +588,7 @@ def _fit_at(coef: np.ndarray | None, x: float, y: float, h: int, w: int) -> tupl
 
 def _box_iou(a: Detection, b: Detection) -> float:
     """IoU of two detections' inclusive pixel boxes."""
-    iw = min(a.x1_px, b.x1_px) - max(a.x0_px, b.x0_px) + 1
-    ih = min(a.y1_px, b.y1_px) - max(a.y0_px, b.y0_px) + 1
-    if iw <= 0 or ih <= 0:
-        return 0.0
-    inter = iw * ih
-    area = lambda d: (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1)  # noqa: E731
-    return inter / (area(a) + area(b) - inter)
+    return _iou_xyxy((a.x0_px, a.y0_px, a.x1_px, a.y1_px), (b.x0_px, b.y0_px, b.x1_px, b.y1_px))
 
 
 def _along(d: Detection, gv, bound: float, p: dict) -> bool:
