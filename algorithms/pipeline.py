@@ -440,7 +440,7 @@ class Pipeline:
                 p.step(shifts[t], filtered if point_field == "filtered" else cur["flow_local"], cur["valid"],
                        frames=cur["gray"])
             if multi is not None:
-                multi.step(t, dets, offset_px=cumulative[t])
+                multi.step(t, dets, offset_px=cumulative[t], image=cur["gray"][0])
             ms["tracking"] = _ms(t0)
             for k, v in ms.items():
                 totals[k] = totals.get(k, 0.0) + v
@@ -467,7 +467,7 @@ class Pipeline:
                 del cur, nxt
         yield finish(prev_done, window[0], None)
         if multi is not None:
-            multi.extrapolate(n - 1, offset_px=cumulative[n - 1])
+            multi.extrapolate(n - 1, offset_px=cumulative[n - 1], image=g0)
         del window, prev_done, g0
 
         rows = [r for p in points for r in p.rows()] + (multi.rows() if multi is not None else [])

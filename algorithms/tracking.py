@@ -40,9 +40,12 @@ Multi-target tracker (beyond the thesis): the moving regions of
 velocity; each track is a constant-velocity Kalman filter of its box's centre
 and size (:class:`~algorithms.kalman.BoxKalman`); detections are assigned to
 tracks by the Hungarian method on IoU and distance to each track's prediction,
-gated; a track is confirmed after ``birth_hits`` consecutive hits, coasts
-through short occlusions and is dropped after ``death_misses`` consecutive
-misses. It works in a ground-fixed frame: given the camera path (the
+gated; a track is confirmed after ``birth_hits`` consecutive hits once it has
+left a quarter of its box along a straight path (flicker on a tree crown or a
+roof edge recurs in place), is held where its template matches when it loses
+its detection (a vehicle that slows and stops at a light leaves the motion
+detector but not the image), coasts through short occlusions and is dropped
+after ``death_misses`` consecutive misses. It works in a ground-fixed frame: given the camera path (the
 cumulative global shift of frame t), it subtracts it from detections before
 filtering and adds it back to its output, so a car driving straight is a
 constant-velocity target even when the camera sways.
@@ -52,6 +55,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -603,6 +607,14 @@ class _Track:
     confirmed: bool = False
     pending: list = field(default_factory=list)  # rows held until confirmation
     start: np.ndarray | None = None  # ground-fixed centre of its first detection
+    travel: float = 0.0  # farthest its ground-fixed centre has been from start, px
+    path: float = 0.0  # length of the path of its detections' ground-fixed centres, px
+    last_z: np.ndarray | None = None  # ground-fixed centre of its last detection
+    template: np.ndarray | None = None  # the image inside its box at its last detection (float32)
+    held: int = 0  # consecutive frames placed by the template (no detection)
+    hist: list = field(default_factory=list)  # (frame, ground-fixed centre) of its detections
+    ground_checked: bool = False  # its template was compared with the place before the vehicle came
+    first: tuple | None = None  # (frame, ground-fixed box, template) of its first detection, to extend it back
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -611,8 +623,12 @@ class _Track:
 # min_iou: a pair whose boxes overlap at least this much is feasible whatever its distance (a bus's centre
 #   can jump when its region is found whole after being found in part);
 # birth_hits: consecutive detections before a track is confirmed (the detections' minimum persistence);
-# min_travel_px: a track is confirmed only once its ground-fixed centre has moved this far from its first
-#   detection (flow noise, compression artefacts and flicker make regions that recur in place);
+# min_travel_px, min_travel_rel: a track is confirmed only once its ground-fixed centre has moved this far from
+#   its first detection, and this many times its box's larger side (flow noise, compression artefacts, flicker
+#   and a tree crown's sway make regions that recur in place; a vehicle leaves its own box; the rows of the
+#   frames before confirmation are output when it comes, so a slow car loses nothing by the wait);
+# min_straightness: ... and the distance from its first detection is at least this fraction of the length of
+#   the path through its detections (a vehicle drives on; a region that jumps about in place does not);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -620,9 +636,31 @@ class _Track:
 #   prediction of a vehicle that is hidden);
 # use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
 #   new track at the vehicle's speed;
+# hold_min_ncc: a confirmed track without a detection is placed where its template (the image inside its box
+#   at its last detection) matches the frame best, when that normalised cross-correlation reaches this: a
+#   vehicle that slows down and stops (a queue at a light) leaves the motion detector but not the image
+#   (0 turns holding off; needs the frames);
+# hold_search_px: the template is searched within this distance of the prediction, and at least half the box's
+#   larger side (a stopping vehicle falls behind its constant-velocity prediction by its deceleration, a
+#   fraction of a pixel a frame; searching back to its last place would let a fast car's template, whose box
+#   holds ground, match the ground it left);
+# hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
+#   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
+#   would otherwise be held for ever);
+# hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
+#   most it is followed back from its first detection (a vehicle that waited at a light when the clip began
+#   stood where it was first found: once it has left that place, which then looks different, the kept frames
+#   before are searched for its first template);
+# hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
+#   it first holds a track, that the place looked
+#   different before the vehicle came: in the latest kept frame in which the track was a box side or more away,
+#   the template must not match that place (at hold_min_ncc); a template of ground, a roof edge or a tree crown
+#   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
-MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "death_misses": 10, "coast_gate_growth": 0.5,
-                  "report_coasting": False, "use_velocity": True, "sigma_accel_px": 0.5,
+MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
+                  "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
+                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -635,6 +673,19 @@ def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
         box = np.array([d[0], d[1], side, side], dtype=np.float64)
     vel = np.array([d[7], d[8]], dtype=np.float64) if len(d) >= 9 else np.full(2, np.nan)
     return box, vel
+
+
+def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float = 2.0) -> np.ndarray | None:
+    """The pixels of ``img`` inside the ground-fixed box ``(cx, cy, w, h)`` (image = ground + ``off``), float32;
+    None when it is not wholly inside, under 4 px a side, or without contrast (std under ``min_std`` grey levels)."""
+    cx, cy = box[0] + off[0], box[1] + off[1]
+    tw, th = int(round(box[2])), int(round(box[3]))
+    x0, y0 = int(round(cx - (tw - 1) / 2)), int(round(cy - (th - 1) / 2))
+    h, w = img.shape
+    if tw < 4 or th < 4 or x0 < 0 or y0 < 0 or x0 + tw > w or y0 + th > h:
+        return None
+    t = np.ascontiguousarray(img[y0:y0 + th, x0:x0 + tw], dtype=np.float32)
+    return t if float(t.std()) >= min_std else None
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -660,10 +711,12 @@ class MultiTargetTracker:
     a pair feasible when the distance is within the gate (``gate_px``, growing by
     ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
     A new track is confirmed after ``birth_hits`` consecutive hits once it has travelled
-    ``min_travel_px`` over the ground (its rows, from its first frame, are then output; a miss
-    before that deletes it); a confirmed track coasts on its
-    prediction through up to ``death_misses - 1`` frames without a detection (short
-    occlusions) and ends at the ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
+    ``min_travel_px`` and ``min_travel_rel`` box sides over the ground along a path at least
+    ``min_straightness`` straight (its rows, from its first frame, are then output; a miss
+    before that deletes it). A confirmed track without a detection is held where its
+    template matches the frame (``hold_*`` keys, given ``image``), else coasts on its
+    prediction through up to ``death_misses - 1`` frames (short occlusions) and ends at the
+    ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
 
     Use :meth:`step` once per frame, then :meth:`rows`.
     """
@@ -673,14 +726,15 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("birth_hits", "death_misses"):
+        for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
         for name in ("report_coasting", "use_velocity"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
-        for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px"):
+        for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
+                     "hold_min_travel_rel"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -688,23 +742,38 @@ class MultiTargetTracker:
             raise ValueError(f"gate_px: expected > 0, got {p['gate_px']}")
         if not 0 < p["min_iou"] <= 1:
             raise ValueError(f"min_iou: expected a number in (0, 1], got {p['min_iou']}")
+        v = p["min_straightness"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"min_straightness: expected a number in [0, 1], got {v!r}")
+        v = p["hold_min_ncc"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"hold_min_ncc: expected a number in [0, 1] (0: no holding), got {v!r}")
         self.params = p
         self.gate_px, self.birth_hits, self.death_misses = float(p["gate_px"]), int(p["birth_hits"]), int(p["death_misses"])
         self._kf_kw = {k: p[k] for k in ("sigma_accel_px", "sigma_size_accel_px", "sigma_meas_px",
                                           "sigma_vel_meas_px", "sigma_vel0_px")}
         BoxKalman((0.0, 0.0, 1.0, 1.0), **self._kf_kw)  # its own checks of the noise keys, now
         self._tracks: list[_Track] = []
+        self._seen: deque = deque(maxlen=int(p["hold_history"]))  # (frame, gray image, camera path)
         self._rows: list[dict] = []
         self._next_id = 0
 
-    def step(self, frame: int, detections, *, offset_px=(0.0, 0.0)) -> None:
+    def step(self, frame: int, detections, *, offset_px=(0.0, 0.0), image=None) -> None:
         """Take the detections of ``frame`` (:class:`~algorithms.detection.Detection` s, or ``(x_px, y_px, area_px)``).
 
         ``offset_px`` is the camera path at this frame (ground content displacement
-        since frame 0); tracks live in ``image - offset`` coordinates.
+        since frame 0); tracks live in ``image - offset`` coordinates. ``image``, the gray
+        frame (H, W), lets a confirmed track without a detection be held on its template
+        (``hold_min_ncc``); without it tracks only coast.
         """
         p = self.params
         off = np.asarray(offset_px, dtype=np.float64)
+        img = None
+        if image is not None:
+            img = np.asarray(image)
+            if img.ndim != 2:
+                raise ValueError(f"image: expected a gray frame (H, W), got shape {img.shape}")
+            img = img.astype(np.float32, copy=False)
         parsed = [_box_of(d) for d in detections]
         boxes = np.array([b for b, _ in parsed], dtype=np.float64).reshape(-1, 4)
         boxes[:, :2] -= off
@@ -728,22 +797,33 @@ class MultiTargetTracker:
             pairs = [(r, c) for r, c in zip(r_idx, c_idx) if feasible[r, c]]
         det_of = dict(pairs)
         taken_d = set(det_of.values())
+        detected = [boxes[c] for c in det_of.values()]
         survivors = []
         for i, trk in enumerate(self._tracks):
             pred = preds[i]
             if i in det_of:
                 c = det_of[i]
                 trk.kf.update(boxes[c], vels[c])
-                trk.hits, trk.misses = trk.hits + 1, 0
+                trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
                 z = boxes[c]
+                trk.travel = max(trk.travel, float(np.hypot(*(trk.kf.x[:2] - trk.start))))
+                trk.path += float(np.hypot(*(z[:2] - trk.last_z))) if trk.last_z is not None else 0.0
+                trk.last_z = z[:2].copy()
+                trk.hist.append((int(frame), trk.kf.x[:2].copy()))
+                trk.ground_checked = False
+                if img is not None:
+                    trk.template = _crop(img, trk.kf.x[:4], off)
             else:
-                trk.misses += 1
-                if not trk.confirmed or trk.misses >= self.death_misses:
-                    continue
-                z = None
+                z = self._hold(trk, img, pred, off, detected) if img is not None else None
+                if z is not None:
+                    trk.kf.update(z)
+                    trk.held, trk.misses = trk.held + 1, 0
+                else:
+                    trk.misses += 1
+                    if not trk.confirmed or trk.misses >= self.death_misses:
+                        continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
-            if not trk.confirmed and trk.hits >= self.birth_hits and \
-                    float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= p["min_travel_px"]:
+            if not trk.confirmed and trk.hits >= self.birth_hits and self._travelled(trk):
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
@@ -751,24 +831,139 @@ class MultiTargetTracker:
         for c in range(len(boxes)):
             if c not in taken_d:
                 trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
-                             start=boxes[c][:2].copy())
+                             start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy(),
+                             hist=[(int(frame), boxes[c][:2].copy())])
+                if img is not None and p["hold_min_ncc"] > 0:
+                    first = _crop(img, boxes[c], off)
+                    trk.first = None if first is None else (int(frame), boxes[c].copy(), first)
                 self._next_id += 1
                 self._emit(trk, frame, boxes[c], boxes[c], boxes[c], off)
-                if self.birth_hits == 1 and p["min_travel_px"] == 0:
+                if self.birth_hits == 1 and p["min_travel_px"] == 0 and p["min_travel_rel"] == 0:
                     trk.confirmed = True
                     self._rows.extend(trk.pending)
                     trk.pending = []
                 survivors.append(trk)
         self._tracks = survivors
+        if img is not None:
+            for trk in survivors:
+                if trk.confirmed and trk.first is not None and \
+                        trk.travel >= p["hold_min_travel_rel"] * max(trk.first[2].shape):
+                    self._extend_back(trk, img, off)
+        if img is not None and self.params["hold_min_ncc"] > 0:  # kept as 8 bits: 2 MB a 1080p frame
+            self._seen.append((int(frame), np.clip(img, 0, 255).astype(np.uint8), off.copy()))
 
-    def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0)) -> None:
-        """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) at the prediction
-        of every confirmed track that had a detection in the frame before: its box moved by its velocity."""
+    def _travelled(self, trk: _Track) -> bool:
+        """Whether a tentative track has moved enough, and straight enough, to be confirmed (``min_travel_px``,
+        ``min_travel_rel``, ``min_straightness``)."""
+        p = self.params
+        net = float(np.hypot(*(trk.last_z - trk.start))) if trk.last_z is not None else 0.0
+        side = float(max(trk.kf.x[2], trk.kf.x[3]))
+        return (float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= max(p["min_travel_px"], p["min_travel_rel"] * side)
+                and net >= p["min_straightness"] * trk.path)
+
+    def _hold(self, trk: _Track, img: np.ndarray, pred: np.ndarray, off: np.ndarray, others: list) -> np.ndarray | None:
+        """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.
+
+        Only a confirmed track that has travelled ``hold_min_travel_rel`` box sides, for at most
+        ``hold_frames`` frames in a row; the search covers ``hold_search_px`` around the
+        prediction (at least half the box's larger side); a
+        place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice.
+        """
+        p = self.params
+        if (not p["hold_min_ncc"] > 0 or trk.template is None or not trk.confirmed or trk.held >= p["hold_frames"]
+                or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)):
+            return None
+        th, tw = trk.template.shape
+        guess = pred[:2] + off  # image coordinates
+        r = max(p["hold_search_px"], 0.5 * max(th, tw))
+        cx0, cx1, cy0, cy1 = guess[0] - r, guess[0] + r, guess[1] - r, guess[1] + r
+        h, w = img.shape
+        xa, ya = int(math.floor(cx0 - (tw - 1) / 2)), int(math.floor(cy0 - (th - 1) / 2))
+        xb, yb = int(math.ceil(cx1 + (tw - 1) / 2)), int(math.ceil(cy1 + (th - 1) / 2))
+        if xa < 0 or ya < 0 or xb >= w or yb >= h:
+            return None  # at the border: the vehicle may be leaving; the track coasts
+        area = img[ya:yb + 1, xa:xb + 1]
+        if area.shape[0] < th or area.shape[1] < tw:
+            return None
+        ncc = cv2.matchTemplate(area, trk.template, cv2.TM_CCOEFF_NORMED)
+        iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+        if not ncc[iy, ix] >= p["hold_min_ncc"]:
+            return None
+        box = np.array([xa + ix + (tw - 1) / 2 - off[0], ya + iy + (th - 1) / 2 - off[1], tw, th])
+        if others and (_iou(box[None], np.asarray(others)) >= 0.5).any():
+            return None
+        if not trk.ground_checked:
+            if self._looked_alike_before(trk, box):
+                trk.template = None  # not a vehicle's: never held
+                return None
+            trk.ground_checked = True
+        return box
+
+    def _extend_back(self, trk: _Track, img: np.ndarray, off: np.ndarray) -> None:
+        """Follow a track back from its first detection through the kept frames while its first template matches.
+
+        A vehicle waiting at a light when the clip starts is found only when it drives off; it
+        stood where its first detection was. Once the track has left its first box (by
+        ``hold_min_travel_rel`` sides), the place looks different now (else the template is of the
+        ground, and nothing is added), and the kept frames before the first detection are searched
+        (``hold_search_px`` around the place found in the frame after, ``hold_min_ncc``), newest
+        first, until a frame does not match, a frame is not kept, or ``hold_frames`` are added.
+        """
+        p = self.params
+        f0, box, tpl = trk.first
+        trk.first = None  # once
+        th, tw = tpl.shape
+        now = _crop(img, box, off, min_std=0.0)
+        if now is None or cv2.matchTemplate(now, tpl, cv2.TM_CCOEFF_NORMED)[0, 0] >= p["hold_min_ncc"]:
+            return
+        kept = {f: (g, o) for f, g, o in self._seen}
+        at = box[:2].copy()
+        r = max(p["hold_search_px"], 0.5 * max(th, tw))
+        for frame in range(f0 - 1, max(-1, f0 - 1 - p["hold_frames"]), -1):
+            if frame not in kept:
+                return
+            g, o = kept[frame]
+            cx, cy = at + o
+            xa, ya = int(math.floor(cx - r - (tw - 1) / 2)), int(math.floor(cy - r - (th - 1) / 2))
+            xb, yb = int(math.ceil(cx + r + (tw - 1) / 2)), int(math.ceil(cy + r + (th - 1) / 2))
+            if xa < 0 or ya < 0 or xb >= g.shape[1] or yb >= g.shape[0]:
+                return
+            ncc = cv2.matchTemplate(g[ya:yb + 1, xa:xb + 1].astype(np.float32), tpl, cv2.TM_CCOEFF_NORMED)
+            iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+            if not ncc[iy, ix] >= p["hold_min_ncc"]:
+                return
+            at = np.array([xa + ix + (tw - 1) / 2 - o[0], ya + iy + (th - 1) / 2 - o[1]])
+            found = np.array([at[0], at[1], tw, th])
+            self._emit(trk, frame, found, found, found, o)
+
+    def _looked_alike_before(self, trk: _Track, box: np.ndarray) -> bool:
+        """Whether the template matched the ground-fixed ``box``'s place before the track came near it (or no kept
+        frame shows the place without the track: the test cannot be made, and the hold is refused too)."""
+        th, tw = trk.template.shape
+        side = max(th, tw)
+        where = dict(trk.hist)
+        for frame, img, off in reversed(self._seen):
+            c = where.get(frame)
+            if c is None or float(np.hypot(*(c - box[:2]))) < side:
+                continue
+            then = _crop(img.astype(np.float32), np.array([box[0], box[1], tw, th]), off, min_std=0.0)
+            if then is None:
+                return True
+            ncc = cv2.matchTemplate(then, trk.template, cv2.TM_CCOEFF_NORMED)
+            return bool(ncc[0, 0] >= self.params["hold_min_ncc"])
+        return True
+
+    def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:
+        """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) for every confirmed
+        track that had a detection (or was held) in the frame before: where its template matches ``image``
+        (``hold_min_ncc``), else at the prediction, its box moved by its velocity."""
         off = np.asarray(offset_px, dtype=np.float64)
+        img = None if image is None else np.asarray(image).astype(np.float32, copy=False)
         for trk in self._tracks:
             if trk.confirmed and trk.misses == 0:
                 pred = trk.kf.F @ trk.kf.x
-                self._emit(trk, frame, None, pred[:4], pred[:4], off, shown=True)
+                held = self._hold(trk, img, pred, off, []) if img is not None else None
+                self._emit(trk, frame, None, pred[:4] if held is None else held, pred[:4], off, shown=True)
 
     def _emit(self, trk: _Track, frame, z, filt, pred, off, *, shown: bool = False) -> None:
         """A row: the detection's centre (NaN when coasting), the filtered centre and box, the prediction."""

@@ -114,7 +114,8 @@ from harness.metrics.stabilisation import (  # noqa: F401
 )
 from harness.metrics.matching import _linear_sum_assignment  # noqa: F401
 from harness.metrics.objects import (  # noqa: F401
-    DISTRACTOR_CLASSES, VEHICLE_CLASSES, counted_objects, distractor_objects, distractor_table, keep_estimates,
+    DISTRACTOR_CLASSES, STATIC_SPEED_MPS, VEHICLE_CLASSES, counted_objects, distractor_objects, distractor_table,
+    keep_estimates, static_vehicles,
     truth_classes,
 )
 from harness.metrics.trajectories import (  # noqa: F401
@@ -143,7 +144,8 @@ __all__ = [
     "HOTA_ALPHAS", "HOTACounts", "hota_counts", "hota_rows", "alpha_mean_value",
     "encode_alpha_totals", "decode_alpha_totals",
     "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
-    "VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "truth_classes", "counted_objects", "distractor_objects",
+    "VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "truth_classes", "counted_objects",
+    "distractor_objects", "static_vehicles",
     "distractor_table", "keep_estimates",
     "detection_rows", "detection_counts", "moving_vehicles",
     "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",

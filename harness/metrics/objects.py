@@ -8,10 +8,16 @@ Counted objects (truth the metrics count: a miss when no estimate matches them):
     column (0/1) says it where present; else ``parked`` (0/1: a parked car is not
     counted, a car queued at a light is, whatever its speed in that frame); without
     either (real footage, a MOTChallenge ``gt.txt``) every row counts: the annotation
-    decides.
+    decides. A vehicle that stands still through the whole sequence (a ``speed_mps``
+    column whose every visible row of that vehicle is below :data:`STATIC_SPEED_MPS`: a car
+    queued at a red light from the first frame to the last) is not counted but is a
+    distractor, below.
 
 Distractors (the MOT16 devkit's treatment, Milan et al. 2016, sec. 3.3): visible rows of
-:data:`DISTRACTOR_CLASSES` (pedestrians and cyclists in a vehicle benchmark) and the
+:data:`DISTRACTOR_CLASSES` (pedestrians and cyclists in a vehicle benchmark), of vehicles
+that never move in the sequence (MOT16's "static person" is a distractor for the same
+reason: from the clip alone nothing tells it from a parked one, so neither finding it nor
+missing it is scored), and the
 rows of real footage's ``ignore.csv`` (:attr:`scenes.sequence.Sequence.ignore_regions`,
 ignored objects and regions). In every frame the estimates are assigned one-to-one to
 the counted objects and distractors together (Hungarian method on the box-aware rules
@@ -32,8 +38,11 @@ from harness.metrics.matching import BOX_COLUMNS, _linear_sum_assignment, box_of
 
 VEHICLE_CLASSES = ("car", "van", "truck", "bus", "motorbike")
 DISTRACTOR_CLASSES = ("cyclist", "pedestrian")
+# A vehicle whose speed stays below this in every visible row of the sequence never moves in it (walking pace is
+# 1.4 m/s; the traffic model's queued cars read 0, a creeping one a few tenths): a distractor, not a counted object.
+STATIC_SPEED_MPS = 0.5
 
-__all__ = ["VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "truth_classes", "counted_objects", "distractor_objects",
+__all__ = ["VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "truth_classes", "static_vehicles", "counted_objects", "distractor_objects",
            "distractor_table", "keep_estimates"]
 
 
@@ -48,8 +57,8 @@ def _visible(truth: pd.DataFrame) -> np.ndarray:
     return pd.to_numeric(truth["visible"], errors="coerce").fillna(0).to_numpy() != 0
 
 
-def counted_objects(truth: pd.DataFrame) -> np.ndarray:
-    """``(N,)`` bool: the rows of tracks.csv that are counted objects (see the module docstring)."""
+def _moving_vehicles(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` bool: visible rows of a vehicle class that the ``moving`` or ``parked`` column (if any) calls moving."""
     keep = _visible(truth) & np.isin(truth_classes(truth), VEHICLE_CLASSES)
     if "moving" in truth.columns:
         return keep & (pd.to_numeric(truth["moving"], errors="coerce").to_numpy() == 1)
@@ -58,9 +67,30 @@ def counted_objects(truth: pd.DataFrame) -> np.ndarray:
     return keep
 
 
+def static_vehicles(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` bool: rows of moving-vehicle truth whose vehicle stands still through the whole sequence.
+
+    A vehicle (``vehicle_id``) not parked whose ``speed_mps`` is below :data:`STATIC_SPEED_MPS`
+    in every visible row; all False without ``speed_mps`` or ``vehicle_id`` (real annotations).
+    """
+    rows = _moving_vehicles(truth)
+    if "speed_mps" not in truth.columns or "vehicle_id" not in truth.columns or not rows.any():
+        return np.zeros(len(truth), bool)
+    speed = pd.to_numeric(truth["speed_mps"], errors="coerce").to_numpy(np.float64)
+    ids = truth["vehicle_id"].to_numpy()
+    moved = pd.Series(np.where(rows, np.nan_to_num(speed, nan=np.inf), -np.inf)).groupby(ids).transform("max")
+    return rows & (moved.to_numpy() < STATIC_SPEED_MPS)
+
+
+def counted_objects(truth: pd.DataFrame) -> np.ndarray:
+    """``(N,)`` bool: the rows of tracks.csv that are counted objects (see the module docstring)."""
+    return _moving_vehicles(truth) & ~static_vehicles(truth)
+
+
 def distractor_objects(truth: pd.DataFrame) -> np.ndarray:
-    """``(N,)`` bool: visible rows of tracks.csv of a distractor class (pedestrian, cyclist)."""
-    return _visible(truth) & np.isin(truth_classes(truth), DISTRACTOR_CLASSES)
+    """``(N,)`` bool: visible rows of tracks.csv that are distractors: a distractor class (pedestrian, cyclist)
+    or a vehicle that never moves in the sequence (:func:`static_vehicles`)."""
+    return (_visible(truth) & np.isin(truth_classes(truth), DISTRACTOR_CLASSES)) | static_vehicles(truth)
 
 
 def distractor_table(truth: pd.DataFrame, ignore: pd.DataFrame | None = None) -> pd.DataFrame:

@@ -121,7 +121,7 @@ def test_multi_target_tracker_keeps_identities_through_a_crossing():
 
 
 def test_multi_target_tracker_birth_death_and_ground_frame():
-    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2, min_travel_px=0.0)
+    trk = MultiTargetTracker(gate_px=3.0, birth_hits=2, death_misses=2, min_travel_px=0.0, min_travel_rel=0.0)
     trk.step(0, [(5.0, 5.0, 10), (40.0, 40.0, 10)])
     trk.step(1, [(6.0, 5.0, 10)])           # the second one was a one-frame blip
     trk.step(2, [])
@@ -132,12 +132,116 @@ def test_multi_target_tracker_birth_death_and_ground_frame():
     assert np.isnan(rows[2]["x_px"])
     # a target fixed on the ground seen by a camera panning 4 px/frame: in the
     # ground frame it does not move, so a tight gate still holds it
-    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1, min_travel_px=0.0)
+    pan = MultiTargetTracker(gate_px=1.0, birth_hits=1, death_misses=1, min_travel_px=0.0, min_travel_rel=0.0)
     for t in range(6):
         pan.step(t, [(20.0 + 4 * t, 10.0, 5)], offset_px=(4.0 * t, 0.0))
     assert {r["track_id"] for r in pan.rows()} == {0}
     with pytest.raises(ValueError, match="birth_hits: expected an integer >= 1"):
         MultiTargetTracker(birth_hits=0)
+
+
+def _car_scene(h: int, w: int, x_px: float, y_px: float, seed: int = 1) -> np.ndarray:
+    """Gray ground texture (smoothed noise) with a 14 x 8 px car, darker with a bright roof stripe, centred at x, y."""
+    rng = np.random.default_rng(seed)
+    import cv2
+
+    img = cv2.GaussianBlur(rng.uniform(60, 140, (h, w)).astype(np.float32), (0, 0), 1.5)
+    x0, y0 = int(round(x_px)) - 7, int(round(y_px)) - 4
+    img[y0:y0 + 8, x0:x0 + 14] = 40.0
+    img[y0 + 3:y0 + 5, x0 + 2:x0 + 12] = 220.0
+    return img
+
+
+def _car_det(x_px: float, y_px: float, u_px: float = 0.0):
+    from algorithms.detection import Detection
+
+    x0, y0 = int(round(x_px)) - 7, int(round(y_px)) - 4
+    return Detection(x_px, y_px, 112, x0, y0, x0 + 13, y0 + 7, u_px, 0.0)
+
+
+def test_a_car_that_stops_is_held_on_its_template_and_dropped_without_the_image():
+    # 12 frames at 3 px/frame, then it stops at a light for 20 frames: the motion detector loses it
+    xs = [30.0 + 3.0 * t for t in range(12)] + [63.0] * 20
+    held, blind = MultiTargetTracker(death_misses=5), MultiTargetTracker(death_misses=5)
+    for t, x in enumerate(xs):
+        dets = [_car_det(x, 40.0, 3.0)] if t < 12 else []
+        held.step(t, dets, image=_car_scene(80, 160, x, 40.0))
+        blind.step(t, dets)
+    rows = held.rows()
+    assert {r["track_id"] for r in rows} == {0}
+    assert [r["frame"] for r in rows] == list(range(len(xs)))   # every stopped frame is output
+    stopped = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] >= 16])
+    assert np.abs(stopped - [63.0, 40.0]).max() < 1.0            # on the car, not on its prediction
+    assert max(r["frame"] for r in blind.rows() if not np.isnan(r["x_filt_px"])) == 11
+    # the car drives off behind a wall (the template matches nowhere): the held track ends after death_misses
+    gone = MultiTargetTracker(death_misses=3)
+    for t, x in enumerate(xs[:14]):
+        image = _car_scene(80, 160, x, 40.0) if t < 12 else _car_scene(80, 160, 300.0, 40.0)
+        gone.step(t, [_car_det(x, 40.0, 3.0)] if t < 12 else [], image=image)
+    assert max(r["frame"] for r in gone.rows() if not np.isnan(r["x_filt_px"])) == 11
+    with pytest.raises(ValueError, match="hold_min_ncc: expected a number in"):
+        MultiTargetTracker(hold_min_ncc=1.5)
+    with pytest.raises(ValueError, match="image: expected a gray frame"):
+        held.step(40, [], image=np.zeros((4, 4, 3)))
+
+
+def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same_before():
+    # detections slide along a road marking (a bright stripe that does not move) and then stop: the template is
+    # the marking's, which matched the same place before the "vehicle" came, so it is not held
+    import cv2
+
+    rng = np.random.default_rng(4)
+    ground = cv2.GaussianBlur(rng.uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    xs = [30.0 + 3.0 * t for t in range(12)]
+    marking, car = MultiTargetTracker(death_misses=3), MultiTargetTracker(death_misses=3)
+    for t in range(16):
+        dets = [_car_det(xs[t], 40.0, 3.0)] if t < 12 else []
+        marking.step(t, dets, image=ground)
+        car.step(t, dets, image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
+    last = lambda trk: max(r["frame"] for r in trk.rows() if not np.isnan(r["x_filt_px"]))  # noqa: E731
+    assert last(marking) == 11 and last(car) == 15
+    # without kept frames the check cannot be made, and nothing is held
+    blind = MultiTargetTracker(death_misses=3, hold_history=1)
+    for t in range(16):
+        blind.step(t, [_car_det(xs[t], 40.0, 3.0)] if t < 12 else [], image=_car_scene(80, 160, xs[min(t, 11)], 40.0))
+    assert last(blind) == 11
+
+
+def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
+    # it waits 10 frames (the motion detector cannot see it), then drives off at 3 px/frame
+    xs = [30.0] * 10 + [30.0 + 3.0 * k for k in range(1, 16)]
+    trk = MultiTargetTracker(death_misses=3)
+    for t, x in enumerate(xs):
+        trk.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
+    rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(len(xs)))
+    waiting = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] < 10])
+    assert np.abs(waiting - [30.0, 40.0]).max() < 1.0
+    # a "car" that is a marking (the place looks the same after it left) is not followed back
+    import cv2
+
+    ground = cv2.GaussianBlur(np.random.default_rng(4).uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    mark = MultiTargetTracker(death_misses=3)
+    for t, x in enumerate(xs):
+        mark.step(t, [_car_det(x, 40.0, 3.0)] if t >= 10 else [], image=ground)
+    assert min(r["frame"] for r in mark.rows()) == 10
+
+
+def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
+    rng = np.random.default_rng(2)
+    trk = MultiTargetTracker()
+    for t in range(30):
+        flicker = (100.0 + rng.uniform(-3, 3), 50.0 + rng.uniform(-3, 3), 64)   # a tree crown's sway, 8 x 8 px
+        car = (20.0 + 1.0 * t, 20.0, 64)
+        trk.step(t, [flicker, car])
+    rows = trk.rows()
+    assert {r["track_id"] for r in rows} == {1}
+    assert [r["frame"] for r in rows] == list(range(30))   # the car's rows before confirmation are output too
+    with pytest.raises(ValueError, match="min_straightness: expected a number in"):
+        MultiTargetTracker(min_straightness=2)
 
 
 def test_recentre_on_region_finds_the_vehicle_that_moves_like_the_point():

@@ -152,9 +152,18 @@ def test_a_track_on_a_parked_car_is_a_false_positive_and_the_parked_car_no_miss(
     # the parked car has no track rows; the moving one is complete
     rows = [r for r in M.track_rows(est, truth, gate_px=5.0) if r["metric"] == "track_completeness"]
     assert [(r["track_id"], r["value"]) for r in rows] == [(1, 100.0)]
-    # a car queued at a light (not parked, speed 0 in a frame) stays an object in that frame
-    queued = truth.assign(speed_mps=0.0)
+    # a car queued at a light (not parked, speed 0 in a frame) stays an object in that frame when it moves in another
+    queued = truth.assign(speed_mps=np.where(truth["frame"] == 0, 0.0, 6.0))
     assert M.mot_counts(est, queued, gate_px=5.0).objects == 2
+    # one that stands still through the whole sequence is a distractor: neither a miss nor its track a false positive
+    static = truth.assign(speed_mps=0.3)
+    c = M.mot_counts(est, static, gate_px=5.0)
+    assert (c.objects, c.misses, c.false_positives) == (0, 0, 2)   # the parked car's track is still one
+    assert M.mot_counts(est[est["track_id"] == 11], static, gate_px=5.0).misses == 0
+    assert M.static_vehicles(static).tolist() == [True, False, True, False]
+    # a speed at or over the limit in one visible row makes it a moving vehicle, counted in every frame
+    once = static.assign(speed_mps=np.where(static["frame"] == 1, M.STATIC_SPEED_MPS, 0.0))
+    assert M.mot_counts(est, once, gate_px=5.0).objects == 2
     # a moving column, where present, decides over parked
     moving = truth.assign(moving=1)
     assert M.mot_counts(est, moving, gate_px=5.0).objects == 4

@@ -25,8 +25,11 @@ def test_point_seeds_are_the_counted_vehicles_only_no_parked_car_no_pedestrian()
     tracks = pd.DataFrame({"frame": 0, "vehicle_id": [1, 2, 3, 4, 5], "x_px": [1.0, 2.0, 3.0, 4.0, 5.0],
                            "y_px": 0.0, "visible": 1, "parked": [0, 1, 0, 0, 0],
                            "class": ["car", "car", "pedestrian", "bus", "cyclist"], "speed_mps": [5.0, 0, 1, 0, 3]})
-    # vehicle 4 is a bus queued at a light (speed 0, not parked): a moving vehicle, seeded
-    assert point_seeds(tracks) == [(1, 1.0, 0.0), (4, 4.0, 0.0)]
+    # vehicle 4 is a bus queued at a light in frame 0 (speed 0, not parked) that drives off in frame 1: seeded
+    later = tracks.assign(frame=1, speed_mps=[5.0, 0, 1, 4.0, 3])
+    assert point_seeds(pd.concat([tracks, later])) == [(1, 1.0, 0.0), (4, 4.0, 0.0)]
+    # one that stands still through the whole clip is a distractor, not a counted vehicle: not seeded
+    assert point_seeds(tracks) == [(1, 1.0, 0.0)]
 
 
 def test_a_cell_whose_scene_failed_to_render_is_recorded_as_failed_in_its_folder(tmp_path):
