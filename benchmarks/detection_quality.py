@@ -26,7 +26,7 @@ and pipeline:
 - ``fp/frame``: detections within the gate of no moving vehicle, per frame (on parked cars,
   roofs, trees, noise);
 - ``dets/frame``, ``cars/frame``: detections and moving vehicles per frame;
-- ``det_ms``: the detection stage's mean CPU-wall ms per pair in this process (indicative only;
+- ``det_ms``: the detection stage's mean wall-clock ms per pair in this process (indicative only;
   ``benchmarks/pipeline_speed.py`` times pipelines properly).
 
 The last table pools each pipeline over the scenes (sums of counts, medians of the pooled pairs).
