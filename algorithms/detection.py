@@ -3,7 +3,7 @@
 Beyond the thesis (its 4.1 follows seeded pixels; it detects nothing). After the
 global model is compensated, the local flow ``w`` of a pair is the motion the
 camera does not explain: vehicles, and the parallax of whatever stands above the
-ground. :func:`detect_vehicles` turns it into :class:`Detection` s in five steps,
+ground. :func:`detect_vehicles` turns it into :class:`Detection` s in six steps,
 each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section):
 
 1. **mask**: valid pixels with ``|w| >= min_magnitude_px``, opened (``open_px``:
@@ -25,7 +25,16 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    (``min_explained``: an illumination change or a moving shadow edge changes
    the grey values without moving the texture, and noise changes them at
    random, so warping frame t+1 back by the region's flow brings it no closer to
-   frame t than warping by the opposite flow does).
+   frame t than warping by the opposite flow does). Parts whose boxes overlap by
+   ``nms_iou`` are judged as one mover on the motion of the part that explains the
+   change best (a vehicle faster than the flow method follows breaks into parts of
+   different speeds). The frames are compared about the motion the ground fit
+   leaves at the region (a shift compensation leaves the ground a residual);
+6. **box**: the pixels the region's motion explains better than the ground's
+   (``box_from_frames``; with frame t-1, ``box_three_frames``: those that explain
+   the change from t-1 too, the vehicle at t without the ground it covers next),
+   their parts joined unless static texture lies between them (``box_join``); a
+   region with fewer than ``min_area_px`` such pixels is no mover.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
@@ -100,10 +109,18 @@ class Detection(NamedTuple):
 #   speed: that halo is left out of the box);
 # refine_px: the region's motion is refined by block matching within this radius of the flow's (needs the
 #   frames; 0: the flow's median as it is);
-# nms_iou: of two regions whose boxes overlap this much, the one whose motion explains the change better
-#   stays (a vehicle moving more than its size leaves a second region where the flow failed; 1 keeps all);
-# box_from_frames: the box is that of the pixels the region's motion explains better than standing still
-#   (_moved_box: the vehicle without the flow's halo; needs the frames), else of the region's fast core;
+# nms_iou: regions whose boxes overlap this much are parts of one mover (a vehicle moving more than the flow
+#   method follows leaves parts of different speeds, and a region where the flow failed): with the frames
+#   their union is judged on the motion of each part that explains the change best, without them the largest
+#   stays; and of two detections whose boxes overlap this much the better-explained one stays (1 keeps all);
+# box_from_frames: the box is that of the pixels the region's motion explains better than the ground's
+#   (_moved_box: the vehicle without the flow's halo; needs the frames; a region with fewer than min_area_px
+#   such pixels is no mover: flow noise, an edge the registration left), else of the region's fast core;
+# box_join: parts of those pixels (a slow car with a uniform roof changes at its front and rear edges only)
+#   join the box when at most this fraction of the pixels between them is static texture (ground between two
+#   vehicles that follow each other; 0: the largest part alone);
+# box_three_frames: with the previous frame (Pipeline.run passes it) a vehicle pixel must also explain the
+#   change from frame t-1, which leaves out the ground the vehicle covers next (false: frames t, t+1 only);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
@@ -120,6 +137,7 @@ DETECTION_DEFAULTS = {
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
     "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
+    "box_join": 0.5, "box_three_frames": True,
 }
 
 
@@ -175,17 +193,18 @@ def _check_keys(params: dict) -> dict:
     for k, v in p.items():
         if k == "ground_model" or (v is None and k in ("max_area_px", "min_area_m2", "max_area_m2")):
             continue
-        if k == "box_from_frames":
+        if k in ("box_from_frames", "box_three_frames"):
             if not isinstance(v, bool):
-                raise ValueError(f"box_from_frames: expected true/false, got {v!r}")
+                raise ValueError(f"{k}: expected true/false, got {v!r}")
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise ValueError(f"{k}: expected a finite number >= 0, got {v!r}")
     for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px"):
         if not isinstance(p[k], (int, np.integer)):
             raise ValueError(f"{k}: expected an integer >= 0, got {p[k]!r}")
-    if not p["min_explained"] <= 1:
-        raise ValueError(f"min_explained: expected a fraction in [0, 1], got {p['min_explained']!r}")
+    for k in ("min_explained", "box_join"):
+        if not p[k] <= 1:
+            raise ValueError(f"{k}: expected a fraction in [0, 1], got {p[k]!r}")
     return p
 
 
@@ -266,32 +285,113 @@ def _merge(regions: list[_Region], p: dict) -> list[_Region]:
                                              np.concatenate([r.w for r in g])) for g in groups.values()]
 
 
-def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int) -> tuple[float, float]:
-    """The region's motion to the compensated frame t+1 by masked block matching around the flow's (u, v).
+def _overlapping(cores: list[_Region], iou: float) -> list[list[_Region]]:
+    """Cores grouped greedily, largest first: each takes the cores not yet grouped whose boxes overlap its own by ``iou``.
+
+    A vehicle that moves much more than the flow method can follow leaves parts of different
+    speeds (the flow found part of its motion here, all of it there) and a region where the flow
+    failed (the ground it uncovered); their boxes overlap. The largest part leads its group.
+    """
+    order = sorted(range(len(cores)), key=lambda i: -len(cores[i].ys))
+    boxes = [cores[i].box() for i in order]
+    used = [False] * len(order)
+    groups = []
+    for a in range(len(order)):
+        if used[a]:
+            continue
+        used[a] = True
+        members = [cores[order[a]]]
+        for b in range(a + 1, len(order)):
+            if not used[b] and _iou_xyxy(boxes[a], boxes[b]) >= iou:
+                used[b] = True
+                members.append(cores[order[b]])
+        groups.append(members)
+    return groups
+
+
+def _iou_xyxy(a, b) -> float:
+    """IoU of two inclusive pixel boxes ``(x0, y0, x1, y1)``."""
+    iw = min(a[2], b[2]) - max(a[0], b[0]) + 1
+    ih = min(a[3], b[3]) - max(a[1], b[1]) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    return inter / ((a[2] - a[0] + 1) * (a[3] - a[1] + 1) + (b[2] - b[0] + 1) * (b[3] - b[1] + 1) - inter)
+
+
+def _motion(region: _Region, starts, frames, ground, p: dict):
+    """The motion of a region that best explains the change between the frames: ``(u, v, margin)`` or None.
+
+    Candidates: each start (the flow's median motion of each part of the region, relative to the
+    ground) and, with ``refine_px``, the block matching's motion from it. Evidence that the
+    region's texture moved by (u, v) over the ground: the change it explains (at least
+    ``min_explained``), then its margin over the opposite motion (at least half ``min_explained``:
+    a uniform roof moved less than its size matches itself either way). The best-explaining
+    candidate that passes both is chosen; with ``min_explained`` 0 the best-explaining one. None
+    when none passes.
+    """
+    cands: list[tuple[float, float]] = []
+    for u, v in starts:
+        tries = [(u, v)]
+        if p["refine_px"] > 0:
+            tries.append(_refine_velocity(region, frames, u, v, p["refine_px"], ground))
+        for a, b in tries:
+            if all(math.hypot(a - a2, b - b2) > 0.25 for a2, b2 in cands):
+                cands.append((a, b))
+    options = sorted(((_explained(region, frames, a, b, ground), a, b) for a, b in cands), reverse=True)
+    for gain, a, b in options:
+        if p["min_explained"] > 0 and gain < p["min_explained"]:
+            break
+        margin = gain - _explained(region, frames, -a, -b, ground)
+        if p["min_explained"] <= 0 or margin >= p["min_explained"] / 2:
+            return a, b, margin
+    if p["min_explained"] > 0:
+        return None
+    gain, a, b = options[0]
+    return a, b, gain - _explained(region, frames, -a, -b, ground)
+
+
+def _patch(img: np.ndarray, xa: int, ya: int, xb: int, yb: int) -> np.ndarray:
+    return np.ascontiguousarray(img[ya:yb + 1, xa:xb + 1], dtype=np.float32)
+
+
+def _shifted(img: np.ndarray, du: float, dv: float) -> np.ndarray:
+    """``img(x + du, y + dv)`` sampled bilinearly (the border replicated)."""
+    return cv2.warpAffine(img, np.float32([[1, 0, du], [0, 1, dv]]), (img.shape[1], img.shape[0]),
+                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int,
+                     ground=(0.0, 0.0)) -> tuple[float, float]:
+    """The region's motion over the ground by masked block matching around the flow's (u, v).
 
     Flow methods fall short of motions much larger than their window or finest pyramid level can
     see (a vehicle at 30 m/s moves 15 px a frame at 10 fps, 0.2 m/px); the region's own pixels of
-    frame t, searched in frame t+1 within ``radius_px`` of ``(0, 0)`` and of the flow's
-    prediction, are matched by the sum of squared differences over the region's pixels
-    (``cv2.matchTemplate`` with a mask), the minimum refined to sub-pixel by a parabola per axis.
+    frame t, searched in the compensated frame t+1 within ``radius_px`` of the flow's prediction
+    (``ground`` + (u, v): ``ground`` is the motion the compensation left the ground with there),
+    are matched by the sum of squared differences over the region's pixels (``cv2.matchTemplate``
+    with a mask), the minimum refined to sub-pixel by a parabola per axis. Returns the motion
+    relative to the ground.
     """
     g0, g1 = frames
     h, w = g0.shape
+    gu, gv = ground
+    pu, pv = u + gu, v + gv
     x0, y0, x1, y1 = region.box()
-    tpl = np.ascontiguousarray(g0[y0:y1 + 1, x0:x1 + 1], dtype=np.float32)
+    tpl = _patch(g0, x0, y0, x1, y1)
     mask = np.zeros(tpl.shape, np.float32)
     mask[region.ys - y0, region.xs - x0] = 1.0
-    r = int(radius_px) + int(math.ceil(max(abs(u), abs(v))))
+    r = int(radius_px) + int(math.ceil(max(abs(pu), abs(pv))))
     xa, ya, xb, yb = max(0, x0 - r), max(0, y0 - r), min(w - 1, x1 + r), min(h - 1, y1 + r)
-    area = np.ascontiguousarray(g1[ya:yb + 1, xa:xb + 1], dtype=np.float32)
+    area = _patch(g1, xa, ya, xb, yb)
     if area.shape[0] < tpl.shape[0] + 2 or area.shape[1] < tpl.shape[1] + 2:
         return u, v
     ssd = cv2.matchTemplate(area, tpl, cv2.TM_SQDIFF, mask=mask)
-    # candidates: within radius_px of the flow's prediction (the stationary place is where the region's
+    # candidates: within radius_px of the flow's prediction (the ground's place is where the region's
     # ground halo matches, so it is no candidate unless the flow predicts it)
     dy, dx = np.mgrid[0:ssd.shape[0], 0:ssd.shape[1]]
     dx, dy = dx + xa - x0, dy + ya - y0
-    ssd = np.where(np.hypot(dx - u, dy - v) <= radius_px, ssd, np.inf)
+    ssd = np.where(np.hypot(dx - pu, dy - pv) <= radius_px, ssd, np.inf)
     iy, ix = np.unravel_index(int(np.argmin(ssd)), ssd.shape)
     if not np.isfinite(ssd[iy, ix]):
         return u, v
@@ -302,29 +402,47 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
 
     ox = vertex(ssd[iy, ix - 1], ssd[iy, ix], ssd[iy, ix + 1]) if 0 < ix < ssd.shape[1] - 1 else 0.0
     oy = vertex(ssd[iy - 1, ix], ssd[iy, ix], ssd[iy + 1, ix]) if 0 < iy < ssd.shape[0] - 1 else 0.0
-    return float(dx[iy, ix] + ox), float(dy[iy, ix] + oy)
+    return float(dx[iy, ix] + ox) - gu, float(dy[iy, ix] + oy) - gv
 
 
-def _moved_box(region: _Region, frames, u: float, v: float, margin_px: int) -> tuple[int, int, int, int] | None:
-    """The box of the pixels around the region that its motion explains better than standing still.
+def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), prev=None, *, join: float = 0.5,
+               margin_px: int = 4, gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
+    """The box of the pixels around the region that its motion explains better than the ground's.
 
     A flow region is larger than its vehicle: the flow window carries the vehicle's motion onto the
-    ground around it. A pixel of the vehicle is where frame t+1 warped by the vehicle's motion
-    matches frame t better than frame t+1 unwarped does (the ground matches unwarped); the
-    difference, averaged over 3 x 3 px, above 2 grey levels, closed over 2 px, and its 8-connected
-    part that holds most of the region's pixels, within ``margin_px`` of the region's box.
-    None when no pixel qualifies.
+    ground around it. A pixel of the vehicle is where the compensated frame t+1 sampled at the
+    vehicle's motion (``ground`` + (u, v)) matches frame t better than sampled at the ground's
+    (``ground``: what the compensation left of the ground's motion there); with ``prev`` (frame
+    t-1 compensated into frame t) also where frame t-1 sampled at the opposite motions does: the
+    first test alone marks the vehicle and the ground it covers next, the second the vehicle and
+    the ground it uncovered, both the vehicle at t alone, however far it moved (the intersection
+    of the two change masks, each made motion-aware). The gain, averaged over 3 x 3 px, above
+    ``gain_grey`` grey levels, closed over 2 px, within ``margin_px`` of the region's box: its
+    8-connected part that holds most of the region's pixels, joined by the other parts that lie
+    at least half in the region when at most ``join`` of the pixels between them are static
+    texture (warping by the motion makes them worse by ``gain_grey``: ground between two
+    vehicles that follow each other; a uniform roof between a car's front and rear edges changes
+    neither way). Without ``prev`` the box reaches one motion ahead, taken off, unless the vehicle
+    moved more than its length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
+    of marked pixels in its parts; None when no pixel qualifies.
     """
     g0, g1 = frames
     h, w = g0.shape
+    gu, gv = ground
     x0, y0, x1, y1 = region.box()
-    xa, ya, xb, yb = max(0, x0 - margin_px), max(0, y0 - margin_px), min(w - 1, x1 + margin_px), min(h - 1, y1 + margin_px)
-    a = np.ascontiguousarray(g0[ya:yb + 1, xa:xb + 1], dtype=np.float32)
-    b = np.ascontiguousarray(g1[ya:yb + 1, xa:xb + 1], dtype=np.float32)
-    bw = cv2.warpAffine(b, np.float32([[1, 0, u], [0, 1, v]]), (b.shape[1], b.shape[0]),
-                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-    gain = cv2.blur(np.abs(b - a) - np.abs(bw - a), (3, 3))
-    moved = cv2.morphologyEx((gain > 2.0).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2))
+    pad = margin_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
+    xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
+    a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
+    gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
+    if prev is not None:
+        c = _patch(prev, xa, ya, xb, yb)
+        gain = np.minimum(gain, cv2.blur(np.abs(_shifted(c, -gu, -gv) - a) - np.abs(_shifted(c, -u - gu, -v - gv) - a),
+                                         (3, 3)))
+    moved = (gain > gain_grey).astype(np.uint8)
+    inner = np.zeros_like(moved)  # within margin_px of the region's box
+    inner[max(0, y0 - margin_px) - ya:min(h - 1, y1 + margin_px) - ya + 1,
+          max(0, x0 - margin_px) - xa:min(w - 1, x1 + margin_px) - xa + 1] = 1
+    moved = cv2.morphologyEx(moved & inner, cv2.MORPH_CLOSE, _disk(2))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(moved, connectivity=8)
     if n < 2:
         return None
@@ -333,40 +451,55 @@ def _moved_box(region: _Region, frames, u: float, v: float, margin_px: int) -> t
     k = int(np.argmax(votes))
     if votes[k] == 0:
         return None
-    s = stats[k]
-    bx0, by0 = xa + s[cv2.CC_STAT_LEFT], ya + s[cv2.CC_STAT_TOP]
-    bx1, by1 = bx0 + s[cv2.CC_STAT_WIDTH] - 1, by0 + s[cv2.CC_STAT_HEIGHT] - 1
-    # those pixels are the vehicle in frame t and the ground it covers in frame t+1: the box reaches one
-    # motion ahead, taken off here, unless the vehicle moved more than its length (the two places apart,
-    # the part the region chose is the vehicle alone: extent under twice the motion); and the 3 x 3
-    # average widened it by a pixel a side
-    if bx1 - bx0 + 1 >= 2 * abs(u):
-        bx0, bx1 = bx0 - min(u, 0.0), bx1 - max(u, 0.0)
-    if by1 - by0 + 1 >= 2 * abs(v):
-        by0, by1 = by0 - min(v, 0.0), by1 - max(v, 0.0)
+    left, top = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    right, bottom = left + stats[:, cv2.CC_STAT_WIDTH] - 1, top + stats[:, cv2.CC_STAT_HEIGHT] - 1
+    bx0, by0, bx1, by1 = left[k], top[k], right[k], bottom[k]
+    count = int(stats[k, cv2.CC_STAT_AREA])
+    if join > 0:
+        static = gain < -gain_grey
+        for j in np.argsort(-votes, kind="stable"):
+            if j == k or votes[j] == 0 or 2 * votes[j] < stats[j, cv2.CC_STAT_AREA]:
+                continue
+            c0, r0, c1, r1 = min(bx0, left[j]), min(by0, top[j]), max(bx1, right[j]), max(by1, bottom[j])
+            between = moved[r0:r1 + 1, c0:c1 + 1] == 0
+            if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
+                bx0, by0, bx1, by1 = c0, r0, c1, r1
+                count += int(stats[j, cv2.CC_STAT_AREA])
+    bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya
+    if prev is None:
+        # the marked pixels are the vehicle and the ground it covers next: one motion ahead taken off, unless
+        # the two places lie apart (extent under twice the motion: the part chosen is the vehicle alone)
+        if bx1 - bx0 + 1 >= 2 * abs(u):
+            bx0, bx1 = bx0 - min(u, 0.0), bx1 - max(u, 0.0)
+        if by1 - by0 + 1 >= 2 * abs(v):
+            by0, by1 = by0 - min(v, 0.0), by1 - max(v, 0.0)
+    # the 3 x 3 average widened the box by a pixel a side
     bx0, bx1, by0, by1 = bx0 + 1, bx1 - 1, by0 + 1, by1 - 1
     if bx1 < bx0 or by1 < by0:
         return None
-    return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1))
+    return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
 
 
-def _explained(region: _Region, frames, u: float, v: float) -> float:
-    """The fraction of the region's grey-value change ``|I1' - I0|`` that warping ``I1'`` by (u, v) removes."""
+def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -> float:
+    """The fraction of the region's grey-value change that its motion (u, v) over the ground removes.
+
+    The change is ``|I1'(x + g) - I0(x)|`` (``g``: ``ground``, the motion the compensation left the
+    ground with there), the rest ``|I1'(x + g + w) - I0(x)|``.
+    """
     g0, g1 = frames
     h, w = g0.shape
+    gu, gv = ground
     x0, y0, x1, y1 = region.box()
-    pad = int(math.ceil(max(abs(u), abs(v)))) + 2
+    pad = int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
     xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
-    a = g0[ya:yb + 1, xa:xb + 1].astype(np.float32)
-    b = g1[ya:yb + 1, xa:xb + 1].astype(np.float32)
-    M = np.float32([[1, 0, u], [0, 1, v]])  # sample I1'(x + w)
-    bw = cv2.warpAffine(b, M, (b.shape[1], b.shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                        borderMode=cv2.BORDER_REPLICATE)
+    a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
+    b0 = _shifted(b, gu, gv) if gu or gv else b
+    bw = _shifted(b, u + gu, v + gv)
     step = max(1, len(region.ys) // 1500)  # a large region is judged on a sample of its pixels
     ys, xs = region.ys[::step] - ya, region.xs[::step] - xa
     # a change of brightness over the region (light, a cloud's shadow) is no motion: each difference is
     # taken about its median over the region
-    d0, d1 = b[ys, xs] - a[ys, xs], bw[ys, xs] - a[ys, xs]
+    d0, d1 = b0[ys, xs] - a[ys, xs], bw[ys, xs] - a[ys, xs]
     before, after = np.abs(d0 - np.median(d0)), np.abs(d1 - np.median(d1))
     # over the quarter of the pixels that changed most: the flow method's halo (ground around a vehicle that the flow
     # window carries along) did not change, and warping it by the vehicle's motion would count against it
@@ -397,16 +530,38 @@ def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine
     ndarray, (H, W, 2) float32
         ``flow`` minus the fitted field (``flow`` itself when fewer than 12 grid pixels are valid).
     """
+    return _subtract_fit(flow, _ground_fit(flow, valid, model=model, step_px=step_px, iterations=iterations))
+
+
+def _subtract_fit(flow: np.ndarray, coef: np.ndarray | None) -> np.ndarray:
+    """``flow`` (float32) minus the ground fit of coefficients ``coef`` (affine: 3 rows, quadratic: 6)."""
+    f = np.asarray(flow, dtype=np.float32)
+    if coef is None:
+        return f
+    h, w = flow.shape[:2]
+    X = ((np.arange(w) - w / 2) / w)[:, None]
+    Y = ((np.arange(h) - h / 2) / h)[:, None]
+    gx = (coef[0] + coef[1] * X).astype(np.float32)                              # (W, 2)
+    gy = (coef[2] * Y).astype(np.float32)                                        # (H, 2)
+    out = f - gx[None, :, :] - gy[:, None, :]
+    if len(coef) == 6:
+        out -= (coef[3] * X * X).astype(np.float32)[None, :, :] + (coef[5] * Y * Y).astype(np.float32)[:, None, :]
+        out -= (X[None, :, :] * Y[:, None, :] * coef[4]).astype(np.float32)
+    return out
+
+
+def _ground_fit(flow: np.ndarray, valid: np.ndarray, *, model: str, step_px: int = 8,
+                iterations: int = 3) -> np.ndarray | None:
+    """The coefficients ``(3 or 6, 2)`` of :func:`ground_residual`'s fit, or None (fewer than 12 grid pixels)."""
     h, w = flow.shape[:2]
     ys, xs = np.mgrid[step_px // 2:h:step_px, step_px // 2:w:step_px]
     ok = valid[ys, xs]
     ys, xs = ys[ok].astype(np.float64), xs[ok].astype(np.float64)
-    f = np.asarray(flow, dtype=np.float32)
-    if len(xs) < 12:
-        return f
-    z = f[ys.astype(int), xs.astype(int)].astype(np.float64)
     if model not in ("affine", "quadratic"):
         raise ValueError(f"model: expected affine or quadratic, got {model!r}")
+    if len(xs) < 12:
+        return None
+    z = np.asarray(flow)[ys.astype(int), xs.astype(int)].astype(np.float64)
     # coordinates scaled to about [-1, 1]: the quadratic terms' least squares stay well conditioned
     xn, yn = (xs - w / 2) / w, (ys - h / 2) / h
     A = np.column_stack([np.ones_like(xs), xn, yn] + ([xn * xn, xn * yn, yn * yn] if model == "quadratic" else []))
@@ -418,26 +573,22 @@ def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine
         coef = np.linalg.lstsq(A[keep], z[keep], rcond=None)[0]
         r = np.hypot(*(z - A @ coef).T)
         keep = r <= max(0.3, 2.5 * float(np.median(r[keep])))
-    X = ((np.arange(w) - w / 2) / w)[:, None]
-    Y = ((np.arange(h) - h / 2) / h)[:, None]
-    gx = (coef[0] + coef[1] * X).astype(np.float32)                              # (W, 2)
-    gy = (coef[2] * Y).astype(np.float32)                                        # (H, 2)
-    out = f - gx[None, :, :] - gy[:, None, :]
-    if model == "quadratic":
-        out -= (coef[3] * X * X).astype(np.float32)[None, :, :] + (coef[5] * Y * Y).astype(np.float32)[:, None, :]
-        out -= (X[None, :, :] * Y[:, None, :] * coef[4]).astype(np.float32)
-    return out
+    return coef
+
+
+def _fit_at(coef: np.ndarray | None, x: float, y: float, h: int, w: int) -> tuple[float, float]:
+    """The ground fit's flow at pixel (x, y), px ((0, 0) without a fit)."""
+    if coef is None:
+        return 0.0, 0.0
+    xn, yn = (x - w / 2) / w, (y - h / 2) / h
+    terms = [1.0, xn, yn, xn * xn, xn * yn, yn * yn][:len(coef)]
+    g = np.asarray(terms) @ coef
+    return float(g[0]), float(g[1])
 
 
 def _box_iou(a: Detection, b: Detection) -> float:
     """IoU of two detections' inclusive pixel boxes."""
-    iw = min(a.x1_px, b.x1_px) - max(a.x0_px, b.x0_px) + 1
-    ih = min(a.y1_px, b.y1_px) - max(a.y0_px, b.y0_px) + 1
-    if iw <= 0 or ih <= 0:
-        return 0.0
-    inter = iw * ih
-    area = lambda d: (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1)  # noqa: E731
-    return inter / (area(a) + area(b) - inter)
+    return _iou_xyxy((a.x0_px, a.y0_px, a.x1_px, a.y1_px), (b.x0_px, b.y0_px, b.x1_px, b.y1_px))
 
 
 def _along(d: Detection, gv, bound: float, p: dict) -> bool:
@@ -495,7 +646,7 @@ def _common_parallax(dets: list[Detection], p: dict, image_area: int):
 
 
 @register_stage("detection")
-def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None, frames=None,
+def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None, frames=None, prev_frame=None,
                     gsd_m_per_px: float | None = None, **params) -> list[Detection]:
     """Moving vehicles of a pair: regions of independent local motion, one per rigid mover (module docstring).
 
@@ -509,8 +660,11 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         The global (camera) motion of the pair, px: the shift, or the global model's field.
         Without it the parallax test is off.
     frames : (ndarray, ndarray), optional
-        Gray frame t and the compensated frame t+1, (H, W): for the ``min_explained`` test
-        (off without them).
+        Gray frame t and the compensated frame t+1, (H, W): for the ``min_explained`` test,
+        the refinement and the box (off without them).
+    prev_frame : ndarray, (H, W), optional
+        Gray frame t-1 compensated into frame t's pixels (``I_{t-1}(M^-1 x)``, ``M`` the global
+        model of pair t-1): the box test of ``box_three_frames`` (frames t, t+1 alone without it).
     gsd_m_per_px : float, optional
         Ground sampling distance, m/px: fills ``area_m2`` and applies ``min_area_m2``, ``max_area_m2``.
     **params
@@ -531,8 +685,10 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if gsd_m_per_px is not None and not (math.isfinite(gsd_m_per_px) and gsd_m_per_px > 0):
         raise ValueError(f"gsd_m_per_px: expected None or a finite number > 0, got {gsd_m_per_px!r}")
     h, w = f.shape[:2]
+    coef = None
     if p["ground_model"] != "none":
-        f = ground_residual(f, val, model=p["ground_model"])
+        coef = _ground_fit(f, val, model=p["ground_model"])
+        f = _subtract_fit(f, coef)
     mag2 = f[..., 0].astype(np.float32) ** 2 + f[..., 1].astype(np.float32) ** 2
     thr = float(p["min_magnitude_px"])
     if p["noise_k"] > 0:
@@ -571,9 +727,16 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         raise ValueError(f"global_flow_px: expected (2,) or {(h, w, 2)}, got {tuple(g.shape)}")
     if frames is not None and (len(frames) != 2 or any(np.shape(a) != (h, w) for a in frames)):
         raise ValueError(f"frames: expected two gray frames of shape {(h, w)}")
+    if prev_frame is not None and np.shape(prev_frame) != (h, w):
+        raise ValueError(f"prev_frame: expected a gray frame of shape {(h, w)}, got {np.shape(prev_frame)}")
     out, evidence_of = [], []
     cores = [c for r in regions if len(r.ys) >= p["min_area_px"] for c in r.cores(p["core_rel"], p["min_area_px"])]
-    for c in _merge(cores, p) if len(cores) > len(regions) else cores:
+    cores = _merge(cores, p) if len(cores) > len(regions) else cores
+    for group in _overlapping(cores, p["nms_iou"]):
+        # without the frames the largest part alone (nothing tells which part's flow is right)
+        c = group[0] if frames is None or len(group) == 1 else _Region(
+            np.concatenate([q.ys for q in group]), np.concatenate([q.xs for q in group]),
+            np.concatenate([q.w for q in group]))
         area = len(c.ys)
         if p["max_area_px"] is not None and area > p["max_area_px"]:
             continue
@@ -582,36 +745,24 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
                                          or (p["max_area_m2"] is not None and area_m2 > p["max_area_m2"])):
             continue
         cx, cy = float(c.xs.mean()), float(c.ys.mean())
-        u, v = (float(a) for a in c.velocity)
+        u, v = (float(a) for a in group[0].velocity)
         margin = float(area)  # what ranks overlapping regions without frames
+        # the motion the compensation left the ground with here: the frames are compared about it
+        ground = _fit_at(coef, cx, cy, h, w)
         if frames is not None and (p["refine_px"] > 0 or p["min_explained"] > 0):
-            # evidence that the region's texture moved by (u, v): the change it explains, then its margin over
-            # the opposite motion (half min_explained: a uniform roof moved less than its size matches itself
-            # either way); the block matching's motion where it explains the change better than the flow's
-            options = [(_explained(c, frames, u, v), u, v)]
-            if p["refine_px"] > 0:
-                ur, vr = _refine_velocity(c, frames, u, v, p["refine_px"])
-                if math.hypot(ur - u, vr - v) > 0.25:
-                    options.append((_explained(c, frames, ur, vr), ur, vr))
-            chosen = None
-            for gain, a, b in sorted(options, reverse=True):
-                if p["min_explained"] > 0 and gain < p["min_explained"]:
-                    break
-                margin = gain - _explained(c, frames, -a, -b)
-                if p["min_explained"] <= 0 or margin >= p["min_explained"] / 2:
-                    chosen = (a, b)
-                    break
+            chosen = _motion(c, [tuple(float(a) for a in q.velocity) for q in group], frames, ground, p)
             if chosen is None:
-                if p["min_explained"] > 0:
-                    continue
-                chosen = max(options)[1:]
-            u, v = chosen
+                continue
+            u, v, margin = chosen
         x0, y0, x1, y1 = c.box()
         if frames is not None and p["box_from_frames"]:
-            box = _moved_box(c, frames, u, v, 4)
-            if box is not None:
-                x0, y0, x1, y1 = box
-                cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+            box = _moved_box(c, frames, u, v, ground, prev_frame if p["box_three_frames"] else None, join=p["box_join"])
+            # the evidence of a mover: at least min_area_px pixels that its motion explains better than the
+            # ground's (a region of flow noise, or of an edge the registration left, holds a few)
+            if box is None or box[4] < p["min_area_px"]:
+                continue
+            x0, y0, x1, y1 = box[:4]
+            cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
         evidence_of.append(margin)
     # one detection per mover: a vehicle that moves more than its size leaves a second region where the

@@ -409,7 +409,8 @@ class Pipeline:
             ms["spatial"] = _ms(t0)
             return {"index": t, "flow_global": fg, "flow_total": total, "flow_local": w_local, "valid": valid,
                     "cleaned": cleaned, "stage_ms": ms, "gray": (g0, g1), "compensated": (g0, g1c),
-                    "global_px": shifts[t] if is_shift else fg}
+                    "global_px": shifts[t] if is_shift else fg,
+                    "matrix": M if comp["model"] != "none" else np.eye(3)}
 
         def finish(prev: dict | None, cur: dict, nxt: dict | None) -> PairEstimate:
             ms, t = cur["stage_ms"], cur["index"]
@@ -422,8 +423,17 @@ class Pipeline:
             t0 = time.perf_counter()
             det_field = filtered if det_cfg["field"] == "filtered" else cur["flow_local"]
             mask = motion_mask(det_field, cur["valid"], det_cfg["min_magnitude_px"])
+            # frame t-1 in frame t's pixels, I_{t-1}(M^-1 x) (cv2 inverts M without WARP_INVERSE_MAP): the
+            # detection's box test over three frames
+            before = None
+            if prev is not None and "gray0" in prev and det_cfg["box_three_frames"] and det_cfg["box_from_frames"]:
+                gp, Mp = prev["gray0"], prev["matrix"]
+                size = (gp.shape[1], gp.shape[0])
+                before = (cv2.warpAffine(gp, Mp[:2], size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                          if np.allclose(Mp[2], [0, 0, 1]) else
+                          cv2.warpPerspective(gp, Mp, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
-                                   frames=cur["compensated"], gsd_m_per_px=gsd, **det_params)
+                                   frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd, **det_params)
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:
@@ -451,7 +461,8 @@ class Pipeline:
             if len(window) == 2:
                 cur, nxt = window
                 yield finish(prev_done, cur, nxt)
-                prev_done = {"cleaned": cur["cleaned"]}  # all the next pair's temporal filter needs
+                # all the next pair's temporal filter and box test need
+                prev_done = {"cleaned": cur["cleaned"], "gray0": cur["gray"][0], "matrix": cur["matrix"]}
                 window = [nxt]
                 del cur, nxt
         yield finish(prev_done, window[0], None)

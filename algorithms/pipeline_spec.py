@@ -297,6 +297,8 @@ class DetectionSpec(_Section):
     refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
     nms_iou: float = DETECTION_DEFAULTS["nms_iou"]
     box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
+    box_join: float = DETECTION_DEFAULTS["box_join"]
+    box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")

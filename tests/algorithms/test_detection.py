@@ -205,3 +205,113 @@ def test_a_parallax_field_of_registered_frames_is_rejected_and_traffic_across_it
     assert sorted((round(d.u_px), round(d.v_px)) for d in dets) == [(-3, 0), (0, 3)]
     # off, the crowns are moving regions too
     assert len(detect_vehicles(flow, np.ones((H, W), bool), parallax_min_fraction=0.0)) == 6
+
+
+def _ground(rng, h=H, w=W):
+    """Textured ground: smoothed noise, grey levels about 60..200."""
+    return cv2.GaussianBlur(rng.uniform(40, 220, (h, w)).astype(np.float32), (0, 0), 1.2)
+
+
+def _paint_car(img, x0, y0, length, width, *, roof=150.0, outline=30.0):
+    """A car seen from above at integer (x0, y0): a 2 px dark outline around a uniform roof."""
+    out = img.copy()
+    out[y0:y0 + width, x0:x0 + length] = outline
+    out[y0 + 2:y0 + width - 2, x0 + 2:x0 + length - 2] = roof
+    return out
+
+
+def _iou(d, box):
+    """IoU of a detection's inclusive box with an inclusive box (x0, y0, x1, y1)."""
+    iw = min(d.x1_px, box[2]) - max(d.x0_px, box[0]) + 1
+    ih = min(d.y1_px, box[3]) - max(d.y0_px, box[1]) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    a = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (box[2] - box[0] + 1) * (box[3] - box[1] + 1)
+    return iw * ih / (a - iw * ih)
+
+
+def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
+    # 40 x 16 px, 1.5 px a frame to the right: only its front and rear edges change, the roof between does not
+    rng = np.random.default_rng(6)
+    g = _ground(rng)
+    frames = [_paint_car(g, 60 + 2 * k - 2, 50, 40, 16) for k in range(3)]  # t-1, t, t+1: 2 px a frame
+    flow = _field(rng, [(48, 68, 56, 104, (2.0, 0.0))])  # the flow's region: the car and a halo
+    valid = np.ones((H, W), bool)
+    car = (60, 50, 99, 65)
+    (d,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.3)
+    assert _iou(d, car) >= 0.8, d
+    # the front and rear edge parts joined: the largest part alone is about half the car
+    (one,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_join=0.0)
+    assert _iou(one, car) < 0.6, one
+    # two frames only: the ground the car covers next is taken off, the box still the car within 2 px
+    (d2,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]))
+    assert (d2.x0_px, d2.y0_px, d2.x1_px, d2.y1_px) == pytest.approx(car, abs=2)
+
+
+def test_a_car_faster_than_its_length_whose_flow_broke_in_two_is_one_detection_at_its_motion():
+    # 24 x 12 px car moving 30 px a frame; the flow found a third of that on its rear half and all of it on its
+    # front half (a flow method that cannot follow such a motion)
+    rng = np.random.default_rng(7)
+    g = _ground(rng)
+    frames = [_paint_car(g, 70 + 30 * k - 30, 60, 24, 12, roof=200.0) for k in range(3)]
+    flow = _field(rng, [(58, 74, 68, 82, (10.0, 0.0)), (58, 74, 82, 96, (30.0, 0.0))], blur=0.7)
+    valid = np.ones((H, W), bool)
+    for prev in (frames[0], None):
+        dets = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=prev)
+        assert len(dets) == 1, dets
+        (d,) = dets
+        assert (d.u_px, d.v_px) == pytest.approx((30.0, 0.0), abs=0.5)
+        assert _iou(d, (70, 60, 93, 71)) >= 0.7, (prev is None, d)
+
+
+def test_the_frames_are_compared_about_the_residual_the_ground_keeps():
+    # a shift compensation that left the ground 1.5 px of motion (a rotation, a tilt): the ground fit removes it
+    # from the flow, and the frame tests take it as the ground's motion; a car moving 2 px over it is found
+    # with its box, and a static textured patch whose flow is the ground's is no detection
+    rng = np.random.default_rng(8)
+    big = _ground(rng, H + 8, W + 8)
+    car_t = _paint_car(big, 60, 50, 30, 14)
+    shift = lambda img, dx: cv2.warpAffine(img, np.float32([[1, 0, dx], [0, 1, 0]]), (img.shape[1], img.shape[0]),  # noqa: E731
+                                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    g0 = car_t[:H, :W]
+    # frame t+1: the ground 1.5 px to the right (sampled at x - 1.5), the car 3.5 px
+    g1 = shift(big, -1.5)
+    g1 = _paint_car(g1, 60 + 3, 50, 30, 14)[:H, :W]  # 3 px over the ground's 0 (integer painting), 1.5 + 2 ~ 3.5
+    flow = _field(rng, [(46, 68, 56, 96, (3.0 - 1.5, 0.0))])
+    flow[..., 0] += 1.5  # the local flow carries the ground's residual
+    (d,) = detect_vehicles(flow, np.ones((H, W), bool), frames=(g0, g1))
+    assert d.u_px == pytest.approx(1.5, abs=0.4)  # relative to the ground
+    assert _iou(d, (60, 50, 89, 63)) >= 0.7, d
+
+
+def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
+    # flow noise: a blob of 1.5 px flow over a patch of ground that is the same in both frames
+    rng = np.random.default_rng(9)
+    g = _ground(rng)
+    noisy = g + rng.normal(0, 2.0, g.shape).astype(np.float32)
+    flow = _field(rng, [(40, 60, 60, 80, (1.5, 0.5))])
+    assert detect_vehicles(flow, np.ones((H, W), bool), frames=(g, noisy), prev_frame=g) == []
+    # the same flow where the patch did move: found
+    moved = g.copy()
+    moved[40:60, 62:82] = g[40:60, 60:80]
+    assert len(detect_vehicles(flow, np.ones((H, W), bool), frames=(g, moved))) == 1
+    # where only a 4 x 4 px spot moved inside the flow's 20 x 20 px region (a pole's top, a pedestrian): the
+    # region is min_area_px large, the pixels its motion explains (about 46 after the 3 x 3 average) decide
+    g0, g1 = g.copy(), g.copy()
+    g0[50:54, 68:72], g1[50:54, 70:74] = 255.0, 255.0
+    flow = _field(rng, [(40, 60, 60, 80, (2.0, 0.0))])
+    (d,) = detect_vehicles(flow, np.ones((H, W), bool), frames=(g0, g1), min_area_px=40)
+    assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx((68, 50, 71, 53), abs=1)
+    assert detect_vehicles(flow, np.ones((H, W), bool), frames=(g0, g1), min_area_px=60) == []
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"box_join": 1.5}, r"box_join: expected a fraction in \[0, 1\], got 1.5"),
+    ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
+    ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
+])
+def test_bad_box_keys_and_a_misshapen_previous_frame_are_rejected(kwargs, match):
+    z = np.zeros((4, 4), np.float32)
+    with pytest.raises(ValueError, match=match):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), frames=(z, z), **kwargs)
