@@ -79,6 +79,30 @@ def test_eval_video_bad_gt_exits_2_and_writes_nothing(tmp_path, capsys, render_c
     assert "--frames" in capsys.readouterr().err and not out.exists()
 
 
+def test_eval_video_says_what_the_truth_holds_and_warns_when_nothing_is_counted(tmp_path, capsys, render_cache):
+    clip = _frames(tmp_path / "clip")
+    gt_dir = tmp_path / "gt"
+    gt_dir.mkdir()
+    gt = gt_dir / "gt.txt"
+    # class 1 of MOT's table: pedestrians, distractors of a vehicle benchmark; frame 9 lies outside the clip
+    gt.write_text("1,1,5,5,6,6,1,1,1\n2,1,6,5,6,6,1,1,1\n2,2,20,5,6,6,0,1,1\n9,1,6,5,6,6,1,1,1\n")
+    args = ["eval-video", str(clip), "--gt", str(gt), "--pipelines", "dis", "--cache", str(render_cache),
+            "--no-report", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "a")]) in (0, 1)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == ("truth: gt.txt (mot): 3 rows in frames 1..2, 2 ids: 0 counted vehicles (none), "
+                      "2 distractors (pedestrian 2), 1 ignored; 1 rows outside the clip's frames 1..4 left out")
+    assert err[1].startswith("aerobench: warning: no row of the ground truth is a counted vehicle")
+    # the same file exported by CVAT names its classes in labels.txt: class 1 is its first line
+    (gt_dir / "labels.txt").write_text("Car\nforklift\n")
+    assert main([*args, "--out", str(tmp_path / "b")]) in (0, 1)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == ("truth: gt.txt (mot): 3 rows in frames 1..2, 2 ids: 2 counted vehicles (car 2), "
+                      "0 distractors, 1 ignored; 1 rows outside the clip's frames 1..4 left out; classes named "
+                      "by labels.txt (Car, forklift), not known and ignored: forklift")
+    assert not any("warning" in line for line in err)
+
+
 @pytest.mark.skipif(not (KIT_AIS / "MOS74-93").is_dir(), reason="../shared/external/kit_ais is not beside the clone")
 def test_kit_ais_suite_files_resolve():
     suite = load_suite(ROOT / "benchmarks" / "suites" / "kit-ais.yaml")
