@@ -80,7 +80,7 @@ PX_PARAMETERS = {
                   "border_px": "length", "refine_px": "length"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length"},
 }
-TRACK_METRICS = ("mota", "idf1", "hota", "mot_false_positives", "mot_misses", "id_switches", "motp")
+TRACK_METRICS = ("mota", "idf1", "hota", "mot_false_positives", "mot_misses", "motp")
 
 
 def _aerobench(*args: str, env: dict) -> tuple[float, subprocess.CompletedProcess]:
@@ -113,11 +113,11 @@ def _scores(run_dir: Path) -> tuple[list[dict], dict[str, float], str]:
         row = {"tracker": tracker}
         for m in TRACK_METRICS:
             v = s[(s["metric"] == m) & (s["region"] == tracker)]
-            if m == "id_switches" and v.empty:
-                v = s[(s["metric"] == m)]
             row[m] = float(v["value"].iloc[0]) if len(v) else float("nan")
         c = s[(s["metric"] == "mota") & (s["region"] == tracker)]
-        row["objects"] = int(c["count"].iloc[0]) if "count" in c.columns and len(c) else -1
+        row["objects"] = int(c["count"].iloc[0]) if len(c) else -1
+        # MOTA's sum is FN + FP + IDSW of this tracker (harness.metrics.mot): its switches, the point tracker's too
+        row["id_switches"] = float(c["sum"].iloc[0]) - row["mot_false_positives"] - row["mot_misses"]
         out.append(row)
     t = df[df["metric"].astype(str).str.startswith("time_") & df["frame"].notna()]
     stages = t.groupby("metric")["value"].sum().sort_values(ascending=False)
@@ -183,7 +183,8 @@ def rehearse(scene: str, args: argparse.Namespace, env: dict) -> list[dict]:
                                                    gt=str(gt.resolve())), args.cache)
         print(f"[{scene} x{scale:g}] ingest ({'decoded' if entry.rendered else 'cached'}): "
               f"{time.perf_counter() - t:.0f} s", flush=True)
-        for pipe, factor in [(p, f) for p in args.pipelines for f in [1.0, *args.px_factor]]:
+        factors = args.px_factor if args.only_scaled else [1.0, *args.px_factor]
+        for pipe, factor in [(p, f) for p in args.pipelines for f in factors]:
             name = pipe if factor == 1.0 else f"{pipe}-px{factor:g}"
             run = work / f"run-{name}-x{scale:g}"
             if run.exists():
@@ -225,6 +226,7 @@ def main(argv=None) -> int:
                     help="beside each pipeline, the same with the px sizes of detection and tracker "
                          "(PX_PARAMETERS) times each factor (areas by its square), through `aerobench run` "
                          "of a suite with a real: scene; e.g. 2 for 1080p against the 960x540 they were tuned at")
+    ap.add_argument("--only-scaled", action="store_true", help="with --px-factor: the scaled pipelines only")
     ap.add_argument("--pipelines", default=",".join(sorted(PIPELINES)),
                     help="pipelines separated by commas (default: every built-in one)")
     ap.add_argument("--work", default="/tmp/aerobench-heldout", help="exports and run folders (default %(default)s)")
