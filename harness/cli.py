@@ -392,7 +392,8 @@ def eval_video_suite(args: argparse.Namespace) -> Any:
     if not video.exists():
         raise UsageError(f"{video}: no such video file or frames folder")
     if args.gt is not None and not Path(args.gt).is_file():
-        raise UsageError(f"--gt: {args.gt}: no such file")
+        what = "a folder; expected the ground-truth file (gt.txt)" if Path(args.gt).is_dir() else "no such file"
+        raise UsageError(f"--gt: {args.gt}: {what}")
     start, stop = _frame_range(args.frames)
     scene: dict[str, Any] = {"real": str(video.resolve()), "label": video.stem or video.name, "start": start,
                              "scale": args.scale, "gt_format": args.gt_format}

@@ -720,7 +720,10 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot", labels: list[st
         if layout == "uavdt" and len(f) != 9:
             raise FormatError(f"{where}: expected 9 UAVDT columns (frame, id, left, top, width, height, "
                               f"out_of_view, occlusion, category), got {len(f)}")
-        frame = _integer(f[0], "frame (column 1)", where, lo=1)
+        frame = _integer(f[0], "frame (column 1)", where)
+        if frame < 1:
+            raise FormatError(f"{where}: frame (column 1): expected an integer >= 1, got {f[0]!r} (the formats "
+                              f"number frames from 1)")
         tid = _integer(f[1], "id (column 2)", where)
         left, top = _number(f[2], "bb_left (column 3)", where), _number(f[3], "bb_top (column 4)", where)
         w, h = _number(f[4], "bb_width (column 5)", where), _number(f[5], "bb_height (column 6)", where)

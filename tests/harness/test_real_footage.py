@@ -77,6 +77,14 @@ def test_eval_video_bad_gt_exits_2_and_writes_nothing(tmp_path, capsys, render_c
     assert not out.exists()
     assert main(["eval-video", str(clip), "--frames", "2", "--out", str(out)]) == 2
     assert "--frames" in capsys.readouterr().err and not out.exists()
+    assert main(["eval-video", str(clip), "--gt", str(tmp_path), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith("a folder; expected the ground-truth file (gt.txt)")
+    gt.write_text("0,1,5,5,6,6,1,3,1\n")  # 0-based frames
+    assert main(["eval-video", str(clip), "--gt", str(gt), "--pipelines", "dis", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("line 1: frame (column 1): expected an integer >= 1, got '0' (the "
+                                             "formats number frames from 1)")
+    assert not out.exists()
 
 
 def test_eval_video_says_what_the_truth_holds_and_warns_when_nothing_is_counted(tmp_path, capsys, render_cache):
