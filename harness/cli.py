@@ -482,7 +482,11 @@ def cmd_export(args: argparse.Namespace) -> int:
                          f"got {args.video!r}")
     export_frames(seq, out / "img1")
     if seq.tracks is not None:
-        export_mot_gt(seq.tracks, out / "gt" / "gt.txt")
+        from harness.metrics.objects import counted_objects, distractor_objects
+
+        # the objects the synthetic path counts and its distractors, as gt.txt rows (flag 0 where ignored)
+        export_mot_gt(seq.tracks, out / "gt" / "gt.txt", counted=counted_objects(seq.tracks),
+                      distractors=distractor_objects(seq.tracks))
     if args.video is not None:
         export_video(seq, out / Path(args.video).name, fps=float(seq.meta.get("fps") or 25.0))
     print(f"wrote {out} ({len(seq)} frames in img1/" + (", gt/gt.txt" if seq.tracks is not None else "")

@@ -665,30 +665,52 @@ def ingest_footage(spec: FootageSpec, out_dir: str | os.PathLike) -> Path:
 _MOT_CLASS_IDS = {"car": 3, "van": 3, "truck": 3, "bus": 3, "motorbike": 5, "cyclist": 4, "pedestrian": 1}
 
 
-def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike) -> Path:
+def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.ndarray | None = None,
+                  distractors: np.ndarray | None = None) -> Path:
     """Write a sequence's tracks.csv as a MOTChallenge ``gt.txt`` (9 columns, MOT16/17 layout).
 
-    One line per visible row of a vehicle that is not parked: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
+    Which rows, and with which flag: without ``counted`` and ``distractors``, every visible row
+    of a road user that is not parked, flag 1. With them (``(N,)`` bool over the rows of
+    ``tracks``: what the synthetic path counts and treats as distractors,
+    ``harness.metrics.objects``; the CLI's ``export`` passes them), the rows that are counted
+    objects or distractors: a counted row and a pedestrian's or cyclist's row (read back as a
+    distractor by its class) with flag 1, any other distractor (a vehicle the synthetic path
+    does not count and does not hold against a tracker) with flag 0, ignored; rows that are
+    neither (a parked car: a track on it is a false positive) are left out. So the real path
+    scores the export as the synthetic path scores the sequence, whatever those rules say.
+
+    One line per row written: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
     ``bb_width = x1 - x0 + 1``, ``bb_height = y1 - y0 + 1`` (the inverse of the reader's
     conversion, written with every digit of the float64, so the boxes come back to an ulp or two:
     ``x0 + 1`` and the reader's ``- 1`` each round),
-    flag 1, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
+    the flag, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
     3 without a class column), visibility (``visible_fraction``, 1 without it). A real reading
     takes the box centre as the vehicle's position, which for a rendered vehicle differs from
     its projected centre ``x_px, y_px`` by up to about a pixel.
     """
-    t = tracks[tracks["visible"].astype(int) > 0]
-    if "parked" in t.columns:  # a motion benchmark's truth holds the vehicles that move, as the synthetic path
-        t = t[t["parked"].astype(int) == 0]  # counts them (harness.metrics.objects): parked ones are left out
-    t = t.sort_values(["frame", "vehicle_id"], kind="stable")
-    cls = t["class"] if "class" in t.columns else pd.Series("car", index=t.index)
+    cls_all = tracks["class"].astype(str) if "class" in tracks.columns else pd.Series("car", index=tracks.index)
+    if (counted is None) != (distractors is None):
+        raise ValueError("counted, distractors: expected both or neither")
+    if counted is None:
+        keep = tracks["visible"].astype(int).to_numpy() > 0
+        if "parked" in tracks.columns:  # a motion benchmark's truth holds the vehicles that move, as the
+            keep &= tracks["parked"].astype(int).to_numpy() == 0  # synthetic path counts them: parked ones out
+        flag = np.ones(len(tracks), int)
+    else:
+        counted, distractors = (np.asarray(m, bool).reshape(-1) for m in (counted, distractors))
+        if len(counted) != len(tracks) or len(distractors) != len(tracks):
+            raise ValueError(f"counted, distractors: expected {len(tracks)} flags each (one per row), got "
+                             f"{len(counted)} and {len(distractors)}")
+        keep = counted | distractors
+        flag = (counted | (distractors & cls_all.isin(["pedestrian", "cyclist"]).to_numpy())).astype(int)
+    t = tracks.assign(_flag=flag, _cls=cls_all)[keep].sort_values(["frame", "vehicle_id"], kind="stable")
     vis = t["visible_fraction"] if "visible_fraction" in t.columns else pd.Series(1.0, index=t.index)
     lines = []
-    for r, c, v in zip(t.itertuples(index=False), cls, vis):
+    for r, c, v, fl in zip(t.itertuples(index=False), t["_cls"], vis, t["_flag"]):
         x0, y0, x1, y1 = r.bbox_x0_px, r.bbox_y0_px, r.bbox_x1_px, r.bbox_y1_px
         lines.append(",".join([str(int(r.frame) + 1), str(int(r.vehicle_id)), repr(float(x0 + 1.0)),
                                repr(float(y0 + 1.0)), repr(float(x1 - x0 + 1.0)), repr(float(y1 - y0 + 1.0)),
-                               "1", str(_MOT_CLASS_IDS.get(str(c), 3)), repr(float(v))]))
+                               str(int(fl)), str(_MOT_CLASS_IDS.get(str(c), 3)), repr(float(v))]))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")

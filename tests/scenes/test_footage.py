@@ -386,3 +386,14 @@ def test_export_mot_gt_leaves_parked_vehicles_out_and_keeps_the_classes(tmp_path
     gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt.txt"))
     assert gt["id"].tolist() == [1, 3]
     assert gt["class"].tolist() == ["car", "pedestrian"]  # MOTChallenge's class 3 is every car-like vehicle
+    # with the synthetic path's own rules (the CLI passes harness.metrics.objects'): counted rows and
+    # distractors written, a distractor vehicle (here the bus, as if it stood still all clip) ignored
+    counted, distractors = np.array([0, 0, 0, 0], bool), np.array([1, 0, 1, 0], bool)
+    gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt2.txt", counted=counted, distractors=distractors))
+    assert gt["id"].tolist() == [1, 3] and gt["ignore"].tolist() == [True, False]
+    assert gt["class"].tolist() == ["car", "pedestrian"]
+    gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt3.txt", counted=np.array([1, 1, 0, 0], bool),
+                                   distractors=np.array([0, 0, 1, 0], bool)))
+    assert gt["id"].tolist() == [1, 2, 3] and not gt["ignore"].any()
+    with pytest.raises(ValueError, match=r"counted, distractors: expected 4 flags each"):
+        export_mot_gt(tracks, tmp_path / "gt4.txt", counted=counted[:2], distractors=distractors[:2])
