@@ -10,7 +10,7 @@ Not a speed benchmark in the gate's sense, but it reports the seconds each pipel
 Run from the project root:
 
     python benchmarks/heldout_rehearsal.py [--scene city realistic city-wide] [--frames 100]
-        [--size 1920x1080] [--fps 25] [--pipelines dis,tv-l1] [--scale 1 0.5] [--px-factor 2]
+        [--size 1920x1080] [--fps 25] [--pipelines dis,tv-l1] [--scale 1 0.5] [--px-factor 2 [--px-motion]]
         [--work DIR] [--cache DIR] [--set KEY=VALUE ...] [--json FILE]
 
 Per scene:
@@ -32,7 +32,8 @@ Per scene:
 With ``--px-factor F``, each pipeline also runs with the px sizes of its detection stage and
 multi-target tracker (:data:`PX_PARAMETERS`: lengths times F, areas times F^2) through
 ``aerobench run`` of a one-scene suite with a ``real:`` scene: whether the defaults, tuned at
-960x540 (0.13 m a pixel), hold at 1080p.
+960x540 (0.13 m a pixel), hold at 1080p; ``--px-motion`` scales the motion threshold
+``min_magnitude_px`` too (:data:`PX_MOTION_PARAMETERS`).
 
 Printed per scene and pipeline and tracker (``multi``: the multi-target tracker over the
 detections; ``point``: the thesis's point tracker seeded on frame 0's vehicles): MOTA,
@@ -80,6 +81,10 @@ PX_PARAMETERS = {
                   "border_px": "length", "refine_px": "length"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length"},
 }
+# motion thresholds in px a frame that the resolution moves all the same: the residual of the camera's
+# rotation and zoom after a shift compensation, and the parallax of roofs and trees, grow with the
+# image's radius in px (at 1080p the city's jitter alone leaves 0.5-1 px a frame at the borders)
+PX_MOTION_PARAMETERS = {"detection": {"min_magnitude_px": "length"}}
 TRACK_METRICS = ("mota", "idf1", "hota", "mot_false_positives", "mot_misses", "motp")
 
 
@@ -124,8 +129,9 @@ def _scores(run_dir: Path) -> tuple[list[dict], dict[str, float], str]:
     return out, {k[5:-3]: float(v) for k, v in stages.items()}, status
 
 
-def scaled_spec(factor: float) -> dict:
-    """The pipeline spec (deep-merged over a built-in one) whose px sizes are ``factor`` times the defaults."""
+def scaled_spec(factor: float, *, motion: bool = False) -> dict:
+    """The pipeline spec (deep-merged over a built-in one) whose px sizes are ``factor`` times the defaults
+    (:data:`PX_PARAMETERS`; with ``motion``, :data:`PX_MOTION_PARAMETERS` too)."""
     from algorithms.detection import DETECTION_DEFAULTS
     from algorithms.tracking import MULTI_DEFAULTS
 
@@ -136,8 +142,13 @@ def scaled_spec(factor: float) -> dict:
             out[key] = int(round(v)) if isinstance(defaults[key], int) else float(v)
         return out
 
-    return {"detection": scaled(DETECTION_DEFAULTS, PX_PARAMETERS["detection"]),
+    detection = {**PX_PARAMETERS["detection"], **(PX_MOTION_PARAMETERS["detection"] if motion else {})}
+    return {"detection": scaled(DETECTION_DEFAULTS, detection),
             "tracking": {"multi": scaled(MULTI_DEFAULTS, PX_PARAMETERS["multi"])}}
+
+
+def _scaled_name(pipe: str, factor: float, args) -> str:
+    return f"{pipe}-px{factor:g}" + ("m" if args.px_motion else "")
 
 
 def _run_scaled(clip: Path, gt: Path, pipe: str, scale: float, factor: float, run: Path, args, env):
@@ -148,7 +159,8 @@ def _run_scaled(clip: Path, gt: Path, pipe: str, scale: float, factor: float, ru
     suite = {"name": "heldout-px", "description": f"{pipe} with px parameters x{factor:g}",
              "scenes": [{"real": str(clip.resolve()), "label": clip.stem, "scale": scale, "gt": str(gt.resolve())}],
              "seeds": [0], "picture_pairs": [0],
-             "pipelines": [{"name": f"{pipe}-px{factor:g}", "base": pipe, "spec": scaled_spec(factor)}]}
+             "pipelines": [{"name": _scaled_name(pipe, factor, args), "base": pipe,
+                            "spec": scaled_spec(factor, motion=args.px_motion)}]}
     path = run.with_suffix(".yaml")
     path.write_text(yaml.safe_dump(suite, sort_keys=False))
     return _aerobench("run", str(path), "--out", str(run), "--workers", "1", "--cache", str(args.cache),
@@ -202,7 +214,7 @@ def rehearse(scene: str, args: argparse.Namespace, env: dict) -> list[dict]:
               f"{time.perf_counter() - t:.0f} s", flush=True)
         factors = args.px_factor if args.only_scaled else [1.0, *args.px_factor]
         for pipe, factor in [(p, f) for p in args.pipelines for f in factors]:
-            name = pipe if factor == 1.0 else f"{pipe}-px{factor:g}"
+            name = pipe if factor == 1.0 else _scaled_name(pipe, factor, args)
             run = work / f"run-{name}-x{scale:g}"
             if run.exists():
                 subprocess.run(["rm", "-rf", str(run)], check=True)
@@ -243,6 +255,8 @@ def main(argv=None) -> int:
                     help="beside each pipeline, the same with the px sizes of detection and tracker "
                          "(PX_PARAMETERS) times each factor (areas by its square), through `aerobench run` "
                          "of a suite with a real: scene; e.g. 2 for 1080p against the 960x540 they were tuned at")
+    ap.add_argument("--px-motion", action="store_true",
+                    help="with --px-factor: scale the motion threshold min_magnitude_px too (PX_MOTION_PARAMETERS)")
     ap.add_argument("--only-scaled", action="store_true", help="with --px-factor: the scaled pipelines only")
     ap.add_argument("--pipelines", default=",".join(sorted(PIPELINES)),
                     help="pipelines separated by commas (default: every built-in one)")

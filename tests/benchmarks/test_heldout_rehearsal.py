@@ -25,6 +25,9 @@ def test_px_parameters_scale_lengths_by_the_factor_and_areas_by_its_square(tmp_p
     assert det["merge_gap_px"] == 2 * DETECTION_DEFAULTS["merge_gap_px"]
     assert det["close_px"] == 2 * DETECTION_DEFAULTS["close_px"] and isinstance(det["close_px"], int)
     assert multi["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]
+    assert "min_magnitude_px" not in det
+    moving = rehearsal.scaled_spec(2.0, motion=True)["detection"]
+    assert moving["min_magnitude_px"] == 2 * DETECTION_DEFAULTS["min_magnitude_px"]
     # every key it scales exists, and a suite's inline pipeline over a built-in one takes them
     assert set(det) <= set(DETECTION_DEFAULTS) and set(multi) <= set(MULTI_DEFAULTS)
     (tmp_path / "f").mkdir()
