@@ -12,7 +12,7 @@ picture pair). What a cell is and where its files go is :mod:`harness.tasks`'.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -125,12 +125,14 @@ class _CellRun:
         self.error: BaseException | None = None
         self.pictures = set(payload["picture_pairs"])
         self.seconds = 0.0
+        self.pairs_done = 0
         pipeline = Pipeline.from_dict(payload["pipeline_spec"])
         warm_up(pipeline)
         self.estimates = pipeline.run(frames, seeds=seeds, shared=shared, gsd_m_per_px=gsd_m_per_px)
 
 
-def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
+def score_cells(payloads: list[Mapping], tmps: list[Path], *,
+                progress: Callable[[int, int], None] | None = None) -> list[CellOutcome]:
     """Run the cells of one sequence in lock-step and score them; artifacts go into their ``tmps``.
 
     Every payload names the same ``sequence``. The pipelines share one
@@ -143,6 +145,9 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
     pipelines finish, the stabilised video's ITF is computed per cell, the frames read
     once for all. A pipeline's rows are the rows it gives alone. A cell that raises stops alone (its outcome carries the
     exception), the others go on. Returns one :class:`CellOutcome` per payload, in order.
+
+    ``progress(done, total)``, if given, is called after every pair scored: pairs done over all the
+    cells, of ``(frames - 1) x cells`` (a cell that stops early counts its pairs as done).
     """
     from algorithms.pipeline import SequenceEstimate
     from algorithms.shared_work import SharedWork
@@ -173,6 +178,8 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
         except Exception as exc:  # an invalid pipeline fails its cell only
             runs.append(exc)
     live = [r for r in runs if isinstance(r, _CellRun)]
+    n_pairs = len(frames) - 1
+    pairs_total, pairs_done = n_pairs * len(runs), n_pairs * (len(runs) - len(live))
     truth_of: dict[int, Any] = {}  # the truth of the pair being scored (lock-step: one pair at a time)
     boxes_of = _truth_by_frame(_detection_truth(seq))
     while live:
@@ -182,6 +189,8 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                 est = next(run.estimates, None)
                 if est is None:
                     live.remove(run)
+                    pairs_done += n_pairs - run.pairs_done  # none left to come
+                    run.pairs_done = n_pairs
                 elif isinstance(est, SequenceEstimate):  # comes last
                     run.seq_est = est
                 else:
@@ -199,10 +208,16 @@ def score_cells(payloads: list[Mapping], tmps: list[Path]) -> list[CellOutcome]:
                     del truth, prepared, photo
                     if est.index in run.pictures:
                         artifacts.write_pair_flows(run.tmp, est.index, est.flow_total, est.flow_global)
+                    run.pairs_done += 1
+                    pairs_done += 1
+                    if progress is not None:
+                        progress(pairs_done, pairs_total)
                 del est  # the arrays of a pair live no longer than its scoring
             except Exception as exc:
                 run.error = exc
                 live.remove(run)
+                pairs_done += n_pairs - run.pairs_done
+                run.pairs_done = n_pairs
             run.seconds += time.perf_counter() - t0
     truth_of.clear()
     _score_itf([r for r in runs if isinstance(r, _CellRun) and r.error is None and r.seq_est is not None], shared)

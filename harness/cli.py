@@ -392,7 +392,8 @@ def eval_video_suite(args: argparse.Namespace) -> Any:
     if not video.exists():
         raise UsageError(f"{video}: no such video file or frames folder")
     if args.gt is not None and not Path(args.gt).is_file():
-        raise UsageError(f"--gt: {args.gt}: no such file")
+        what = "a folder; expected the ground-truth file (gt.txt)" if Path(args.gt).is_dir() else "no such file"
+        raise UsageError(f"--gt: {args.gt}: {what}")
     start, stop = _frame_range(args.frames)
     scene: dict[str, Any] = {"real": str(video.resolve()), "label": video.stem or video.name, "start": start,
                              "scale": args.scale, "gt_format": args.gt_format}
@@ -412,11 +413,58 @@ def eval_video_suite(args: argparse.Namespace) -> Any:
     return parse_suite(data, source="eval-video")
 
 
+def truth_summary(spec: Any) -> tuple[str, int]:
+    """One line saying what a clip's ground truth holds in its range, as the metrics will count it, and the
+    number of counted rows (``harness.metrics.objects``: vehicles counted, pedestrians and cyclists
+    distractors, ignored rows and regions never scored)."""
+    from harness.metrics.objects import DISTRACTOR_CLASSES, VEHICLE_CLASSES
+    from scenes.footage import clip_frames, gt_labels_file, read_gt
+    from scenes.formats import mot_label_class, read_mot_labels
+
+    gt = read_gt(spec)
+    n = clip_frames(spec)
+    inside = gt["frame"] > spec.start
+    if n is not None:
+        inside &= gt["frame"] <= spec.start + n
+    g = gt[inside]
+
+    def by_class(rows: Any) -> str:
+        counts = rows["class"].value_counts()
+        return ", ".join(f"{c} {n}" for c, n in counts.items())
+
+    kept = g[~g["ignore"]]
+    counted = kept[kept["class"].isin(VEHICLE_CLASSES)]
+    distract = kept[kept["class"].isin(DISTRACTOR_CLASSES)]
+    frames = f"frames {int(g['frame'].min())}..{int(g['frame'].max())}" if len(g) else "no frame"
+    line = (f"{Path(spec.gt).name} ({spec.gt_format}): {len(g)} rows in {frames}, {g['id'].nunique()} ids: "
+            f"{len(counted)} counted vehicles ({by_class(counted) or 'none'}), {len(distract)} distractors"
+            f"{f' ({by_class(distract)})' if len(distract) else ''}, {int(g['ignore'].sum())} ignored")
+    if (~inside).any():
+        span = f"{spec.start + 1}..{spec.start + n}" if n is not None else f"{spec.start + 1} on"
+        line += f"; {int((~inside).sum())} rows outside the clip's frames {span} left out"
+    labels = gt_labels_file(spec)
+    if labels is not None:
+        names = read_mot_labels(labels)
+        unknown = [n for n in names if not mot_label_class(n)[0]]
+        line += f"; classes named by {labels.name} ({', '.join(names)})"
+        if unknown:
+            line += f", not known and ignored: {', '.join(unknown)}"
+    return line, len(counted)
+
+
 def cmd_eval_video(args: argparse.Namespace) -> int:
     from harness.suites import expand
 
     suite = eval_video_suite(args)
     expand(suite, source="eval-video")  # a bad file is refused here, before --out is made
+    spec = suite.scenes[0].footage_spec()
+    if spec.gt is not None:
+        line, counted = truth_summary(spec)
+        print(f"truth: {line}", file=sys.stderr)
+        if counted == 0:
+            print("aerobench: warning: no row of the ground truth is a counted vehicle (car, van, truck, bus, "
+                  "motorbike): MOTA, IDF1 and HOTA will be n/a; check its class column (--gt-format, labels.txt)",
+                  file=sys.stderr)
     return _run(suite, args)
 
 
@@ -434,7 +482,11 @@ def cmd_export(args: argparse.Namespace) -> int:
                          f"got {args.video!r}")
     export_frames(seq, out / "img1")
     if seq.tracks is not None:
-        export_mot_gt(seq.tracks, out / "gt" / "gt.txt")
+        from harness.metrics.objects import counted_objects, distractor_objects
+
+        # the objects the synthetic path counts and its distractors, as gt.txt rows (flag 0 where ignored)
+        export_mot_gt(seq.tracks, out / "gt" / "gt.txt", counted=counted_objects(seq.tracks),
+                      distractors=distractor_objects(seq.tracks))
     if args.video is not None:
         export_video(seq, out / Path(args.video).name, fps=float(seq.meta.get("fps") or 25.0))
     print(f"wrote {out} ({len(seq)} frames in img1/" + (", gt/gt.txt" if seq.tracks is not None else "")

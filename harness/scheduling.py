@@ -316,15 +316,22 @@ def read_render_progress(path: str | None) -> tuple[int, int] | None:
 
 
 def _render_status(pending: dict, ctx: dict) -> str:
-    """The bar's postfix: each render in flight with its frames (``rendering realistic 23/60``)."""
-    parts = []
+    """The bar's postfix: each render in flight with its frames (``rendering realistic 23/60``), and each
+    task of cells with the pairs its pipelines have scored (``clip: dis, tv-l1 40/198 pairs``)."""
+    parts, cells = [], []
     for kind, item in pending.values():
         if kind != "render":
+            if not item:
+                continue
+            got = read_render_progress(_progress_file(ctx, f"cells-{item[0][0].cell_id}"))
+            if got:
+                names = ", ".join(c.pipeline for c, _ in item)
+                cells.append(f"{item[0][0].variant.label}: {names} {got[0]}/{got[1]} pairs")
             continue
         got = read_render_progress(_progress_file(ctx, item))
         label = ctx["variants"][item].label
         parts.append(f"{label} {got[0]}/{got[1]}" if got else f"{label} starting")
-    status = ("rendering " + ", ".join(parts)) if parts else ""
+    status = "; ".join(x for x in (("rendering " + ", ".join(parts)) if parts else "", "; ".join(cells)) if x)
     if not ctx["kernels_ready"].is_set():
         status = "; ".join(x for x in (status, "compiling numerical kernels (first run only)") if x)
     return status
@@ -400,7 +407,8 @@ def _round(work: _Work, ctx: dict, executor: str, workers: int | None, scheduler
                     fut = pool.submit(render_task, item, v.spec, str(ctx["cache"]), ctx["imports"],
                                       ctx["import_paths"], _progress_file(ctx, item))
                 else:
-                    fut = pool.submit(cells_task, [_cell_payload(c, r, ctx) for c, r in item])
+                    fut = pool.submit(cells_task, [_cell_payload(c, r, ctx) for c, r in item],
+                                      _progress_file(ctx, f"cells-{item[0][0].cell_id}"))
             except RuntimeError:  # BrokenProcessPool (a RuntimeError) or a shut-down executor
                 (lost.renders.append(item) if kind == "render" else lost.cells.extend(item))
                 return

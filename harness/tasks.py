@@ -134,11 +134,13 @@ def cell_task(payload: Mapping) -> dict:
     return cells_task([payload])[0]
 
 
-def cells_task(payloads: list[Mapping]) -> list[dict]:
+def cells_task(payloads: list[Mapping], progress_file: str | None = None) -> list[dict]:
     """Run, score and write cells of one sequence together (:func:`harness.cell_scoring.score_cells`).
 
     Each cell gets its own folder exactly as :func:`cell_task` writes it; a cell that
     fails is recorded and the others go on. Never raises for a failure of a cell.
+    With ``progress_file``, the pairs scored so far over all the cells are written there as
+    ``"done total"`` (the parent shows them in its progress bar: a 1080p clip's cells take minutes).
     Returns one summary dict per payload, in order.
     """
     _prepare_worker()
@@ -161,7 +163,8 @@ def cells_task(payloads: list[Mapping]) -> list[dict]:
     outcomes: dict[str, CellOutcome] = {}
     if todo:
         try:
-            for (payload, _), outcome in zip(todo, score_cells([p for p, _ in todo], [t for _, t in todo])):
+            for (payload, _), outcome in zip(todo, score_cells([p for p, _ in todo], [t for _, t in todo],
+                                                                     progress=render_progress_writer(progress_file))):
                 outcomes[payload["cell_id"]] = outcome
         except Exception as exc:  # the sequence itself cannot be read: every cell of it fails
             tb = traceback.format_exc()

@@ -74,6 +74,7 @@ from scenes.formats import (
     read_flo,
     read_kitti_flow,
     read_mot_gt,
+    read_mot_labels,
     read_yolo_boxes,
 )
 from scenes.sequence import MASK_PNG, SEQUENCE_LAYOUT, _csv_bytes, _FolderWriter
@@ -93,13 +94,16 @@ __all__ = [
     "ingest_footage",
     "list_frame_files",
     "natural_key",
+    "gt_labels_file",
+    "read_gt",
+    "clip_frames",
     "export_mot_gt",
     "export_frames",
     "export_video",
 ]
 
 # version of what ingestion writes; part of the cache key
-FOOTAGE_VERSION = 1
+FOOTAGE_VERSION = 2  # 2: 10-column MOT lines with a class column, labels.txt
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv")
 FRAME_SUFFIXES = (".png", ".jpg", ".jpeg")
 REAL_TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
@@ -241,6 +245,46 @@ def _classes_file(spec: FootageSpec) -> Path | None:
     return None
 
 
+def gt_labels_file(spec: FootageSpec) -> Path | None:
+    """``labels.txt`` beside a ``mot`` ground truth (CVAT's and Datumaro's MOT export), or None."""
+    if spec.gt is None or spec.gt_format != "mot":
+        return None
+    path = Path(spec.gt).parent / "labels.txt"
+    return path if path.is_file() else None
+
+
+def read_gt(spec: FootageSpec) -> pd.DataFrame:
+    """The parsed ground truth of ``spec`` (:func:`scenes.formats.read_mot_gt`), its ``labels.txt`` applied."""
+    labels = gt_labels_file(spec)
+    return read_mot_gt(spec.gt, layout=spec.gt_format,
+                       labels=read_mot_labels(labels) if labels is not None else None)
+
+
+def clip_frames(spec: FootageSpec) -> int | None:
+    """The number of frames of the range, where known before decoding: a folder's files, a video container's
+    stated frame count (MP4 states it, Matroska not: None), ``stop - start`` when given."""
+    if spec.kind == "frames":
+        return len(_source_frames(spec))
+    total = _video_frames(Path(spec.source))
+    if total is None:
+        return None if spec.stop is None else spec.stop - spec.start
+    return max(min(total, spec.stop if spec.stop is not None else total) - spec.start, 0)
+
+
+def _check_gt_range(gt: pd.DataFrame, spec: FootageSpec, n: int | None) -> None:
+    """Refuse a ground truth with no line in the frames ``[start, start + n)`` (1-based in the file)."""
+    lo = spec.start + 1
+    hi = spec.start + n if n is not None else (spec.stop if spec.stop is not None else None)
+    inside = gt["frame"] >= lo
+    if hi is not None:
+        inside &= gt["frame"] <= hi
+    if not inside.any():
+        span = f"{lo}..{hi}" if hi is not None else f"{lo} on"
+        raise FormatError(f"{spec.gt}: no annotation in the clip's frames {span} (1-based); the file's frames run "
+                          f"{int(gt['frame'].min())}..{int(gt['frame'].max())} (another clip's truth, or a "
+                          f"different --frames?)")
+
+
 _FLOW_NAME = re.compile(r"^(\d+)(?:_10)?$")
 
 
@@ -289,6 +333,8 @@ def _read_files(spec: FootageSpec) -> list[Path]:
         files.append(Path(spec.source))
     if spec.gt is not None:
         files.append(Path(spec.gt))
+        if gt_labels_file(spec) is not None:
+            files.append(gt_labels_file(spec))
     files += [p for _, p in sorted(_flow_files(spec, None).items())]
     return files
 
@@ -320,7 +366,7 @@ def validate_footage(spec: FootageSpec) -> str:
     """
     check_footage(spec)
     if spec.gt is not None:
-        read_mot_gt(spec.gt, layout=spec.gt_format)
+        _check_gt_range(read_gt(spec), spec, clip_frames(spec))
     if spec.kind == "frames":
         labels = _yolo_files(spec, _source_frames(spec))
         for p in labels or []:
@@ -389,6 +435,23 @@ def _video_fps(path: Path) -> float | None:
                 return None
             rate = container.streams.video[0].average_rate or container.streams.video[0].guessed_rate
             return float(rate) if rate else None
+    except av.error.FFmpegError as exc:
+        raise FormatError(f"{path}: not a readable video ({exc})") from None
+
+
+def _video_frames(path: Path) -> int | None:
+    """The frame count a video's container states (None where it states none; never decoded for it)."""
+    try:
+        import av
+    except ImportError:
+        cap = cv2.VideoCapture(str(path))
+        count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
+        cap.release()
+        return int(count) if count and count > 0 else None
+    try:
+        with av.open(str(path)) as container:
+            frames = container.streams.video[0].frames if container.streams.video else 0
+            return int(frames) if frames and frames > 0 else None
     except av.error.FFmpegError as exc:
         raise FormatError(f"{path}: not a readable video ({exc})") from None
 
@@ -508,7 +571,7 @@ def write_footage(spec: FootageSpec, folder: str | os.PathLike, *, digest: str |
     folder = Path(folder)
     digest = digest or footage_hash(spec)
     # parse every annotation before decoding a frame: a bad line fails fast
-    gt = read_mot_gt(spec.gt, layout=spec.gt_format) if spec.gt is not None else None
+    gt = read_gt(spec) if spec.gt is not None else None
     frame_files = _source_frames(spec) if spec.kind == "frames" else None
     labels = _yolo_files(spec, frame_files) if frame_files is not None else None
     if labels is not None:
@@ -548,6 +611,7 @@ def write_footage(spec: FootageSpec, folder: str | os.PathLike, *, digest: str |
         annotations: dict = {"tracks": None, "ids": False, "boxes": None, "ignore_regions": 0, "flow_pairs": [],
                               "camera": False, "instances": False}
         if gt is not None:
+            _check_gt_range(gt, spec, n)
             tracks, ignore = _gt_tables(gt, spec, n, sx, sy)
             out.write("tracks.csv", _csv_bytes(REAL_TRACK_COLUMNS, tracks.to_dict("records")))
             annotations.update(tracks=spec.gt_format, ids=True, ignore_regions=len(ignore))
@@ -601,30 +665,52 @@ def ingest_footage(spec: FootageSpec, out_dir: str | os.PathLike) -> Path:
 _MOT_CLASS_IDS = {"car": 3, "van": 3, "truck": 3, "bus": 3, "motorbike": 5, "cyclist": 4, "pedestrian": 1}
 
 
-def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike) -> Path:
+def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.ndarray | None = None,
+                  distractors: np.ndarray | None = None) -> Path:
     """Write a sequence's tracks.csv as a MOTChallenge ``gt.txt`` (9 columns, MOT16/17 layout).
 
-    One line per visible row of a vehicle that is not parked: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
+    Which rows, and with which flag: without ``counted`` and ``distractors``, every visible row
+    of a road user that is not parked, flag 1. With them (``(N,)`` bool over the rows of
+    ``tracks``: what the synthetic path counts and treats as distractors,
+    ``harness.metrics.objects``; the CLI's ``export`` passes them), the rows that are counted
+    objects or distractors: a counted row and a pedestrian's or cyclist's row (read back as a
+    distractor by its class) with flag 1, any other distractor (a vehicle the synthetic path
+    does not count and does not hold against a tracker) with flag 0, ignored; rows that are
+    neither (a parked car: a track on it is a false positive) are left out. So the real path
+    scores the export as the synthetic path scores the sequence, whatever those rules say.
+
+    One line per row written: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
     ``bb_width = x1 - x0 + 1``, ``bb_height = y1 - y0 + 1`` (the inverse of the reader's
     conversion, written with every digit of the float64, so the boxes come back to an ulp or two:
     ``x0 + 1`` and the reader's ``- 1`` each round),
-    flag 1, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
+    the flag, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
     3 without a class column), visibility (``visible_fraction``, 1 without it). A real reading
     takes the box centre as the vehicle's position, which for a rendered vehicle differs from
     its projected centre ``x_px, y_px`` by up to about a pixel.
     """
-    t = tracks[tracks["visible"].astype(int) > 0]
-    if "parked" in t.columns:  # a motion benchmark's truth holds the vehicles that move, as the synthetic path
-        t = t[t["parked"].astype(int) == 0]  # counts them (harness.metrics.objects): parked ones are left out
-    t = t.sort_values(["frame", "vehicle_id"], kind="stable")
-    cls = t["class"] if "class" in t.columns else pd.Series("car", index=t.index)
+    cls_all = tracks["class"].astype(str) if "class" in tracks.columns else pd.Series("car", index=tracks.index)
+    if (counted is None) != (distractors is None):
+        raise ValueError("counted, distractors: expected both or neither")
+    if counted is None:
+        keep = tracks["visible"].astype(int).to_numpy() > 0
+        if "parked" in tracks.columns:  # a motion benchmark's truth holds the vehicles that move, as the
+            keep &= tracks["parked"].astype(int).to_numpy() == 0  # synthetic path counts them: parked ones out
+        flag = np.ones(len(tracks), int)
+    else:
+        counted, distractors = (np.asarray(m, bool).reshape(-1) for m in (counted, distractors))
+        if len(counted) != len(tracks) or len(distractors) != len(tracks):
+            raise ValueError(f"counted, distractors: expected {len(tracks)} flags each (one per row), got "
+                             f"{len(counted)} and {len(distractors)}")
+        keep = counted | distractors
+        flag = (counted | (distractors & cls_all.isin(["pedestrian", "cyclist"]).to_numpy())).astype(int)
+    t = tracks.assign(_flag=flag, _cls=cls_all)[keep].sort_values(["frame", "vehicle_id"], kind="stable")
     vis = t["visible_fraction"] if "visible_fraction" in t.columns else pd.Series(1.0, index=t.index)
     lines = []
-    for r, c, v in zip(t.itertuples(index=False), cls, vis):
+    for r, c, v, fl in zip(t.itertuples(index=False), t["_cls"], vis, t["_flag"]):
         x0, y0, x1, y1 = r.bbox_x0_px, r.bbox_y0_px, r.bbox_x1_px, r.bbox_y1_px
         lines.append(",".join([str(int(r.frame) + 1), str(int(r.vehicle_id)), repr(float(x0 + 1.0)),
                                repr(float(y0 + 1.0)), repr(float(x1 - x0 + 1.0)), repr(float(y1 - y0 + 1.0)),
-                               "1", str(_MOT_CLASS_IDS.get(str(c), 3)), repr(float(v))]))
+                               str(int(fl)), str(_MOT_CLASS_IDS.get(str(c), 3)), repr(float(v))]))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")

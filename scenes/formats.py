@@ -53,6 +53,8 @@ __all__ = [
     "write_kitti_flow",
     "MOT_LAYOUTS",
     "read_mot_gt",
+    "read_mot_labels",
+    "mot_label_class",
     "read_yolo_boxes",
 ]
 
@@ -543,6 +545,24 @@ _UAVDT_CLASSES = {1: "car", 2: "truck", 3: "bus"}
 _UAVDT_OCCLUSION = {1: 1.0, 2: 0.15, 3: 0.5, 4: 0.845}
 _UAVDT_OUT_OF_VIEW = {1: 1.0, 2: 0.6, 3: 0.845}
 
+# Label names of a ``labels.txt`` beside a MOTChallenge ``gt.txt`` (CVAT's and Datumaro's "MOT 1.1"
+# export: column 8 is the 1-based line of the label in that file, not MOT's class table) -> our
+# classes; None: ignored (never scored). Matched lower-case, blanks and "_" / "-" as one space, a
+# trailing plural "s" dropped. A name not listed is ignored too, and said so (:func:`read_mot_labels`).
+_LABEL_NAMES = {
+    "car": "car", "vehicle": "car", "motor vehicle": "car", "auto": "car", "automobile": "car", "taxi": "car",
+    "suv": "car", "pickup": "car", "pickup truck": "van", "van": "van", "minibus": "van", "minivan": "van",
+    "truck": "truck", "lorry": "truck", "trailer": "truck", "bus": "bus", "coach": "bus",
+    "motorbike": "motorbike", "motorcycle": "motorbike", "motor": "motorbike", "scooter": "motorbike",
+    "moped": "motorbike", "tricycle": "motorbike", "awning tricycle": "motorbike",
+    "bicycle": "cyclist", "bike": "cyclist", "cyclist": "cyclist", "rider": "cyclist",
+    "non motorized vehicle": "cyclist", "pedestrian": "pedestrian", "person": "pedestrian",
+    "people": "pedestrian", "static person": "pedestrian", "person on vehicle": "pedestrian",
+    "distractor": None, "occluder": None, "occluder on the ground": None, "occluder full": None,
+    "reflection": None, "crowd": None, "ignore": None, "ignored": None, "ignored region": None,
+    "ignore region": None, "other": None, "others": None,
+}
+
 MOT_LAYOUTS = ("mot", "visdrone", "uavdt")
 MOT_COLUMNS = ["frame", "id", "left", "top", "width", "height", "ignore", "class", "visible_fraction", "line"]
 
@@ -576,17 +596,78 @@ def _coded(text: str, what: str, where: str, table: dict | set) -> int:
     return v
 
 
-def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame:
+def mot_label_class(name: str) -> tuple[bool, str | None]:
+    """``(known, class)`` of a label name of ``labels.txt``: class None = ignored (see :data:`_LABEL_NAMES`)."""
+    key = " ".join(re.split(r"[\s_-]+", name.strip().lower())).strip()
+    for spelled in (key, key.replace(" ", "")):  # "motor cycle", "motorcycle"
+        for k in (spelled, spelled[:-1] if spelled.endswith("s") else spelled):  # "cars", "car"
+            if k in _LABEL_NAMES:
+                return True, _LABEL_NAMES[k]
+    return False, None
+
+
+def read_mot_labels(path: str | os.PathLike) -> list[str]:
+    """The label names of a ``labels.txt`` (CVAT / Datumaro MOT export), one a line, blank lines skipped.
+
+    Line k of the names is class k of the ``gt.txt`` beside it. Raises
+    :class:`FormatError` naming the file for an unreadable or empty file, or a name given twice.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise FormatError(f"{path}: not a text file") from None
+    names = [line.strip() for line in text.splitlines() if line.strip()]
+    if not names:
+        raise FormatError(f"{path}: no label name (an empty labels file)")
+    seen = set()
+    for k, n in enumerate(names, 1):
+        if n.lower() in seen:
+            raise FormatError(f"{path}: label {n!r} (name {k}) given twice")
+        seen.add(n.lower())
+    return names
+
+
+def _ten_columns_have_class(lines: list[tuple[int, list[str]]]) -> bool:
+    """Whether the 10-column lines of a ``mot`` file carry class and visibility in columns 8, 9.
+
+    MOT15 writes world coordinates x, y, z there (-1, -1, -1 in its 2D files); MOT16/17/20
+    ground truth has class and visibility there, and writers that append a 10th column (CVAT's
+    "MOT 1.1" export) keep them, as TrackEval reads any line of 9 or more columns. So: class
+    and visibility unless every 10-column line has -1 in columns 8-10, or one has a column 8
+    that is not an integer (a world coordinate).
+    """
+    ten = [f for _, f in lines if len(f) == 10]
+    if not ten:
+        return False
+    try:
+        c8 = [float(f[7]) for f in ten]
+        if all(v == -1.0 and float(f[8]) == -1.0 and float(f[9]) == -1.0 for v, f in zip(c8, ten)):
+            return False
+    except ValueError:
+        return True  # not numbers: the per-line checks name the field
+    return all(v == int(v) for v in c8)
+
+
+def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot", labels: list[str] | None = None) -> pd.DataFrame:
     """Read a MOTChallenge ground-truth file (or its VisDrone-MOT / UAVDT variant), every line checked.
 
     Columns read, 1-based as the formats number them (frames are 1-based too):
 
     * ``mot`` (MOTChallenge ``gt/gt.txt``): 1 frame, 2 id, 3-6 bb_left, bb_top, bb_width,
-      bb_height (px, bb_left 1-based), 7 the "consider" flag (0: ignored). With exactly 9
-      columns (MOT16/17/20) also 8 class (1, 2, 7 pedestrian, 3 car, 4 and 6 cyclist,
-      5 motorbike, -1 unspecified: car; 8-13 distractors, occluders, reflections, crowds:
-      ignored) and 9 visibility (0..1; -1, "not given", reads as 1). 6, 7 or 10 columns (MOT15: 8-10 are world
-      coordinates) are read as class car, visibility 1; columns 8-10 are then not read.
+      bb_height (px, bb_left 1-based), 7 the "consider" flag (0: ignored). With 9 columns
+      (MOT16/17/20) also 8 class (1, 2, 7 pedestrian, 3 car, 4 and 6 cyclist, 5 motorbike,
+      -1 unspecified: car; 8-13 distractors, occluders, reflections, crowds: ignored) and 9
+      visibility (0..1; -1, "not given", reads as 1). 10 columns: the same, column 10 not
+      read (TrackEval reads them so; CVAT's "MOT 1.1" export writes a 10th), unless the
+      file's columns 8-10 are MOT15's world coordinates (-1, -1, -1 on every 10-column line,
+      or a column 8 that is not an integer): then class car, visibility 1. 6 or 7 columns:
+      class car, visibility 1.
+      With ``labels`` (the names of a ``labels.txt`` beside the file, CVAT's and Datumaro's MOT
+      export), class k is the k-th name instead of MOT's table: car, vehicle, van, truck, bus,
+      motorbike, motorcycle, bicycle, person, pedestrian and the like map to our classes
+      (plural or capitalised alike); MOT's own names (distractor, occluder, reflection ...) and
+      names not known are ignored (never scored).
     * ``visdrone`` (VisDrone2019-MOT ``annotations/*.txt``, 10 columns): 1-6 as above, 7 score
       (0: ignored), 8 object_category (0 ignored region and 11 others: ignored; 1, 2
       pedestrian, 3 cyclist, 4 car, 5 van, 6 truck, 7, 8, 10 motorbike, 9 bus), 9 truncation
@@ -610,22 +691,25 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame
     ------
     FormatError
         naming the file and line: a wrong number of columns, a field that is not a number, a
-        frame < 1, a box of zero or negative size, a code outside its table, an id given twice
-        in one frame; or a file with no line at all.
+        frame < 1, a box of zero or negative size, a code outside its table (with a hint when
+        the value says the file is of another layout), an id given twice in one frame; or a
+        file with no line at all.
     """
     path = Path(path)
     if layout not in MOT_LAYOUTS:
         raise ValueError(f"layout: expected one of {', '.join(MOT_LAYOUTS)}, got {layout!r}")
+    if labels is not None and layout != "mot":
+        raise ValueError(f"labels: a labels.txt names the classes of the mot layout only, got layout {layout!r}")
     try:
         text = path.read_text()
     except UnicodeDecodeError:
         raise FormatError(f"{path}: not a text file") from None
+    lines = [(k, f) for k, f in ((k, _fields(line)) for k, line in enumerate(text.splitlines(), 1)) if f]
+    label_classes = [mot_label_class(n)[1] for n in labels] if labels is not None else None
+    ten_class = layout == "mot" and _ten_columns_have_class(lines)
     rows = []
     seen: dict[tuple[int, int], int] = {}
-    for k, line in enumerate(text.splitlines(), 1):
-        f = _fields(line)
-        if not f:
-            continue
+    for k, f in lines:
         where = f"{path}: line {k}"
         if layout == "mot" and len(f) not in (6, 7, 9, 10):
             raise FormatError(f"{where}: expected 6, 7, 9 or 10 MOTChallenge columns (frame, id, bb_left, bb_top, "
@@ -636,7 +720,10 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame
         if layout == "uavdt" and len(f) != 9:
             raise FormatError(f"{where}: expected 9 UAVDT columns (frame, id, left, top, width, height, "
                               f"out_of_view, occlusion, category), got {len(f)}")
-        frame = _integer(f[0], "frame (column 1)", where, lo=1)
+        frame = _integer(f[0], "frame (column 1)", where)
+        if frame < 1:
+            raise FormatError(f"{where}: frame (column 1): expected an integer >= 1, got {f[0]!r} (the formats "
+                              f"number frames from 1)")
         tid = _integer(f[1], "id (column 2)", where)
         left, top = _number(f[2], "bb_left (column 3)", where), _number(f[3], "bb_top (column 4)", where)
         w, h = _number(f[4], "bb_width (column 5)", where), _number(f[5], "bb_height (column 6)", where)
@@ -644,20 +731,30 @@ def read_mot_gt(path: str | os.PathLike, *, layout: str = "mot") -> pd.DataFrame
         if layout == "mot":
             if len(f) >= 7:
                 ignore = _number(f[6], "flag (column 7)", where) == 0
-            if len(f) == 9:
+            if len(f) == 9 or (len(f) == 10 and ten_class):
                 c = _integer(f[7], "class (column 8)", where)
-                if c in _MOT_IGNORED:
+                if label_classes is not None:
+                    if not 1 <= c <= len(label_classes):
+                        raise FormatError(f"{where}: class (column 8): expected 1..{len(label_classes)}, a line of "
+                                          f"labels.txt ({', '.join(labels)}), got {f[7]!r}")
+                    named = label_classes[c - 1]
+                    ignore, cls = ignore or named is None, named or "car"
+                elif c in _MOT_IGNORED:
                     ignore = True
                 elif c in _MOT_CLASSES:
                     cls = _MOT_CLASSES[c]
                 else:
-                    raise FormatError(f"{where}: class (column 8): expected -1 or 1..13 (MOTChallenge), got {f[7]!r}")
+                    hint = " (a VisDrone-MOT file? --gt-format visdrone)" if c in (0, 11) else ""
+                    raise FormatError(f"{where}: class (column 8): expected -1 or 1..13 (MOTChallenge), "
+                                      f"got {f[7]!r}{hint}")
                 vis = _number(f[8], "visibility (column 9)", where)
                 if vis == -1.0:  # MOTChallenge's "not given"
                     vis = 1.0
                 elif not 0.0 <= vis <= 1.0:
+                    hint = (" (a UAVDT file? --gt-format uavdt)"
+                            if vis in (2.0, 3.0) and len(f) == 9 else "")
                     raise FormatError(f"{where}: visibility (column 9): expected 0..1 (or -1: not given), "
-                                      f"got {f[8]!r}")
+                                      f"got {f[8]!r}{hint}")
         elif layout == "visdrone":
             ignore = _coded(f[6], "score (column 7)", where, {0, 1}) == 0
             c = _coded(f[7], "object_category (column 8)", where, set(range(12)))

@@ -150,6 +150,25 @@ def test_the_bar_names_each_render_in_flight_with_its_frames(tmp_path):
     assert scheduling._render_status({}, ctx) == ""
 
 
+def test_the_bar_shows_the_pairs_of_each_task_of_cells_in_flight(tmp_path):
+    """A 1080p clip's cells run for minutes: the bar says how far their pipelines are, pair by pair."""
+    class V:
+        label = "clip"
+
+    class C:
+        def __init__(self, cell_id, pipeline):
+            self.cell_id, self.pipeline, self.variant = cell_id, pipeline, V()
+
+    ctx = {"progress_dir": str(tmp_path), "variants": {}, "kernels_ready": threading.Event()}
+    ctx["kernels_ready"].set()
+    pending = {1: ("cells", [(C("a1", "dis"), {}), (C("a2", "tv-l1"), {})]), 2: ("cells", [(C("b1", "farneback"), {})])}
+    assert scheduling._render_status(pending, ctx) == ""  # nothing scored yet: nothing said
+    tasks.render_progress_writer(scheduling._progress_file(ctx, "cells-a1"))(40, 198)
+    assert scheduling._render_status(pending, ctx) == "clip: dis, tv-l1 40/198 pairs"
+    tasks.render_progress_writer(scheduling._progress_file(ctx, "cells-b1"))(7, 99)
+    assert scheduling._render_status(pending, ctx) == "clip: dis, tv-l1 40/198 pairs; clip: farneback 7/99 pairs"
+
+
 def test_only_the_kernels_of_the_suites_pipelines_count():
     from algorithms.pipeline import PIPELINES
 

@@ -77,6 +77,38 @@ def test_eval_video_bad_gt_exits_2_and_writes_nothing(tmp_path, capsys, render_c
     assert not out.exists()
     assert main(["eval-video", str(clip), "--frames", "2", "--out", str(out)]) == 2
     assert "--frames" in capsys.readouterr().err and not out.exists()
+    assert main(["eval-video", str(clip), "--gt", str(tmp_path), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith("a folder; expected the ground-truth file (gt.txt)")
+    gt.write_text("0,1,5,5,6,6,1,3,1\n")  # 0-based frames
+    assert main(["eval-video", str(clip), "--gt", str(gt), "--pipelines", "dis", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("line 1: frame (column 1): expected an integer >= 1, got '0' (the "
+                                             "formats number frames from 1)")
+    assert not out.exists()
+
+
+def test_eval_video_says_what_the_truth_holds_and_warns_when_nothing_is_counted(tmp_path, capsys, render_cache):
+    clip = _frames(tmp_path / "clip")
+    gt_dir = tmp_path / "gt"
+    gt_dir.mkdir()
+    gt = gt_dir / "gt.txt"
+    # class 1 of MOT's table: pedestrians, distractors of a vehicle benchmark; frame 9 lies outside the clip
+    gt.write_text("1,1,5,5,6,6,1,1,1\n2,1,6,5,6,6,1,1,1\n2,2,20,5,6,6,0,1,1\n9,1,6,5,6,6,1,1,1\n")
+    args = ["eval-video", str(clip), "--gt", str(gt), "--pipelines", "dis", "--cache", str(render_cache),
+            "--no-report", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "a")]) in (0, 1)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == ("truth: gt.txt (mot): 3 rows in frames 1..2, 2 ids: 0 counted vehicles (none), "
+                      "2 distractors (pedestrian 2), 1 ignored; 1 rows outside the clip's frames 1..4 left out")
+    assert err[1].startswith("aerobench: warning: no row of the ground truth is a counted vehicle")
+    # the same file exported by CVAT names its classes in labels.txt: class 1 is its first line
+    (gt_dir / "labels.txt").write_text("Car\nforklift\n")
+    assert main([*args, "--out", str(tmp_path / "b")]) in (0, 1)
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == ("truth: gt.txt (mot): 3 rows in frames 1..2, 2 ids: 2 counted vehicles (car 2), "
+                      "0 distractors, 1 ignored; 1 rows outside the clip's frames 1..4 left out; classes named "
+                      "by labels.txt (Car, forklift), not known and ignored: forklift")
+    assert not any("warning" in line for line in err)
 
 
 @pytest.mark.skipif(not (KIT_AIS / "MOS74-93").is_dir(), reason="../shared/external/kit_ais is not beside the clone")
@@ -107,8 +139,12 @@ def test_round_trip_rendered_sequence_as_footage_scores_the_same(tmp_path, rende
     pytest.importorskip("av")
     spec = load_scene_spec("tiny", overrides={"seed": 1})
     seq = open_sequence(cached_sequence(spec, render_cache))
+    from harness.metrics.objects import counted_objects, distractor_objects
+
     video = export_video(seq, tmp_path / "tiny.mkv", fps=seq.meta["fps"])
-    gt = export_mot_gt(seq.tracks, tmp_path / "gt" / "gt.txt")
+    # as `aerobench export` writes it: the synthetic path's counted objects and distractors
+    gt = export_mot_gt(seq.tracks, tmp_path / "gt" / "gt.txt", counted=counted_objects(seq.tracks),
+                       distractors=distractor_objects(seq.tracks))
 
     synthetic = run_suite(parse_suite({"name": "rt", "scenes": [{"preset": "tiny"}], "seeds": [1],
                                        "pipelines": ["dis"]}),

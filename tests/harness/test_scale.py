@@ -217,7 +217,7 @@ def test_cells_run_together_give_the_rows_each_gives_alone(tmp_path, render_cach
     """The lock-step task shares frames, pass 1 and truth; not a number may move, and a failing cell fails alone."""
     from harness.provenance import collect
     from harness.results import read_table
-    from scenes import cached_sequence
+    from scenes import cached_sequence, open_sequence
 
     suite = parse_suite({**copy.deepcopy(TINY_SUITE), "scenes": [{"preset": "tiny"}],
                          "pipelines": ["thesis-lk", "thesis-hs", "dis"]})
@@ -238,7 +238,10 @@ def test_cells_run_together_give_the_rows_each_gives_alone(tmp_path, render_cach
     together_payloads = payloads("together")
     together_payloads[1]["pipeline_spec"] = {**together_payloads[1]["pipeline_spec"],
                                              "flow": {"method": "_fails_on_the_third_pair", "params": {}}}
-    together = tasks.cells_task(together_payloads)
+    progress = tmp_path / "progress.txt"
+    together = tasks.cells_task(together_payloads, str(progress))
+    # every pair of every cell counted once, the failed cell's pairs after its failure too
+    assert progress.read_text().split() == [str(3 * (len(open_sequence(seq)) - 1))] * 2
     assert [s["status"] for s in alone] == ["ok", "ok"]
     assert [s["status"] for s in together] == ["ok", "failed", "ok"]
     assert "the third pair" in together[1]["error"]

@@ -12,8 +12,8 @@ import pytest
 
 from scenes import cached_sequence_result, open_sequence
 from scenes.footage import (FootageSpec, export_frames, export_mot_gt, export_video, footage_hash, footage_key,
-                            ingest_footage, list_frame_files, validate_footage)
-from scenes.formats import FormatError, read_mot_gt, read_yolo_boxes, write_flo
+                            gt_labels_file, ingest_footage, list_frame_files, validate_footage)
+from scenes.formats import FormatError, mot_label_class, read_mot_gt, read_mot_labels, read_yolo_boxes, write_flo
 from harness.datasets import write_kitti_flow
 
 
@@ -51,6 +51,58 @@ def test_mot_gt_columns_classes_and_ignored_rows(tmp_path):
     p.write_text("3,1,5,5,2,2,1,-1,-1,-1\n4,1,5,5,2,2\n5,1,5,5,2,2,1,-1,-1\n")
     df = read_mot_gt(p)
     assert df["class"].tolist() == ["car"] * 3 and df["visible_fraction"].tolist() == [1.0] * 3
+
+
+def test_mot_gt_ten_columns_carry_class_unless_they_are_mot15_world_coordinates(tmp_path):
+    p = tmp_path / "gt.txt"
+    # CVAT's "MOT 1.1" export and TrackEval: class and visibility in 8, 9; column 10 not read
+    p.write_text("1,1,5,5,2,2,1,3,0.5,-1\n1,2,5,5,2,2,1,1,1,-1\n1,3,5,5,2,2,0,3,1,-1\n2,1,6,5,2,2,1,7,1,0\n")
+    df = read_mot_gt(p)
+    assert df["class"].tolist() == ["car", "pedestrian", "car", "pedestrian"]
+    assert df["ignore"].tolist() == [False, False, True, False] and df.loc[0, "visible_fraction"] == 0.5
+    # MOT15 3D: world coordinates (not integers) in 8-10: class car, visibility 1, nothing checked there
+    p.write_text("1,1,5,5,2,2,1,12.5,3.25,0\n2,1,6,5,2,2,1,13,3.5,0\n")
+    df = read_mot_gt(p)
+    assert df["class"].tolist() == ["car", "car"] and df["visible_fraction"].tolist() == [1.0, 1.0]
+    # a class outside MOT's table in a 10-column line is refused as in a 9-column one
+    p.write_text("1,1,5,5,2,2,1,42,1,-1\n")
+    with pytest.raises(FormatError, match=r"gt\.txt: line 1: class \(column 8\): expected -1 or 1\.\.13"):
+        read_mot_gt(p)
+
+
+def test_mot_gt_of_another_layout_is_refused_with_a_hint(tmp_path):
+    p = tmp_path / "gt.txt"
+    p.write_text("1,1,5,5,2,2,1,4,0,1\n1,0,0,0,30,30,0,0,0,0\n")  # VisDrone-MOT: category 0, an ignored region
+    with pytest.raises(FormatError, match=r"line 2: class \(column 8\).*got '0' \(a VisDrone-MOT file\? "
+                                          r"--gt-format visdrone\)$"):
+        read_mot_gt(p)
+    p.write_text("1,1,5,5,2,2,1,1,1\n1,2,5,5,2,2,1,4,3\n")  # UAVDT: category 3 (bus) in column 9
+    with pytest.raises(FormatError, match=r"line 2: visibility \(column 9\).*got '3' \(a UAVDT file\? "
+                                          r"--gt-format uavdt\)$"):
+        read_mot_gt(p)
+
+
+def test_mot_gt_classes_named_by_a_labels_file(tmp_path):
+    p = tmp_path / "gt.txt"
+    # CVAT: class k is line k of labels.txt; "Cars" is car, "tractor" unknown (ignored), "person" a pedestrian
+    p.write_text("1,1,5,5,2,2,1,1,1\n1,2,5,5,2,2,1,2,0.5\n1,3,5,5,2,2,1,3,1\n1,4,5,5,2,2,1,4,1,-1\n"
+                 "1,5,5,5,2,2,0,1,1\n")
+    df = read_mot_gt(p, labels=["Cars", "motor-cycle", "tractor", "person"])
+    assert df["class"].tolist()[:2] == ["car", "motorbike"] and df.loc[3, "class"] == "pedestrian"
+    assert df["ignore"].tolist() == [False, False, True, False, True]
+    assert mot_label_class("Motorcycles") == (True, "motorbike") and mot_label_class("tractor") == (False, None)
+    assert mot_label_class("Awning_Tricycle") == (True, "motorbike") and mot_label_class("reflection") == (True, None)
+    with pytest.raises(FormatError, match=r"line 1: class \(column 8\): expected 1\.\.2, a line of labels\.txt "
+                                          r"\(car, bus\), got '3'"):
+        p.write_text("1,1,5,5,2,2,1,3,1\n")
+        read_mot_gt(p, labels=["car", "bus"])
+    lab = tmp_path / "labels.txt"
+    lab.write_text("car\n\nbus\n")
+    assert read_mot_labels(lab) == ["car", "bus"]
+    for text, match in [("\n", r"labels\.txt: no label name"), ("car\nCar\n", r"labels\.txt: label 'Car' \(name 2\) given twice")]:
+        lab.write_text(text)
+        with pytest.raises(FormatError, match=match):
+            read_mot_labels(lab)
 
 
 def test_visdrone_and_uavdt_layouts(tmp_path):
@@ -146,6 +198,52 @@ def test_mot_gt_range_scale_and_ids(tmp_path):
     ign = seq.ignore_regions
     assert len(ign) == 1 and ign.loc[0, "frame"] == 1
     assert seq.meta["annotations"]["ids"] is True
+
+
+def test_labels_file_beside_the_gt_names_its_classes_and_is_part_of_the_key(tmp_path):
+    src = tmp_path / "clip"
+    _frames_folder(src, 3)
+    gt_dir = tmp_path / "gt"
+    gt_dir.mkdir()
+    gt = gt_dir / "gt.txt"
+    gt.write_text("1,1,11,21,10,20,1,1,1\n1,2,31,21,10,20,1,2,1\n2,1,12,21,10,20,1,1,1\n")
+    spec = FootageSpec(name="c", source=str(src), gt=str(gt))
+    without = footage_hash(spec)
+    seq = open_sequence(ingest_footage(spec, tmp_path / "mot"))
+    assert seq.tracks["class"].tolist() == ["pedestrian", "pedestrian", "pedestrian"]  # MOT's table: 1, 2 persons
+    (gt_dir / "labels.txt").write_text("truck\nbicycle\n")  # CVAT's MOT export: class k = line k
+    assert gt_labels_file(spec) == gt_dir / "labels.txt" and footage_hash(spec) != without
+    seq = open_sequence(ingest_footage(spec, tmp_path / "cvat"))
+    assert seq.tracks["class"].tolist() == ["truck", "cyclist", "truck"]
+    # read only beside a mot file
+    assert gt_labels_file(FootageSpec(name="c", source=str(src), gt=str(gt), gt_format="visdrone")) is None
+
+
+def test_gt_with_no_line_in_the_clips_frames_is_refused(tmp_path):
+    src = tmp_path / "clip"
+    _frames_folder(src, 4)
+    gt = tmp_path / "gt.txt"
+    gt.write_text("101,1,11,21,10,20,1,3,1\n140,1,12,21,10,20,1,3,1\n")  # another clip's, or frames 100.. of it
+    spec = FootageSpec(name="c", source=str(src), gt=str(gt))
+    with pytest.raises(FormatError, match=r"gt\.txt: no annotation in the clip's frames 1\.\.4 \(1-based\); the "
+                                          r"file's frames run 101\.\.140"):
+        validate_footage(spec)
+    with pytest.raises(FormatError, match=r"no annotation in the clip's frames 1\.\.4"):
+        ingest_footage(spec, tmp_path / "seq")
+    assert not (tmp_path / "seq").exists()
+    # a video: before decoding from the frame count its container states (MP4 does, Matroska not), and
+    # from the frames decoded
+    pytest.importorskip("av")
+    frames = _frames_folder(tmp_path / "v", 4)
+    vspec = FootageSpec(name="c", source=str(export_video(frames, tmp_path / "c.mp4")), gt=str(gt))
+    with pytest.raises(FormatError, match=r"no annotation in the clip's frames 1\.\.4 \(1-based\)"):
+        validate_footage(vspec)
+    vspec = FootageSpec(name="c", source=str(export_video(frames, tmp_path / "c.mkv")), gt=str(gt))
+    validate_footage(vspec)  # no frame count stated: the lines are checked, the range not yet
+    with pytest.raises(FormatError, match=r"no annotation in the clip's frames 1\.\.4 \(1-based\)"):
+        ingest_footage(vspec, tmp_path / "vseq")
+    gt.write_text("3,1,11,21,10,20,1,3,1\n140,1,12,21,10,20,1,3,1\n")  # one line in range: read
+    assert len(open_sequence(ingest_footage(vspec, tmp_path / "ok")).tracks) == 1
 
 
 def test_flow_truth_for_some_pairs(tmp_path):
@@ -288,3 +386,14 @@ def test_export_mot_gt_leaves_parked_vehicles_out_and_keeps_the_classes(tmp_path
     gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt.txt"))
     assert gt["id"].tolist() == [1, 3]
     assert gt["class"].tolist() == ["car", "pedestrian"]  # MOTChallenge's class 3 is every car-like vehicle
+    # with the synthetic path's own rules (the CLI passes harness.metrics.objects'): counted rows and
+    # distractors written, a distractor vehicle (here the bus, as if it stood still all clip) ignored
+    counted, distractors = np.array([0, 0, 0, 0], bool), np.array([1, 0, 1, 0], bool)
+    gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt2.txt", counted=counted, distractors=distractors))
+    assert gt["id"].tolist() == [1, 3] and gt["ignore"].tolist() == [True, False]
+    assert gt["class"].tolist() == ["car", "pedestrian"]
+    gt = read_mot_gt(export_mot_gt(tracks, tmp_path / "gt3.txt", counted=np.array([1, 1, 0, 0], bool),
+                                   distractors=np.array([0, 0, 1, 0], bool)))
+    assert gt["id"].tolist() == [1, 2, 3] and not gt["ignore"].any()
+    with pytest.raises(ValueError, match=r"counted, distractors: expected 4 flags each"):
+        export_mot_gt(tracks, tmp_path / "gt4.txt", counted=counted[:2], distractors=distractors[:2])
