@@ -313,8 +313,8 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
             if p == 0:  # the block: walls (faces 0-3) and roof (face 5); its floor is never seen
                 walls.append({**m, "indices": tri[:8], "colours": _face_colours(m, (255, 255, 255), flat=flat)})
                 roofs.append({**m, "indices": tri[10:12], "colours": _face_colours(m, 255 * tint, flat=flat)})
-            else:  # parapet (darker) and roof units (lighter): their sides and tops
-                k = 0.85 if p <= 4 else 1.2
+            else:  # parapet (darker) and roof units (lighter; every third dark: skylights, solar panels)
+                k = 0.85 if p <= 4 else (0.5 if p % 3 == 0 else 1.25)
                 roofs.append({**m, "indices": np.concatenate([tri[:8], tri[10:12]]),
                               "colours": _face_colours(m, np.minimum(255, 255 * k * tint), flat=flat)})
     prims = []
