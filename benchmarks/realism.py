@@ -20,15 +20,18 @@ image, no ground truth needed, per frame on gray levels 0..255 (the median over 
     response / 6, over the flatter half of the image (gray levels);
   - ``blockiness``: mean absolute difference across the 8 x 8 block boundaries over the mean
     inside the blocks (1 = none; JPEG / H.264 blocking raises it);
-scene, from the boxes (KIT AIS labels; synthetic ``tracks.csv``, visible vehicles):
+scene, from the boxes (KIT AIS labels; synthetic ``tracks.csv``, visible motor vehicles: ``MOTOR_CLASSES``,
+as KIT AIS boxes no pedestrian and these frames no cyclist):
   - ``vehicles_per_mpx``: vehicles in view per megapixel;
-  - ``moving_fraction``: synthetic: vehicles not parked; real: of the boxes matched to a box of the
+  - ``moving_fraction``: synthetic: vehicles faster than ``MOVING_SPEED_MPS`` over the ground (a car
+    stopped in a queue is not moving, as on the real side); real: of the boxes matched to a box of the
     next frame after registering the two frames by their global shift (phase correlation of the
     whole frames, refined by ECC where it stays within half a pixel of it), those whose residual displacement exceeds ``MOVING_THRESHOLD_PX`` (3 px at the
     real frames' own scale: the boxes' own jitter is 1-2 px);
   - ``vehicle_length_px``: median of the longer box side;
   - ``speed_px_per_frame``: median displacement of moving vehicles relative to the ground (synthetic:
-    the track minus the camera's global shift; real: the residual of the matched boxes).
+    the track minus the camera's global shift; real: the residual of the matched boxes). Printed, not
+    compared (``NOT_COMPARABLE``): KIT AIS does not give its frame interval.
 
 Compared at the same vehicle size: every sequence (each synthetic one, and the real side as one) is
 scaled down (``cv2.INTER_AREA``) until its median vehicle is as long as the shortest median among
@@ -39,8 +42,8 @@ at each side's own resolution. Each statistic is reported as synthetic / real wi
 ratio lies within +/-25 % (``TOLERANCE``). A side-by-side crop (synthetic left, real right, at the
 matched scale) is written to ``--image`` for people.
 
-Figures on main's ``realistic`` and this one's, and why each failing statistic fails: ``docs/realism.md``
-(4 of 11 within +/-25 %: noise, blockiness, vehicle length by construction, and the median gradient).
+Figures before and after issue 22's look and traffic work, and why each failing statistic fails:
+``docs/realism.md``.
 """
 
 from __future__ import annotations
