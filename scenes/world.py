@@ -56,7 +56,7 @@ TEXELS_PER_PIXEL = 1.5
 MAX_TEXTURE_PX = 4096  # per ground tile uploaded to GL
 MAX_GROUND_TEXELS = 60_000_000
 ROAD_RGB = (108, 108, 112)  # aged asphalt, lighter than new (KIT AIS roads: about 125)
-MARK_RGB = (226, 226, 220)  # road paint (KIT AIS's lane lines: 215-240 on 110-140 asphalt)
+MARK_RGB = (226, 226, 220)  # road paint (the brightest 2 % of a KIT AIS frame, paint among it: 163-238 gray)
 KERB_RGB = (184, 182, 174)
 # every building shares one facade and one roof texture (one draw each); roofs differ by a tint
 ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92),
