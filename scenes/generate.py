@@ -78,6 +78,14 @@ class FrameOutput:
     pair: PairTruth | None
 
 
+def _only(bboxes: list, seen: set[int]) -> list:
+    """``bboxes`` with those of the vehicles not in ``seen`` (ids from 1) made NaN: the visible fraction
+    of a road user the frame does not show is 0 in tracks.csv whatever it computes, and its pass over the
+    pixels of its box (out of view: pixels that are not there) is skipped."""
+    nan = ((np.nan,) * 4, (np.nan, np.nan))
+    return [b if vid in seen else nan for vid, b in enumerate(bboxes, start=1)]
+
+
 class SceneGenerator:
     """Build the world of ``spec`` and stream its frames and ground truth.
 
@@ -156,7 +164,7 @@ class SceneGenerator:
             t = t_s + float(offset)
             R, C = self.pose_at(t)
             Ms = self.vehicle_matrices(t)
-            rgb, depth = render(R, C, Ms, shadow_map=self._fresh_shadow_map)
+            rgb, depth = render(R, C, Ms, shadow_map=self._fresh_shadow_map, depth=offset == 0)
             self._fresh_shadow_map = False
             if offset == 0:
                 mid = (depth, R, C, Ms)
@@ -222,9 +230,9 @@ class SceneGenerator:
         for b, t_b in enumerate(times):
             r0, r1 = int(self.edges[b]), int(self.edges[b + 1])
 
-            def render(R, C, Ms, *, shadow_map, r0=r0):
+            def render(R, C, Ms, *, shadow_map, depth, r0=r0):
                 return self.renderer.render_view(R, C, Ms, cx_px=float(K[0, 2]), cy_px=float(K[1, 2]) - r0,
-                                                 shadow_map=shadow_map)
+                                                 shadow_map=shadow_map, depth=depth)
 
             band_rgb, band_depth, R, C, Ms = self._expose(render, float(t_b))
             if rgb is None:
@@ -250,11 +258,12 @@ class SceneGenerator:
             R, C = surf.RT[b].T, surf.C[b]
             Ms = [np.vstack([surf.T[vid, b], [0.0, 0.0, 0.0, 1.0]]) for vid in range(1, len(self.vehicles) + 1)]
             canvas_truth = self.canvas_truth
-            vis = canvas_truth.visible_fractions(surf.depth, R, C, Ms, canvas_truth.vehicle_bboxes(R, C, Ms))
+            vis = canvas_truth.visible_fractions(surf.depth, R, C, Ms, _only(canvas_truth.vehicle_bboxes(R, C, Ms),
+                                                                              seen))
         else:  # the surface listed each vehicle's pixels and projected its box already
             seen = {vid for vid, _, _ in surf.vehicle_pixels}
             boxes = surf.vehicle_bboxes
-            vis = self.truth.visible_fractions(surf.depth, surf.R, surf.C, surf.vehicle_M, boxes)
+            vis = self.truth.visible_fractions(surf.depth, surf.R, surf.C, surf.vehicle_M, _only(boxes, seen))
         for vid, (v, (bbox, centre)) in enumerate(zip(self.vehicles, boxes), start=1):
             self.track_rows.append((i, vid, centre[0], centre[1], *bbox, int(vid in seen),
                                     v.speed(t), int(v.parked), v.vclass, float(vis[vid - 1]) if vid in seen else 0.0))

@@ -378,6 +378,9 @@ class GroundTruth:
 # fixed-point iterations for the band a point lands in (rolling shutter); 2-3 suffice when a
 # band moves less than its height between frames
 MAX_BAND_ITERATIONS = 8
+# a vehicle's pixels look along rays inside its projected box on the canvas: one whose box stays this far
+# (canvas px, a margin for rounding only) from every ray of a band has no pixel there
+REACH_MARGIN_PX = 2.0
 
 
 @dataclass
@@ -455,10 +458,15 @@ class BandedGroundTruth:
                         + np.clip(np.rint(cxs), 0, self.canvas_w - 1).astype(np.int64))
         self.band = band_of_rows(cys, self.edges)
         self.band_pixels = []  # per band: (its pixel indices, the same as a slice when contiguous)
+        # per band the canvas extent (x0, y0, x1, y1) of its pixels' rays: a vehicle whose projected
+        # box misses it cannot be seen in that band, and its per-pixel pass is skipped
+        self.band_reach = np.full((self.n_bands, 4), np.nan)
         for b in range(self.n_bands):
             idx = np.nonzero(self.band == b)[0]
             contiguous = idx.size and idx[-1] - idx[0] + 1 == idx.size
             self.band_pixels.append((idx, slice(int(idx[0]), int(idx[-1]) + 1) if contiguous else idx))
+            if idx.size:
+                self.band_reach[b] = (cxs[idx].min(), cys[idx].min(), cxs[idx].max(), cys[idx].max())
 
     def _transforms(self, vehicle_M_per_band: list[list[np.ndarray]]) -> np.ndarray:
         n_v = len(self.vehicle_boxes)
@@ -497,7 +505,9 @@ class BandedGroundTruth:
         for b, (idx, _) in enumerate(self.band_pixels):
             if not idx.size:
                 continue
-            for vid, (boxes, M) in enumerate(zip(self.vehicle_boxes, vehicle_M_per_band[b]), start=1):
+            Ms = vehicle_M_per_band[b]
+            for vid in self._reaching(R[b], C[b], Ms, b):
+                boxes, M = self.vehicle_boxes[vid - 1], Ms[vid - 1]
                 cand = self._window(R[b], C[b], M, b)
                 if cand is None:
                     continue
@@ -517,15 +527,31 @@ class BandedGroundTruth:
                 world[take] = C[b] + (Z[take, None] * self.rays[take]) @ R[b].T  # X_w = C + R (Z d)
         T = self._transforms(vehicle_M_per_band)
         points = world.copy()
-        for vid in np.unique(ids[ids > 0]):
-            sel = np.nonzero(ids == vid)[0]
-            Tb = T[vid, self.band[sel]]  # (m, 3, 4) at each pixel's band time
+        sel = np.nonzero(ids > 0)[0]  # every vehicle pixel at once: each row is its own vehicle's transform
+        if sel.size:
+            Tb = T[ids[sel], self.band[sel]]  # (m, 3, 4) of each pixel's vehicle at its band's time
             # X_local = M_R^T (X_w - M_t)
             points[sel] = np.einsum("nji,nj->ni", Tb[:, :, :3], world[sel] - Tb[:, :, 3])
         RT = np.transpose(np.asarray(R, np.float64), (0, 2, 1))
         return BandedSurface(instances=ids.reshape(self.h, self.w).astype(np.uint16), points=points,
                              world_points=world, ids=ids, band=self.band.copy(), sky=sky,
                              depth=np.asarray(depth, np.float32), RT=RT, C=np.asarray(C, np.float64), T=T)
+
+    def _reaching(self, R: np.ndarray, C: np.ndarray, vehicle_M: list, band: int) -> list[int]:
+        """Ids (from 1, ascending) of the vehicles whose projected box, one batch for all, comes within
+        ``REACH_MARGIN_PX`` of the canvas extent of ``band``'s rays (behind the camera: left out, as
+        :meth:`_window` leaves them). A vehicle's pixels all lie in its box, so the others have none in
+        the band: skipping them changes nothing but the cost (a road user out of view, or in another band).
+        """
+        if not vehicle_M:
+            return []
+        boxes = np.array([bbox for bbox, _ in self.corner_truth.vehicle_bboxes(R, C, vehicle_M)], np.float64)
+        x0, y0, x1, y1 = self.band_reach[band]
+        m = REACH_MARGIN_PX
+        with np.errstate(invalid="ignore"):
+            near = ((boxes[:, 2] >= x0 - m) & (boxes[:, 0] <= x1 + m)
+                    & (boxes[:, 3] >= y0 - m) & (boxes[:, 1] <= y1 + m))
+        return [int(v) + 1 for v in np.nonzero(near)[0]]
 
     def _window(self, R: np.ndarray, C: np.ndarray, M: np.ndarray, band: int) -> np.ndarray | None:
         """Output pixels of ``band`` that may see the vehicle at ``M``: its projected box, distorted."""
@@ -572,9 +598,24 @@ class BandedGroundTruth:
             else:
                 Tm = s.T[ids[todo], bt]
                 W = np.einsum("nij,nj->ni", Tm[:, :, :3], points[todo]) + Tm[:, :, 3]
-            Pb = P[bt] if len(P) > 1 else P  # one band (a lens, no rolling shutter): no gather
-            Xc = [Pb[:, 4 * k] * W[:, 0] + Pb[:, 4 * k + 1] * W[:, 1] + Pb[:, 4 * k + 2] * W[:, 2]
-                  + Pb[:, 4 * k + 3] for k in range(3)]
+            if len(P) > 1 and W.shape[0] > 64 * len(P):
+                # many points (the whole image): band by band with the band's matrix as scalars, the same
+                # float64 operations per point as the gather below, without a (n, 12) copy of it
+                Xc = [np.empty(W.shape[0]) for _ in range(3)]
+                order = np.argsort(bt, kind="stable")
+                starts = np.searchsorted(bt[order], np.arange(len(P) + 1))
+                for band in range(len(P)):
+                    sel = order[starts[band]:starts[band + 1]]
+                    if not sel.size:
+                        continue
+                    Wb, pb = W[sel], P[band]
+                    for k in range(3):
+                        Xc[k][sel] = pb[4 * k] * Wb[:, 0] + pb[4 * k + 1] * Wb[:, 1] + pb[4 * k + 2] * Wb[:, 2] \
+                            + pb[4 * k + 3]
+            else:
+                Pb = P[bt] if len(P) > 1 else P  # one band (a lens, no rolling shutter): no gather
+                Xc = [Pb[:, 4 * k] * W[:, 0] + Pb[:, 4 * k + 1] * W[:, 1] + Pb[:, 4 * k + 2] * W[:, 2]
+                      + Pb[:, 4 * k + 3] for k in range(3)]
             zz = Xc[2]
             with np.errstate(divide="ignore", invalid="ignore"):
                 xx = self.fx * Xc[0] / zz + self.cx
@@ -633,14 +674,21 @@ class BandedGroundTruth:
         (the last iterate where a point has no consistent band), then distorted; NaN when
         behind the camera.
         """
-        mid = np.full(1, self.n_bands // 2)
+        corners = self.corner_truth.vehicle_corners
+        if not corners:
+            return []
+        # every vehicle's corners and centre in one batch: each point's fixed point is its own
+        pts = np.vstack([np.vstack([c, c.mean(axis=0)]) for c in corners])
+        ids = np.repeat(np.arange(1, len(corners) + 1), [len(c) + 1 for c in corners])
+        x, y, z, _ = self.project(pts, ids, s, np.full(len(pts), self.n_bands // 2))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # behind the camera: NaN below
+            xd, yd = self._to_output(x, y)
         out = []
-        for vid, corners in enumerate(self.corner_truth.vehicle_corners, start=1):
-            pts = np.vstack([corners, corners.mean(axis=0)])
-            x, y, z, _ = self.project(pts, np.full(len(pts), vid), s, np.repeat(mid, len(pts)))
-            if (z <= 0).any():
+        ends = np.cumsum([len(c) + 1 for c in corners])
+        for end, c in zip(ends, corners):
+            k = slice(end - len(c) - 1, end - 1)  # the corners; the centre at end - 1
+            if (z[end - len(c) - 1:end] <= 0).any():
                 out.append(((np.nan,) * 4, (np.nan, np.nan)))
                 continue
-            xd, yd = self._to_output(x, y)
-            out.append(((xd[:-1].min(), yd[:-1].min(), xd[:-1].max(), yd[:-1].max()), (xd[-1], yd[-1])))
+            out.append(((xd[k].min(), yd[k].min(), xd[k].max(), yd[k].max()), (xd[end - 1], yd[end - 1])))
         return out

@@ -89,8 +89,9 @@ def _install_frame_reader(offscreen) -> None:
         if flags & (RenderFlags.DEPTH_ONLY | RenderFlags.RGBA | RenderFlags.SEG) or sys.platform == "darwin":
             return original(scene, flags)
         cam = scene.main_camera_node.camera
-        return _read_frame(self, cam.znear, cam.zfar)
+        return _read_frame(self, cam.znear, cam.zfar, depth=not self.skip_depth)
 
+    inner.skip_depth = False  # SceneRenderer.render(depth=False): colour only, depth None
     inner._read_main_framebuffer = types.MethodType(read, inner)
 
 
@@ -116,8 +117,10 @@ def _install_shadow_switch(offscreen) -> None:
     inner._shadow_mapping_pass = types.MethodType(shadow_pass, inner)
 
 
-def _read_frame(inner, znear: float, zfar: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Colour (H, W, 3) uint8 and linear depth (H, W) float32 (0 = nothing) of pyrender's main framebuffer.
+def _read_frame(inner, znear: float, zfar: float | None, *, depth: bool = True
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Colour (H, W, 3) uint8 and linear depth (H, W) float32 (0 = nothing; None when ``depth`` is
+    False: neither blitted nor read) of pyrender's main framebuffer.
 
     The depth is pyrender's: NDC ``z = 2 d - 1`` of the window depth ``d``, then
     ``2 n f / (f + n - z (f - n))`` (``2 n / (1 - z)`` without a far plane), float32 with the
@@ -130,6 +133,12 @@ def _read_frame(inner, znear: float, zfar: float | None) -> tuple[np.ndarray, np
     GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb_ms)
     GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, inner._main_fb)
     GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_COLOR_BUFFER_BIT, GL.GL_NEAREST)
+    if not depth:
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb)
+        GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
+        raw = np.empty((height, width, 3), np.uint8)
+        GL.glReadPixels(0, 0, width, height, GL.GL_RGB, GL.GL_UNSIGNED_BYTE, raw.ctypes.data)
+        return raw[::-1].copy(), None
     GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_DEPTH_BUFFER_BIT, GL.GL_NEAREST)
     GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb)
     GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
@@ -304,8 +313,8 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
             if p == 0:  # the block: walls (faces 0-3) and roof (face 5); its floor is never seen
                 walls.append({**m, "indices": tri[:8], "colours": _face_colours(m, (255, 255, 255), flat=flat)})
                 roofs.append({**m, "indices": tri[10:12], "colours": _face_colours(m, 255 * tint, flat=flat)})
-            else:  # parapet (darker) and roof units (lighter): their sides and tops
-                k = 0.85 if p <= 4 else 1.2
+            else:  # parapet (darker) and roof units (lighter; every third dark: skylights, solar panels)
+                k = 0.85 if p <= 4 else (0.5 if p % 3 == 0 else 1.25)
                 roofs.append({**m, "indices": np.concatenate([tri[:8], tri[10:12]]),
                               "colours": _face_colours(m, np.minimum(255, 255 * k * tint), flat=flat)})
     prims = []
@@ -531,8 +540,10 @@ class SceneRenderer:
                 self.flags |= pyrender.RenderFlags.SHADOWS_DIRECTIONAL
 
     def render(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
-               shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``.
+               shadow_map: bool = True, depth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Render one frame: ``(rgb (H, W, 3) uint8, depth (H, W) float32 metres along z, 0 = nothing)``;
+        depth None with ``depth=False`` (a motion-blur sub-frame off the truth's instant: its depth is
+        never used, and reading it back cost about half of the read-back).
 
         ``shadow_map=False`` reuses the shadow map the last render of this scene drew (the
         shadows of the vehicles where they were then; static shadows are the same): the sub-frames
@@ -554,13 +565,18 @@ class SceneRenderer:
             self._place_moving(vehicle_poses, drawn)
         if switch:
             inner.skip_shadow_pass = skip
+        reader = inner is not None and hasattr(inner, "skip_depth")
+        if reader:
+            inner.skip_depth = not depth
         try:
-            rgb, depth = self.renderer.render(self.scene, flags=self.flags)
+            rgb, z = self.renderer.render(self.scene, flags=self.flags)
         finally:
             if switch:
                 inner.skip_shadow_pass = False
                 inner.last_scene = weakref.ref(self.scene)
-        return np.ascontiguousarray(rgb[..., :3]), depth
+            if reader:
+                inner.skip_depth = False
+        return np.ascontiguousarray(rgb[..., :3]), z
 
     def _place_moving(self, vehicle_poses: list[np.ndarray], drawn: np.ndarray | None = None) -> None:
         """Replace the moving vehicles' mesh by one with every vertex at its vehicle's pose, of the road
@@ -614,7 +630,8 @@ class SceneRenderer:
         return ~outside
 
     def render_view(self, R_wc: np.ndarray, C_w: np.ndarray, vehicle_poses: list[np.ndarray], *,
-                    cx_px: float, cy_px: float, shadow_map: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                    cx_px: float, cy_px: float, shadow_map: bool = True, depth: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`render` with the principal point at ``(cx_px, cy_px)`` (integer pixel centres).
 
         An off-axis view: a band of rows ``r0..`` of a taller image is the same camera with
@@ -622,4 +639,4 @@ class SceneRenderer:
         """
         cam = self.camera_node.camera
         cam.cx, cam.cy = cx_px + 0.5, cy_px + 0.5  # pyrender's pixel centres are at half-integers
-        return self.render(R_wc, C_w, vehicle_poses, shadow_map=shadow_map)
+        return self.render(R_wc, C_w, vehicle_poses, shadow_map=shadow_map, depth=depth)

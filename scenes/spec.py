@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.2.0"
+GENERATOR_VERSION = "2.3.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 

@@ -24,6 +24,7 @@ JUNCTION_RADIUS_FACTOR = 0.55  # a junction's plain asphalt: this times its wide
 ZEBRA_STRIPE_M = 0.5  # stripes this wide, as far apart, across the road
 ZEBRA_LENGTH_M = 3.0  # along the road
 STOP_LINE_M = 0.4
+MARK_OPACITY = (0.8, 0.95)  # lane lines, crossings and stop lines: KIT AIS's markings stand out crisp and white
 
 
 def _strip(line: np.ndarray, inner_m: float, outer_m: float) -> np.ndarray:
@@ -74,12 +75,13 @@ def junction_marks(roads, node: int, node_m: np.ndarray, radius_m: float, *, zeb
 
 
 def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, widths_m: tuple[float, float],
-                  material, crosswalk_fraction: float, rng: np.random.Generator) -> None:
+                  material, crosswalk_fraction: float, rng: np.random.Generator, kerb_parking: bool = False) -> None:
     """Paint verges, sidewalks, roads, kerbs, markings and junctions onto ``canvas`` (a ``scenes.world._Canvas``).
 
     ``material(name, gain)`` gives a ground material's paint value (:mod:`scenes.textures`);
     ``cells`` and ``kinds`` the blocks and their land use; ``edges`` the road graph's edges
-    ``(a, b, centre line, is road, major)``.
+    ``(a, b, centre line, is road, major)``; ``kerb_parking``: traffic parks along the kerbs (a parking
+    lane, marked, on roads wide enough for one).
     """
     w_major, w_minor = widths_m
     deg = np.bincount(np.array([r.nodes for r in roads]).ravel(), minlength=len(nodes_m)) if roads else np.zeros(0)
@@ -119,21 +121,31 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
             canvas.ellipses(at, rng.uniform(0.6, 2.2, (n, 2)), rng.uniform(0, 180, n),
                             material("asphalt", rng.uniform(0.8, 1.15) * np.ones(3)), opacity=0.8)
     if kerbs:
-        canvas.lines(kerbs, 0.25, KERB_RGB, opacity=0.9)
+        canvas.lines(kerbs, 0.3, KERB_RGB, opacity=0.95)
 
-    # -- lane markings on main roads ------------------------------------------------------------
+    # -- lane markings on main roads: edge lines, the centre line, and where traffic has them
+    # (:func:`scenes.traffic.lane_layout`) dashed lines between the lanes of one direction and a solid
+    # line along the parking lane; crisp and bright, as fresh thermoplastic paint is from above --
+    from scenes.traffic import lane_layout  # here: scenes.traffic builds on scenes.world
+
     for r in roads:
         if not r.major:
             continue
+        n_lanes, lane_w, park_w = lane_layout(r.width_m, kerb_parking=kerb_parking)
         edge = r.width_m / 2 - 0.35
-        canvas.lines([_offset_right(r.centre_m, edge), _offset_right(r.centre_m, -edge)], 0.2, MARK_RGB,
-                     opacity=float(rng.uniform(0.55, 0.8)))
+        solid = [_offset_right(r.centre_m, edge), _offset_right(r.centre_m, -edge)]
+        if park_w > 0:
+            solid += [_offset_right(r.centre_m, e * (r.width_m / 2 - park_w)) for e in (1, -1)]
+        canvas.lines(solid, 0.2, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))
         s = polyline_arc_lengths(r.centre_m)
         dashes = []
-        for a in np.arange(rng.uniform(0, 9), s[-1] - 3.0, 9.0):  # 3 m dash, 6 m gap
-            t = np.linspace(a, a + 3.0, 4)
-            dashes.append(np.stack([np.interp(t, s, r.centre_m[:, 0]), np.interp(t, s, r.centre_m[:, 1])], axis=1))
-        canvas.lines(dashes, 0.15, MARK_RGB, opacity=float(rng.uniform(0.5, 0.8)))
+        offsets = [0.0] + [e * k * lane_w for k in range(1, n_lanes) for e in (1, -1)]
+        for off in offsets:
+            line = _offset_right(r.centre_m, off) if off else r.centre_m
+            for a in np.arange(rng.uniform(0, 9), s[-1] - 3.0, 9.0):  # 3 m dash, 6 m gap
+                t = np.linspace(a, a + 3.0, 4)
+                dashes.append(np.stack([np.interp(t, s, line[:, 0]), np.interp(t, s, line[:, 1])], axis=1))
+        canvas.lines(dashes, 0.15, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))
 
     # -- junctions: plain asphalt over the markings' ends, then crossings and stop lines -----------
     if not junctions:
@@ -147,6 +159,6 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
         stripes += zs
         stops += st
     if stripes:
-        canvas.polygon(stripes, MARK_RGB, opacity=float(rng.uniform(0.6, 0.85)))
+        canvas.polygon(stripes, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))
     if stops:
-        canvas.polygon(stops, MARK_RGB, opacity=float(rng.uniform(0.6, 0.85)))
+        canvas.polygon(stops, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))

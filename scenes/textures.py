@@ -63,8 +63,9 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
     # gravel: flat white grain at the texel (stones), little else
     "gravel": ((148, 144, 136), (Layer(0.0, 0.15, 0.45, 0.096), Layer(2.0, 2.0, 15.0, 0.04),
                                  Layer(0.0, 0.15, 0.3, 0.6, (96, 94, 90), 2.0, 0.6))),
-    # yards: worn concrete and paving, oil and water stains metres wide, fine grain
-    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.024), Layer(2.0, 1.5, 12.0, 0.035),
+    # yards: worn concrete and paving, patches and tyre marks half a metre to metres wide, oil and water
+    # stains, fine grain (KIT AIS's courtyards and roads vary by 6-10 % over a few metres)
+    "yard": ((136, 134, 128), (Layer(0.5, 0.15, 0.5, 0.016), Layer(1.5, 0.5, 12.0, 0.07),
                                Layer(2.5, 3.0, 20.0, 0.35, (112, 110, 106), 1.6, 1.0))),
     # the floor under a wood's canopy: dark, leaf litter and undergrowth
     "wood": ((56, 66, 44), (Layer(1.0, 0.15, 2.0, 0.14), Layer(2.0, 2.0, 15.0, 0.1))),
@@ -73,9 +74,9 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
     # verges along roads: rough grass, some dry
     "verge": ((100, 112, 72), (Layer(0.5, 0.15, 0.8, 0.048), Layer(2.0, 1.0, 10.0, 0.4, (138, 130, 96), 0.8, 1.0))),
     # sidewalk paving: light, slightly blotchy
-    "paving": ((150, 148, 142), (Layer(0.3, 0.15, 0.5, 0.03), Layer(2.0, 1.0, 10.0, 0.05))),
+    "paving": ((150, 148, 142), (Layer(0.3, 0.15, 0.5, 0.02), Layer(1.5, 0.5, 10.0, 0.07))),
     # asphalt: aggregate grain and faint patching
-    "asphalt": ((108, 108, 112), (Layer(0.0, 0.15, 0.4, 0.036), Layer(2.0, 1.5, 20.0, 0.05))),
+    "asphalt": ((108, 108, 112), (Layer(0.0, 0.15, 0.4, 0.024), Layer(1.5, 0.6, 20.0, 0.07))),
     # crops under the field rows: a little grain only (the rows carry the rest)
     "crop": ((1.0, 1.0, 1.0), (Layer(0.5, 0.15, 0.8, 0.036), Layer(2.0, 0.8, 8.0, 0.04))),
 }

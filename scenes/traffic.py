@@ -825,7 +825,7 @@ def _kerb_parking(spec, net: _Network, view, rng: np.random.Generator) -> list[V
         if leg.park_w <= 0 or not _in_box(leg.centre, view, pad=10.0).any():
             continue
         s = polyline_arc_lengths(leg.centre)
-        clear = JUNCTION_CLEAR_M * leg.width + 8.0
+        clear = JUNCTION_CLEAR_M * leg.width + 2.0  # from where the corners start, plus a little (was 8 m)
         c = clear + float(rng.uniform(0, slot))
         while c < leg.length - clear:
             cls = "van" if rng.uniform() < 0.12 else "car"

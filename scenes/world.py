@@ -56,10 +56,11 @@ TEXELS_PER_PIXEL = 1.5
 MAX_TEXTURE_PX = 4096  # per ground tile uploaded to GL
 MAX_GROUND_TEXELS = 60_000_000
 ROAD_RGB = (108, 108, 112)  # aged asphalt, lighter than new (KIT AIS roads: about 125)
-MARK_RGB = (212, 212, 204)
-KERB_RGB = (170, 168, 160)
+MARK_RGB = (226, 226, 220)  # road paint (the brightest 2 % of a KIT AIS frame, paint among it: 163-238 gray)
+KERB_RGB = (184, 182, 174)
 # every building shares one facade and one roof texture (one draw each); roofs differ by a tint
-ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92))
+ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92),
+              (1.06, 0.8, 0.7))  # the last: clay tiles, as on Munich's older blocks
 N_CROWN_VARIANTS = len(CROWN_BASES)  # crown colours (the last ones conifers'), all in one draw
 ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
 ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
@@ -252,7 +253,7 @@ def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
 # (the materials of scenes/textures.py carry each surface's own detail; this shade adds light and soil
 # moisture over everything, weaker than it was at 40 m, and the smooth grain that flow needs)
 NOISE_OCTAVES_M = ((40.0, 0.05), (10.0, 0.04), (3.0, 0.04), (1.0, 0.1))
-GRAIN_AMP = 0.08
+GRAIN_AMP = 0.03  # KIT AIS's flattest half shows about 0.5 gray levels of pixel-scale variation
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
 _DRAW_ROWS = 1024  # noise lattices are drawn this many rows at a time (no float64 copy of a big one)
@@ -769,7 +770,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
 
     paint_streets(canvas, roads=roads, nodes_m=nodes, cells=cells, kinds=kinds, edges=edges,
                   widths_m=(w_major, w_minor), material=material, crosswalk_fraction=ws.crosswalk_fraction,
-                  rng=rng)
+                  rng=rng, kerb_parking=spec.traffic.kerb_parking_per_km > 0)
 
     # -- painted shadows of the static world (flat light only: sun light casts real ones) ------
     light = spec.light
@@ -827,7 +828,7 @@ def _parking_lot(canvas: _Canvas, rect, yaw: float, rng: np.random.Generator,
             u += stall_w
         lines.append(np.array([origin + ex * u + ey * v, origin + ex * u + ey * (v + stall_d)]))
         v += stall_d + (aisle if len(lines) % 2 else 0.0)
-    canvas.lines(lines, 0.12, MARK_RGB, opacity=float(rng.uniform(0.45, 0.75)))
+    canvas.lines(lines, 0.12, MARK_RGB, opacity=float(rng.uniform(0.6, 0.85)))
     return stalls
 
 
@@ -869,14 +870,16 @@ def _place_buildings(bs, cells, kinds, seen, road_index: _RoadIndex, phi: float,
 
 
 def _building_parts(sx: float, sy: float, h: float, rng: np.random.Generator) -> tuple[Box, ...]:
-    """The building's boxes in its own frame: the block, a parapet round the roof, a few roof units."""
+    """The building's boxes in its own frame: the block, a parapet round the roof, roof units."""
     parts = [Box(centre=(0.0, 0.0, h / 2), size=(sx, sy, h))]
     t, ph = 0.3, 0.8  # parapet thickness and height
     parts += [Box(centre=(0.0, e * (sy / 2 - t / 2), h + ph / 2), size=(sx, t, ph)) for e in (-1, 1)]
     parts += [Box(centre=(e * (sx / 2 - t / 2), 0.0, h + ph / 2), size=(t, sy - 2 * t, ph)) for e in (-1, 1)]
     placed: list[np.ndarray] = []
-    for _ in range(int(rng.integers(1, 5))):
-        ux, uy, uh = rng.uniform(1.0, min(4.0, sx / 3)), rng.uniform(1.0, min(4.0, sy / 3)), rng.uniform(0.8, 2.2)
+    # vents, plant rooms, skylights, solar panels, dormers: more on a larger roof (one per 40 m2 or so,
+    # as on KIT AIS's city roofs), up to 24
+    for _ in range(min(24, int(rng.integers(2, 9)) + int(sx * sy / 60.0))):
+        ux, uy, uh = rng.uniform(0.8, min(3.5, sx / 3)), rng.uniform(0.8, min(3.5, sy / 3)), rng.uniform(0.6, 2.2)
         cx = rng.uniform(-sx / 2 + t + 0.5 + ux / 2, sx / 2 - t - 0.5 - ux / 2)
         cy = rng.uniform(-sy / 2 + t + 0.5 + uy / 2, sy / 2 - t - 0.5 - uy / 2)
         corners = _rect_corners(cx, cy, ux, uy, 0.0)
@@ -986,7 +989,13 @@ def _building_textures(rng: np.random.Generator, texel: float):
             tex[row:row + 12, col:col + w] = (60, 66, 74) if rng.uniform() < 0.8 else (110, 112, 110)
             col += w + int(rng.integers(6, 14))
     wall = np.clip(np.rint(tex * g[..., None]), 0, 255).astype(np.uint8)
-    g = 1.0 + 0.5 * _multiscale_noise(rng, (n, n), 0.1)
+    g = 1.0 + 0.35 * _multiscale_noise(rng, (n, n), 0.1)
+    # membrane sheets 1.6 m wide with darker welded seams, and a lighter strip along each (a roof seen
+    # from above is panels and edges, not an even gray)
+    seam = np.ones(n, np.float32)
+    seam[::16] = 0.72
+    seam[1::16] = 1.12
+    g *= seam[None, :]
     roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
     return [wall], [roof]
 

@@ -132,3 +132,28 @@ def test_side_by_side_puts_the_crops_next_to_each_other_around_the_vehicles():
     assert pic.shape == (64, 64 + 8 + 40, 3)
     assert (pic[:64, :64] == 200).any()  # the vehicle is in the left crop
     assert (pic[:, 64:72] == 255).all() and (pic[:40, 72:] == 50).all()
+
+
+def _side(name: str, frame: np.ndarray, length_px: float, speeds_mps=()) -> "realism.Side":
+    n = len(speeds_mps)
+    b = realism.SceneBoxes(centres=np.full((n, 2), 20.0), sizes=np.tile([length_px, length_px / 2], (n, 1)))
+    b.moving = np.asarray(speeds_mps, float) > realism.MOVING_SPEED_MPS
+    b.moving_known = np.full(n, True)
+    return realism.Side(name, [frame], [b])
+
+
+def test_each_sequence_is_scaled_by_its_own_factor_and_stopped_vehicles_are_not_moving():
+    rng = np.random.default_rng(5)
+    img = np.clip(cv2.GaussianBlur(rng.uniform(0, 255, (128, 128)), (0, 0), 1.0), 0, 255).astype(np.uint8)
+    rgb = np.repeat(img[..., None], 3, axis=2)
+    a = _side("a", rgb, 20.0, speeds_mps=(0.0, 0.0, 0.0, 8.0))  # a queue of three and one driving
+    b = _side("b", rgb, 40.0, speeds_mps=(12.0, 0.2))
+    stats = realism.side_statistics([a, b], [1.0, 0.5])
+    # both at the same vehicle size: 20 px each, one in three of the six moving
+    assert stats["vehicle_length_px"] == pytest.approx(20.0)
+    assert stats["moving_fraction"] == pytest.approx(2 / 6)
+    # the scale changes the size-dependent statistics: b at half size has larger gradients
+    half = realism.side_statistics([b], [0.5])["gradient_p90"]
+    assert half > realism.side_statistics([b], [1.0])["gradient_p90"]
+    with pytest.raises(ValueError, match=r"expected one scale per sequence \(2\), got 3"):
+        realism.side_statistics([a, b], [1.0, 1.0, 1.0])

@@ -68,6 +68,11 @@ def test_frame_read_back_gives_pyrenders_colour_and_depth_exactly(light):
         inner._read_main_framebuffer = ours
     assert rgb.dtype == np.uint8 and rgb.shape == rgb_ref.shape and rgb.flags.c_contiguous
     np.testing.assert_array_equal(rgb, rgb_ref)
+    # a motion-blur sub-frame asks for colour only: the same pixels, no depth read back
+    rgb_only, none = gen.renderer.render(*args, depth=False)
+    assert none is None
+    np.testing.assert_array_equal(rgb_only, rgb_ref)
+    assert gen.renderer.render(*args)[1] is not None  # the next render reads depth again
     assert depth.dtype == np.float32
     np.testing.assert_array_equal(depth, depth_ref)
     assert (depth > 0).mean() > 0.5
