@@ -200,6 +200,45 @@ def _translation(s) -> np.ndarray:
     return M
 
 
+# The px keys of the detection stage and the multi-target tracker that are lengths ("length": times the factor)
+# or areas ("area": times its square) in the image, given for a frame whose shorter side is 480 px
+# (`detection.px_scale`). A larger frame of the same view sees vehicles, their motion per frame, the camera
+# rotation's residual and parallax all larger by the same factor (at 1920x1080 the built-in sizes found 39
+# regions a pair on a city scene, 80 % of them on no vehicle, the rotation's residual at the borders:
+# benchmarks/heldout_rehearsal.md). Thresholds on velocity differences against the flow's own noise
+# (split_px, merge_px, parallax_perp_px) are not scaled: a method's noise in px does not grow with the frame.
+PX_SCALED_KEYS = {
+    "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
+                  "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length"},
+    "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length",
+              "hold_max_speed_px": "length"},
+}
+PX_REFERENCE_SIDE = 480
+
+
+def px_scale_factor(setting, frame_shape) -> float:
+    """The factor of :data:`PX_SCALED_KEYS` for a frame ``(H, W)``: ``"auto"``, the shorter side over
+    :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080); a number, itself."""
+    if setting == "auto":
+        return min(int(frame_shape[0]), int(frame_shape[1])) / PX_REFERENCE_SIDE
+    return float(setting)
+
+
+def scale_px(params: Mapping, kinds: Mapping[str, str], factor: float) -> dict:
+    """``params`` with the keys of ``kinds`` times ``factor`` (lengths) or its square (areas); integers stay
+    integers (at least 1 where they were), None stays None."""
+    out = dict(params)
+    if factor == 1.0:
+        return out
+    for key, kind in kinds.items():
+        v = out.get(key)
+        if v is None or isinstance(v, bool):
+            continue
+        scaled = v * (factor if kind == "length" else factor * factor)
+        out[key] = max(1 if v >= 1 else 0, int(round(scaled))) if isinstance(v, (int, np.integer)) else float(scaled)
+    return out
+
+
 def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
@@ -363,7 +402,8 @@ class Pipeline:
         flow_fn, flow_params = get_stage("flow", cfg["flow"]["method"]), cfg["flow"]["params"]
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
-        det_params = {k: det_cfg[k] for k in DETECTION_DEFAULTS}
+        px = px_scale_factor(det_cfg["px_scale"], shared.gray(0).shape)
+        det_params = scale_px({k: det_cfg[k] for k in DETECTION_DEFAULTS}, PX_SCALED_KEYS["detection"], px)
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
@@ -375,7 +415,8 @@ class Pipeline:
                                    position_filter={k: point_cfg[k] for k in ("sigma_accel_px", "sigma_meas_px")}
                                    if point_cfg.get("filter") == "position" else None)
                       for i, (vid, x, y) in enumerate(seeds)]
-        multi = multi_tracker(**track_cfg["multi"]) if track_cfg["multi"] is not None else None
+        multi = (multi_tracker(**scale_px(track_cfg["multi"], PX_SCALED_KEYS["multi"], px))
+                 if track_cfg["multi"] is not None else None)
 
         def estimate_pair(t: int, g0: np.ndarray, g1: np.ndarray) -> dict:
             ms: dict[str, float] = {"global_motion": float(gm_ms[t])}

@@ -271,6 +271,7 @@ class DetectionSpec(_Section):
     """The keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (defaults and meaning there), checked by it."""
 
     field: StrictStr = "local"
+    px_scale: Any = "auto"
     min_magnitude_px: float = DETECTION_DEFAULTS["min_magnitude_px"]
     open_px: StrictInt = DETECTION_DEFAULTS["open_px"]
     close_px: StrictInt = DETECTION_DEFAULTS["close_px"]
@@ -307,6 +308,10 @@ class DetectionSpec(_Section):
         gsd = d.pop("gsd_m_per_px")
         if d.pop("field") not in ("local", "filtered"):
             raise _fail(f"expected local or filtered, got {self.field!r}", at="field")
+        ps = d.pop("px_scale")
+        if ps != "auto" and (isinstance(ps, bool) or not isinstance(ps, (int, float)) or not math.isfinite(ps)
+                             or not ps > 0):
+            raise _fail(f"expected auto or a finite number > 0, got {ps!r}", at="px_scale")
         if gsd is not None and (isinstance(gsd, bool) or not isinstance(gsd, (int, float))
                                 or not math.isfinite(gsd) or not gsd > 0):
             raise _fail(f"expected null or a finite number > 0, got {gsd!r}", at="gsd_m_per_px")

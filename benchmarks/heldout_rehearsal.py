@@ -10,7 +10,7 @@ Not a speed benchmark in the gate's sense, but it reports the seconds each pipel
 Run from the project root:
 
     python benchmarks/heldout_rehearsal.py [--scene city realistic city-wide] [--frames 100]
-        [--size 1920x1080] [--fps 25] [--pipelines dis,tv-l1] [--scale 1 0.5] [--px-factor 2 [--px-motion]]
+        [--size 1920x1080] [--fps 25] [--pipelines dis,tv-l1] [--scale 1 0.5] [--px-factor 1 2]
         [--work DIR] [--cache DIR] [--set KEY=VALUE ...] [--json FILE]
 
 Per scene:
@@ -29,11 +29,10 @@ Per scene:
    once per pipeline and ``--scale`` (default 1: the clip as handed over) (every built-in one by default, ``tvl1`` included), in its own process,
    timed (wall seconds: start-up, the pipeline on every pair, scoring, the run's files).
 
-With ``--px-factor F``, each pipeline also runs with the px sizes of its detection stage and
-multi-target tracker (:data:`PX_PARAMETERS`: lengths times F, areas times F^2) through
-``aerobench run`` of a one-scene suite with a ``real:`` scene: whether the defaults, tuned at
-960x540 (0.13 m a pixel), hold at 1080p; ``--px-motion`` scales the motion threshold
-``min_magnitude_px`` too (:data:`PX_MOTION_PARAMETERS`).
+The built-in pipelines scale their px sizes to the frame (``detection.px_scale: auto``: the
+shorter side over 480 px, 2.25 at 1080p; :data:`algorithms.pipeline.PX_SCALED_KEYS`). With
+``--px-factor F``, each pipeline also runs with ``px_scale`` fixed at F (1: the sizes as given,
+tuned at 640x480) through ``aerobench run`` of a one-scene suite with a ``real:`` scene.
 
 Printed per scene and pipeline and tracker (``multi``: the multi-target tracker over the
 detections; ``point``: the thesis's point tracker seeded on frame 0's vehicles): MOTA,
@@ -72,19 +71,6 @@ SCENES = {
     # size in px as at 960x540) over four times the ground, so about 4x the movers in a frame
     "city-wide": ("city", {"camera.altitude_m": 220.0}),
 }
-# px parameters of the detection stage and the multi-target tracker that are sizes or distances in the
-# image (a vehicle twice as large in px: twice as far), with their kind: "length" scales by --px-factor,
-# "area" by its square; motion thresholds against the flow's noise (min_magnitude_px, split_px, merge_px,
-# parallax_perp_px) are left alone: the noise of a flow method does not grow with the resolution
-PX_PARAMETERS = {
-    "detection": {"open_px": "length", "close_px": "length", "min_area_px": "area", "merge_gap_px": "length",
-                  "border_px": "length", "refine_px": "length"},
-    "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length"},
-}
-# motion thresholds in px a frame that the resolution moves all the same: the residual of the camera's
-# rotation and zoom after a shift compensation, and the parallax of roofs and trees, grow with the
-# image's radius in px (at 1080p the city's jitter alone leaves 0.5-1 px a frame at the borders)
-PX_MOTION_PARAMETERS = {"detection": {"min_magnitude_px": "length"}}
 TRACK_METRICS = ("mota", "idf1", "hota", "mot_false_positives", "mot_misses", "motp")
 
 
@@ -129,26 +115,14 @@ def _scores(run_dir: Path) -> tuple[list[dict], dict[str, float], str]:
     return out, {k[5:-3]: float(v) for k, v in stages.items()}, status
 
 
-def scaled_spec(factor: float, *, motion: bool = False) -> dict:
-    """The pipeline spec (deep-merged over a built-in one) whose px sizes are ``factor`` times the defaults
-    (:data:`PX_PARAMETERS`; with ``motion``, :data:`PX_MOTION_PARAMETERS` too)."""
-    from algorithms.detection import DETECTION_DEFAULTS
-    from algorithms.tracking import MULTI_DEFAULTS
-
-    def scaled(defaults: dict, kinds: dict) -> dict:
-        out = {}
-        for key, kind in kinds.items():
-            v = defaults[key] * (factor if kind == "length" else factor**2)
-            out[key] = int(round(v)) if isinstance(defaults[key], int) else float(v)
-        return out
-
-    detection = {**PX_PARAMETERS["detection"], **(PX_MOTION_PARAMETERS["detection"] if motion else {})}
-    return {"detection": scaled(DETECTION_DEFAULTS, detection),
-            "tracking": {"multi": scaled(MULTI_DEFAULTS, PX_PARAMETERS["multi"])}}
+def scaled_spec(factor: float) -> dict:
+    """The pipeline spec (deep-merged over a built-in one) whose px sizes are ``factor`` times the built-in ones
+    (``detection.px_scale``, :data:`algorithms.pipeline.PX_SCALED_KEYS`), instead of the frame's own factor."""
+    return {"detection": {"px_scale": float(factor)}}
 
 
 def _scaled_name(pipe: str, factor: float, args) -> str:
-    return f"{pipe}-px{factor:g}" + ("m" if args.px_motion else "")
+    return f"{pipe}-px{factor:g}"
 
 
 def _run_scaled(clip: Path, gt: Path, pipe: str, scale: float, factor: float, run: Path, args, env):
@@ -160,7 +134,7 @@ def _run_scaled(clip: Path, gt: Path, pipe: str, scale: float, factor: float, ru
              "scenes": [{"real": str(clip.resolve()), "label": clip.stem, "scale": scale, "gt": str(gt.resolve())}],
              "seeds": [0], "picture_pairs": [0],
              "pipelines": [{"name": _scaled_name(pipe, factor, args), "base": pipe,
-                            "spec": scaled_spec(factor, motion=args.px_motion)}]}
+                            "spec": scaled_spec(factor)}]}
     path = run.with_suffix(".yaml")
     path.write_text(yaml.safe_dump(suite, sort_keys=False))
     return _aerobench("run", str(path), "--out", str(run), "--workers", "1", "--cache", str(args.cache),
@@ -252,11 +226,8 @@ def main(argv=None) -> int:
                     help="eval-video's --scale, one run per value (0.5: the 1080p clip at the 960x540 the "
                          "pipelines' px parameters were tuned at)")
     ap.add_argument("--px-factor", type=float, nargs="*", default=[],
-                    help="beside each pipeline, the same with the px sizes of detection and tracker "
-                         "(PX_PARAMETERS) times each factor (areas by its square), through `aerobench run` "
-                         "of a suite with a real: scene; e.g. 2 for 1080p against the 960x540 they were tuned at")
-    ap.add_argument("--px-motion", action="store_true",
-                    help="with --px-factor: scale the motion threshold min_magnitude_px too (PX_MOTION_PARAMETERS)")
+                    help="beside each pipeline, the same with detection.px_scale fixed at each factor (1: the "
+                         "px sizes as given for 640x480), through `aerobench run` of a one-scene real: suite")
     ap.add_argument("--only-scaled", action="store_true", help="with --px-factor: the scaled pipelines only")
     ap.add_argument("--pipelines", default=",".join(sorted(PIPELINES)),
                     help="pipelines separated by commas (default: every built-in one)")

@@ -362,3 +362,50 @@ def test_jitter_iterations_remeasure_the_corrected_frames_and_two_frames_suffice
     assert np.abs(corrected - fit_flight_path(corrected)).max() <= np.abs(one.jitter_px).max()
     pairs, seq2 = _run(Pipeline.from_dict(BASE), Frames(2))
     assert len(pairs) == 1 and seq2.cumulative_px.shape == (2, 2)
+
+
+def test_px_sizes_scale_with_the_frame_lengths_by_the_factor_and_areas_by_its_square(monkeypatch):
+    import algorithms.pipeline as P
+
+    assert P.px_scale_factor("auto", (480, 640)) == 1.0 and P.px_scale_factor("auto", (1080, 1920)) == 2.25
+    assert P.px_scale_factor(0.5, (1080, 1920)) == 0.5
+    got = P.scale_px({"min_area_px": 20, "close_px": 2, "min_magnitude_px": 0.5, "max_area_px": None, "x": 3},
+                     P.PX_SCALED_KEYS["detection"], 2.25)
+    assert got == {"min_area_px": 101, "close_px": 4, "min_magnitude_px": 1.125, "max_area_px": None, "x": 3}
+    assert P.scale_px({"open_px": 1}, P.PX_SCALED_KEYS["detection"], 0.3) == {"open_px": 1}  # never 0 from 1
+    # what the run hands its stages: the detector's and the tracker's sizes for a 960x1280 frame (factor 2)
+    seen = {}
+    real_stage = P._stage
+
+    def spy(kind):
+        fn = real_stage(kind)
+        if kind != "detection":
+            return fn
+
+        def detect(*a, **kw):
+            seen.update(kw)
+            return fn(*a, **kw)
+        return detect
+    monkeypatch.setattr(P, "_stage", spy)
+    made = {}
+    real_get = P.get_stage
+
+    def get(kind, name):
+        cls = real_get(kind, name)
+        if (kind, name) != ("tracking", "multi"):
+            return cls
+
+        def build(**kw):
+            made.update(kw)
+            return cls(**kw)
+        return build
+    monkeypatch.setattr(P, "get_stage", get)
+    frames = [np.full((960, 1280), 100 + k, np.uint8) for k in range(2)]
+    list(get_pipeline("dis").run(frames))
+    from algorithms.detection import DETECTION_DEFAULTS
+    from algorithms.tracking import MULTI_DEFAULTS
+
+    assert seen["min_area_px"] == 4 * DETECTION_DEFAULTS["min_area_px"]
+    assert seen["min_magnitude_px"] == 2 * DETECTION_DEFAULTS["min_magnitude_px"]
+    assert seen["split_px"] == DETECTION_DEFAULTS["split_px"]     # a noise threshold: not scaled
+    assert made["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]

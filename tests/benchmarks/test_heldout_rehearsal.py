@@ -18,18 +18,10 @@ sys.modules[_spec.name] = rehearsal
 _spec.loader.exec_module(rehearsal)
 
 
-def test_px_parameters_scale_lengths_by_the_factor_and_areas_by_its_square(tmp_path):
+def test_a_scaled_pipeline_fixes_px_scale_and_a_suite_takes_it(tmp_path):
     spec = rehearsal.scaled_spec(2.0)
-    det, multi = spec["detection"], spec["tracking"]["multi"]
-    assert det["min_area_px"] == 4 * DETECTION_DEFAULTS["min_area_px"]
-    assert det["merge_gap_px"] == 2 * DETECTION_DEFAULTS["merge_gap_px"]
-    assert det["close_px"] == 2 * DETECTION_DEFAULTS["close_px"] and isinstance(det["close_px"], int)
-    assert multi["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]
-    assert "min_magnitude_px" not in det
-    moving = rehearsal.scaled_spec(2.0, motion=True)["detection"]
-    assert moving["min_magnitude_px"] == 2 * DETECTION_DEFAULTS["min_magnitude_px"]
-    # every key it scales exists, and a suite's inline pipeline over a built-in one takes them
-    assert set(det) <= set(DETECTION_DEFAULTS) and set(multi) <= set(MULTI_DEFAULTS)
+    assert spec == {"detection": {"px_scale": 2.0}}
+    # a suite's inline pipeline over a built-in one takes it
     (tmp_path / "f").mkdir()
     import cv2
     import numpy as np
@@ -40,6 +32,7 @@ def test_px_parameters_scale_lengths_by_the_factor_and_areas_by_its_square(tmp_p
                          "pipelines": [{"name": "dis-px2", "base": "dis", "spec": spec}]})
     (cell,) = expand(suite)
     p = Pipeline.from_dict(cell.pipeline_spec)
-    assert p.config["detection"]["min_area_px"] == det["min_area_px"]
-    assert p.config["tracking"]["multi"]["gate_px"] == multi["gate_px"]
+    assert p.config["detection"]["px_scale"] == 2.0
+    assert p.config["detection"]["min_area_px"] == DETECTION_DEFAULTS["min_area_px"]   # scaled when it runs
+    assert p.config["tracking"]["multi"]["gate_px"] == MULTI_DEFAULTS["gate_px"]
     assert p.config["flow"]["method"] == "dis"  # the base's flow kept
