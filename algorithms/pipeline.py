@@ -210,17 +210,18 @@ def _translation(s) -> np.ndarray:
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
                   "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length"},
-    "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length",
-              "hold_max_speed_px": "length"},
+    "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
 PX_REFERENCE_SIDE = 480
 
 
 def px_scale_factor(setting, frame_shape) -> float:
     """The factor of :data:`PX_SCALED_KEYS` for a frame ``(H, W)``: ``"auto"``, the shorter side over
-    :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080); a number, itself."""
+    :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080), never below 1 (a smaller frame is more often
+    a crop than a wider view, and the flow's noise in px, which the sizes as given are set against, does not
+    shrink with it); a number, itself."""
     if setting == "auto":
-        return min(int(frame_shape[0]), int(frame_shape[1])) / PX_REFERENCE_SIDE
+        return max(1.0, min(int(frame_shape[0]), int(frame_shape[1])) / PX_REFERENCE_SIDE)
     return float(setting)
 
 

@@ -393,7 +393,6 @@ class MultiSpec(_Section):
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]
     hold_min_travel_rel: float = MULTI_DEFAULTS["hold_min_travel_rel"]
-    hold_max_speed_px: float = MULTI_DEFAULTS["hold_max_speed_px"]
     hold_frames: StrictInt = MULTI_DEFAULTS["hold_frames"]
     hold_history: StrictInt = MULTI_DEFAULTS["hold_history"]
     sigma_accel_px: float = MULTI_DEFAULTS["sigma_accel_px"]

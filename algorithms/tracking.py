@@ -647,9 +647,6 @@ class _Track:
 # hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
 #   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
 #   would otherwise be held for ever);
-# hold_max_speed_px: only a track slower than this (px/frame, its filtered ground speed) is held: a vehicle
-#   the motion detector loses because it slows down; a fast one that loses its detection (a region split, a
-#   crown over it) coasts unseen instead, since a template of a part of it would be output with a wrong box;
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (a vehicle that waited at a light when the clip began
 #   stood where it was first found: once it has left that place, which then looks different, the kept frames
@@ -663,7 +660,7 @@ class _Track:
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "hold_max_speed_px": 2.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
+                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -737,7 +734,7 @@ class MultiTargetTracker:
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
-                     "hold_min_travel_rel", "hold_max_speed_px"):
+                     "hold_min_travel_rel"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -867,16 +864,14 @@ class MultiTargetTracker:
     def _hold(self, trk: _Track, img: np.ndarray, pred: np.ndarray, off: np.ndarray, others: list) -> np.ndarray | None:
         """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.
 
-        Only a confirmed track slower than ``hold_max_speed_px`` that has travelled ``hold_min_travel_rel`` box
-        sides, for at most
+        Only a confirmed track that has travelled ``hold_min_travel_rel`` box sides, for at most
         ``hold_frames`` frames in a row; the search covers ``hold_search_px`` around the
         prediction (at least half the box's larger side); a
         place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice.
         """
         p = self.params
         if (not p["hold_min_ncc"] > 0 or trk.template is None or not trk.confirmed or trk.held >= p["hold_frames"]
-                or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)
-                or float(np.hypot(*trk.kf.x[4:6])) > p["hold_max_speed_px"]):
+                or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)):
             return None
         th, tw = trk.template.shape
         guess = pred[:2] + off  # image coordinates

@@ -168,7 +168,7 @@ BASE = {"name": "t", "flow": {"method": "dis"}}
 
 
 @pytest.mark.parametrize("section, match", [
-    ({"detection": {"bogus": 1}}, r"detection.bogus: unknown key; valid: field, min_magnitude_px"),
+    ({"detection": {"bogus": 1}}, r"detection.bogus: unknown key; valid: field, px_scale, min_magnitude_px"),
     ({"detection": {"split_px": -1.0}}, r"detection.split_px: expected a finite number >= 0, got -1.0"),
     ({"detection": {"ground_model": "cubic"}}, r"detection.ground_model: expected affine, quadratic or none"),
     ({"detection": {"field": "total"}}, r"detection.field: expected local or filtered, got 'total'"),

@@ -368,7 +368,7 @@ def test_px_sizes_scale_with_the_frame_lengths_by_the_factor_and_areas_by_its_sq
     import algorithms.pipeline as P
 
     assert P.px_scale_factor("auto", (480, 640)) == 1.0 and P.px_scale_factor("auto", (1080, 1920)) == 2.25
-    assert P.px_scale_factor(0.5, (1080, 1920)) == 0.5
+    assert P.px_scale_factor("auto", (240, 320)) == 1.0 and P.px_scale_factor(0.5, (1080, 1920)) == 0.5
     got = P.scale_px({"min_area_px": 20, "close_px": 2, "min_magnitude_px": 0.5, "max_area_px": None, "x": 3},
                      P.PX_SCALED_KEYS["detection"], 2.25)
     assert got == {"min_area_px": 101, "close_px": 4, "min_magnitude_px": 1.125, "max_area_px": None, "x": 3}
