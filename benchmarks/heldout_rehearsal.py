@@ -186,13 +186,13 @@ def rehearse(scene: str, args: argparse.Namespace, env: dict) -> list[dict]:
                                                    gt=str(gt.resolve())), args.cache)
         print(f"[{scene} x{scale:g}] ingest ({'decoded' if entry.rendered else 'cached'}): "
               f"{time.perf_counter() - t:.0f} s", flush=True)
-        factors = args.px_factor if args.only_scaled else [1.0, *args.px_factor]
+        factors = args.px_factor if args.only_scaled else [None, *args.px_factor]  # None: the built-in auto
         for pipe, factor in [(p, f) for p in args.pipelines for f in factors]:
-            name = pipe if factor == 1.0 else _scaled_name(pipe, factor, args)
+            name = pipe if factor is None else _scaled_name(pipe, factor, args)
             run = work / f"run-{name}-x{scale:g}"
             if run.exists():
                 subprocess.run(["rm", "-rf", str(run)], check=True)
-            if factor == 1.0:
+            if factor is None:
                 wall, proc = _aerobench("eval-video", str(clip), "--gt", str(gt), "--pipelines", pipe, "--scale",
                                         repr(scale), "--out", str(run), "--workers", "1", "--cache", str(args.cache),
                                         "--no-report", "--quiet", env=env)
