@@ -38,7 +38,6 @@ The last table pools each pipeline over the scenes (sums of counts, medians of t
 from __future__ import annotations
 
 import argparse
-import copy
 import os
 import sys
 from pathlib import Path
@@ -49,38 +48,13 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
-from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E402
+from algorithms.pipeline import PIPELINES, SequenceEstimate  # noqa: E402
 from harness.metrics.detection import detection_boxes, moving_vehicles  # noqa: E402
 from harness.metrics.matching import BOX_COLUMNS, _linear_sum_assignment, box_iou  # noqa: E402
+from benchmarks._overrides import parse_value as _value, pipeline_with  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles", "city")
 DEFAULT_PIPELINES = ("dis", "pyramidal-lk", "pyramidal-hs", "tv-l1", "farneback")
-
-
-def _value(text: str):
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return {"true": True, "false": False, "null": None}.get(text, text)
-
-
-def pipeline_with(name: str, sets: list[str]) -> Pipeline:
-    """The built-in pipeline ``name`` with ``section.key=value`` overrides (e.g. ``detection.core_rel=0.4``)."""
-    d = copy.deepcopy(PIPELINES[name])
-    for kv in sets:
-        if "=" not in kv:
-            raise ValueError(f"--set: expected SECTION.KEY=VALUE, got {kv!r}")
-        key, value = kv.split("=", 1)
-        *path, leaf = key.split(".")
-        node = d
-        for k in path:
-            if node.get(k) is None:
-                node[k] = {}
-            node = node[k]
-        node[leaf] = _value(value)
-    return Pipeline.from_dict(d)
 
 
 def match_frame(detections, truth_frame: pd.DataFrame, *, gate_px: float) -> tuple[list[dict], int]:

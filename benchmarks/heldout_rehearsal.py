@@ -62,6 +62,7 @@ from harness.results import read_results, summarize  # noqa: E402
 from scenes import load_scene_spec  # noqa: E402
 from scenes.cache import cached_sequence_result  # noqa: E402
 from scenes.footage import FootageSpec  # noqa: E402
+from benchmarks._overrides import parse_value as _value  # noqa: E402
 
 # scene name -> (preset, overrides beyond size, frames and fps)
 SCENES = {
@@ -83,15 +84,6 @@ def _aerobench(*args: str, env: dict) -> tuple[float, subprocess.CompletedProces
     if proc.returncode not in (0, 1):  # 1: a failed cell, reported below with the rest
         sys.exit(f"aerobench {' '.join(args)}: exit {proc.returncode}: {proc.stderr.strip()[-2000:]}")
     return wall, proc
-
-
-def _value(text: str):
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return {"true": True, "false": False, "null": None}.get(text, text)
 
 
 def _scores(run_dir: Path) -> tuple[list[dict], dict[str, float], str]:

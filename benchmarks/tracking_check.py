@@ -37,6 +37,7 @@ from harness.metrics import position_error_px  # noqa: E402
 from harness.runner import point_seeds  # noqa: E402
 from scenes import load_scene_spec, open_sequence  # noqa: E402
 from scenes.cache import cached_sequence  # noqa: E402
+from benchmarks._overrides import parse_value as _value  # noqa: E402
 
 VARIANTS = {
     "built-in": None,
@@ -46,15 +47,6 @@ VARIANTS = {
     "re-centred, flow filter": {"recentre_px": 12.0, "filter": "flow", "correlation": None},
     "re-centred, position filter": {"recentre_px": 12.0, "filter": "position", "correlation": None},
 }
-
-
-def _value(text: str):
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return text
 
 
 def point_errors(seq, pipeline: Pipeline) -> pd.DataFrame:

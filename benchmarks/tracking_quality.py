@@ -46,7 +46,6 @@ sequences from summed counts.
 from __future__ import annotations
 
 import argparse
-import copy
 import math
 import os
 import sys
@@ -61,34 +60,11 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E402
 from harness.metrics import MOTCounts, mot_counts  # noqa: E402
+from benchmarks._overrides import pipeline_with as _pipeline  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles")
 KIT_DIR = Path(__file__).resolve().parents[2] / "shared" / "external" / "kit_ais"  # shared/ beside the clone
 BOXES = ["bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"]
-
-
-def _value(text: str):
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _pipeline(name: str, sets: list[str]) -> Pipeline:
-    """A built-in pipeline with ``section.key=value`` overrides (e.g. ``detection.close_px=3``)."""
-    d = copy.deepcopy(PIPELINES[name])
-    for kv in sets:
-        key, value = kv.split("=", 1)
-        *path, leaf = key.split(".")
-        node = d
-        for k in path:
-            if node.get(k) is None:
-                node[k] = {}
-            node = node[k]
-        node[leaf] = {"true": True, "false": False, "null": None}.get(value, _value(value))
-    return Pipeline.from_dict(d)
 
 
 def run_multi(pipeline: Pipeline, frames, *, gsd_m_per_px=None):
