@@ -688,6 +688,28 @@ def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float =
     return t if float(t.std()) >= min_std else None
 
 
+def _best_match(img: np.ndarray, tpl: np.ndarray, centre_px, radius_px: float) -> tuple[float, np.ndarray] | None:
+    """The best NCC of ``tpl`` in ``img`` with its centre within ``radius_px`` of ``centre_px`` (image coordinates,
+    a square search), and that centre; None when the search reaches past the border."""
+    th, tw = tpl.shape
+    cx, cy = centre_px
+    xa, ya = int(math.floor(cx - radius_px - (tw - 1) / 2)), int(math.floor(cy - radius_px - (th - 1) / 2))
+    xb, yb = int(math.ceil(cx + radius_px + (tw - 1) / 2)), int(math.ceil(cy + radius_px + (th - 1) / 2))
+    if xa < 0 or ya < 0 or xb >= img.shape[1] or yb >= img.shape[0] or yb - ya + 1 < th or xb - xa + 1 < tw:
+        return None
+    ncc = cv2.matchTemplate(img[ya:yb + 1, xa:xb + 1].astype(np.float32, copy=False), tpl, cv2.TM_CCOEFF_NORMED)
+    iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+    return float(ncc[iy, ix]), np.array([xa + ix + (tw - 1) / 2, ya + iy + (th - 1) / 2])
+
+
+def _ncc_at(img: np.ndarray, tpl: np.ndarray, centre_ground, off: np.ndarray) -> float | None:
+    """The NCC of ``tpl`` with the pixels of ``img`` it covers centred at a ground-fixed place; None off the image."""
+    th, tw = tpl.shape
+    here = _crop(img.astype(np.float32, copy=False), np.array([centre_ground[0], centre_ground[1], tw, th]), off,
+                 min_std=0.0)
+    return None if here is None else float(cv2.matchTemplate(here, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
+
+
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
     ax0, ay0, ax1, ay1 = a[:, 0] - a[:, 2] / 2, a[:, 1] - a[:, 3] / 2, a[:, 0] + a[:, 2] / 2, a[:, 1] + a[:, 3] / 2
@@ -874,22 +896,11 @@ class MultiTargetTracker:
                 or trk.travel < p["hold_min_travel_rel"] * max(trk.template.shape)):
             return None
         th, tw = trk.template.shape
-        guess = pred[:2] + off  # image coordinates
-        r = max(p["hold_search_px"], 0.5 * max(th, tw))
-        cx0, cx1, cy0, cy1 = guess[0] - r, guess[0] + r, guess[1] - r, guess[1] + r
-        h, w = img.shape
-        xa, ya = int(math.floor(cx0 - (tw - 1) / 2)), int(math.floor(cy0 - (th - 1) / 2))
-        xb, yb = int(math.ceil(cx1 + (tw - 1) / 2)), int(math.ceil(cy1 + (th - 1) / 2))
-        if xa < 0 or ya < 0 or xb >= w or yb >= h:
-            return None  # at the border: the vehicle may be leaving; the track coasts
-        area = img[ya:yb + 1, xa:xb + 1]
-        if area.shape[0] < th or area.shape[1] < tw:
+        # at the border (None) the vehicle may be leaving: the track coasts
+        found = _best_match(img, trk.template, pred[:2] + off, max(p["hold_search_px"], 0.5 * max(th, tw)))
+        if found is None or not found[0] >= p["hold_min_ncc"]:
             return None
-        ncc = cv2.matchTemplate(area, trk.template, cv2.TM_CCOEFF_NORMED)
-        iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
-        if not ncc[iy, ix] >= p["hold_min_ncc"]:
-            return None
-        box = np.array([xa + ix + (tw - 1) / 2 - off[0], ya + iy + (th - 1) / 2 - off[1], tw, th])
+        box = np.array([found[1][0] - off[0], found[1][1] - off[1], tw, th])
         if others and (_iou(box[None], np.asarray(others)) >= 0.5).any():
             return None
         if not trk.ground_checked:
@@ -913,8 +924,8 @@ class MultiTargetTracker:
         f0, box, tpl = trk.first
         trk.first = None  # once
         th, tw = tpl.shape
-        now = _crop(img, box, off, min_std=0.0)
-        if now is None or cv2.matchTemplate(now, tpl, cv2.TM_CCOEFF_NORMED)[0, 0] >= p["hold_min_ncc"]:
+        now = _ncc_at(img, tpl, box[:2], off)
+        if now is None or now >= p["hold_min_ncc"]:
             return
         kept = {f: (g, o) for f, g, o in self._seen}
         at = box[:2].copy()
@@ -923,18 +934,12 @@ class MultiTargetTracker:
             if frame not in kept:
                 return
             g, o = kept[frame]
-            cx, cy = at + o
-            xa, ya = int(math.floor(cx - r - (tw - 1) / 2)), int(math.floor(cy - r - (th - 1) / 2))
-            xb, yb = int(math.ceil(cx + r + (tw - 1) / 2)), int(math.ceil(cy + r + (th - 1) / 2))
-            if xa < 0 or ya < 0 or xb >= g.shape[1] or yb >= g.shape[0]:
+            found = _best_match(g, tpl, at + o, r)
+            if found is None or not found[0] >= p["hold_min_ncc"]:
                 return
-            ncc = cv2.matchTemplate(g[ya:yb + 1, xa:xb + 1].astype(np.float32), tpl, cv2.TM_CCOEFF_NORMED)
-            iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
-            if not ncc[iy, ix] >= p["hold_min_ncc"]:
-                return
-            at = np.array([xa + ix + (tw - 1) / 2 - o[0], ya + iy + (th - 1) / 2 - o[1]])
-            found = np.array([at[0], at[1], tw, th])
-            self._emit(trk, frame, found, found, found, o)
+            at = found[1] - o
+            box_then = np.array([at[0], at[1], tw, th])
+            self._emit(trk, frame, box_then, box_then, box_then, o)
 
     def _looked_alike_before(self, trk: _Track, box: np.ndarray) -> bool:
         """Whether the template matched the ground-fixed ``box``'s place before the track came near it (or no kept
@@ -946,11 +951,8 @@ class MultiTargetTracker:
             c = where.get(frame)
             if c is None or float(np.hypot(*(c - box[:2]))) < side:
                 continue
-            then = _crop(img.astype(np.float32), np.array([box[0], box[1], tw, th]), off, min_std=0.0)
-            if then is None:
-                return True
-            ncc = cv2.matchTemplate(then, trk.template, cv2.TM_CCOEFF_NORMED)
-            return bool(ncc[0, 0] >= self.params["hold_min_ncc"])
+            then = _ncc_at(img, trk.template, box[:2], off)
+            return then is None or then >= self.params["hold_min_ncc"]
         return True
 
     def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:
