@@ -265,7 +265,7 @@ def clip_frames(spec: FootageSpec) -> int | None:
     stated frame count (MP4 states it, Matroska not: None), ``stop - start`` when given."""
     if spec.kind == "frames":
         return len(_source_frames(spec))
-    total = _video_frames(Path(spec.source))
+    total = _video_header(Path(spec.source))[1]
     if total is None:
         return None if spec.stop is None else spec.stop - spec.start
     return max(min(total, spec.stop if spec.stop is not None else total) - spec.start, 0)
@@ -421,37 +421,23 @@ def _decode_video(path: Path, start: int, stop: int | None) -> Iterator[np.ndarr
         cap.release()
 
 
-def _video_fps(path: Path) -> float | None:
+def _video_header(path: Path) -> tuple[float | None, int | None]:
+    """The frame rate and frame count a video's container states (None for what it states not; nothing decoded)."""
     try:
         import av
     except ImportError:
         cap = cv2.VideoCapture(str(path))
-        fps = cap.get(cv2.CAP_PROP_FPS)
+        fps, count = cap.get(cv2.CAP_PROP_FPS), cap.get(cv2.CAP_PROP_FRAME_COUNT)
         cap.release()
-        return float(fps) if fps and fps > 0 else None
+        return (float(fps) if fps and fps > 0 else None), (int(count) if count and count > 0 else None)
     try:
         with av.open(str(path)) as container:
             if not container.streams.video:
-                return None
-            rate = container.streams.video[0].average_rate or container.streams.video[0].guessed_rate
-            return float(rate) if rate else None
-    except av.error.FFmpegError as exc:
-        raise FormatError(f"{path}: not a readable video ({exc})") from None
-
-
-def _video_frames(path: Path) -> int | None:
-    """The frame count a video's container states (None where it states none; never decoded for it)."""
-    try:
-        import av
-    except ImportError:
-        cap = cv2.VideoCapture(str(path))
-        count = cap.get(cv2.CAP_PROP_FRAME_COUNT)
-        cap.release()
-        return int(count) if count and count > 0 else None
-    try:
-        with av.open(str(path)) as container:
-            frames = container.streams.video[0].frames if container.streams.video else 0
-            return int(frames) if frames and frames > 0 else None
+                return None, None
+            stream = container.streams.video[0]
+            rate = stream.average_rate or stream.guessed_rate
+            return (float(rate) if rate else None), (int(stream.frames) if stream.frames and stream.frames > 0
+                                                      else None)
     except av.error.FFmpegError as exc:
         raise FormatError(f"{path}: not a readable video ({exc})") from None
 
@@ -578,7 +564,7 @@ def write_footage(spec: FootageSpec, folder: str | os.PathLike, *, digest: str |
         for p in labels:
             if p is not None:
                 read_yolo_boxes(p)
-    fps = spec.fps if spec.fps is not None else (_video_fps(Path(spec.source)) if spec.kind == "video" else None)
+    fps = spec.fps if spec.fps is not None else (_video_header(Path(spec.source))[0] if spec.kind == "video" else None)
 
     out = _FolderWriter(folder, threads=2)
     try:
