@@ -32,3 +32,18 @@ def pipeline_with(name: str, sets: list[str]):
             node = node[k]
         node[leaf] = parse_value(value)
     return Pipeline.from_dict(d)
+
+
+def scene_overrides(*, frames: int | None = None, seed: int | None = None, sets=()) -> dict:
+    """A scene's overrides from ``--frames``, ``--seed`` and ``KEY=VALUE`` texts (ValueError naming a bad one)."""
+    over = {}
+    if frames:
+        over["image.n_frames"] = frames
+    if seed is not None:
+        over["seed"] = seed
+    for kv in sets:
+        if "=" not in kv:
+            raise ValueError(f"expected KEY=VALUE, got {kv!r}")
+        key, value = kv.split("=", 1)
+        over[key] = parse_value(value)
+    return over

@@ -51,7 +51,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 from algorithms.pipeline import PIPELINES, SequenceEstimate  # noqa: E402
 from harness.metrics.detection import detection_boxes, moving_vehicles  # noqa: E402
 from harness.metrics.matching import BOX_COLUMNS, _linear_sum_assignment, box_iou  # noqa: E402
-from benchmarks._overrides import parse_value as _value, pipeline_with  # noqa: E402
+from benchmarks._overrides import pipeline_with, scene_overrides  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles", "city")
 DEFAULT_PIPELINES = ("dis", "pyramidal-lk", "pyramidal-hs", "tv-l1", "farneback")
@@ -146,17 +146,11 @@ def main(argv: list[str] | None = None) -> int:
     cache = os.environ.get("AEROBENCH_CACHE", ".aerobench-cache")
     summary, all_rows = [], []
     for scene in args.scene:
-        over = {}
-        if args.frames:
-            over["image.n_frames"] = args.frames
-        if args.seed is not None:
-            over["seed"] = args.seed
-        for kv in args.scene_set:
-            if "=" not in kv:
-                print(f"--scene-set: expected KEY=VALUE, got {kv!r}", file=sys.stderr)
-                return 2
-            key, value = kv.split("=", 1)
-            over[key] = _value(value)
+        try:
+            over = scene_overrides(frames=args.frames, seed=args.seed, sets=args.scene_set)
+        except ValueError as e:
+            print(f"--scene-set: {e}", file=sys.stderr)
+            return 2
         seq = open_sequence(cached_sequence(load_scene_spec(scene, over), cache))
         frames = [seq.frame(i) for i in range(len(seq))]
         truth, gsd = seq.tracks, seq.meta.get("gsd_m")

@@ -60,7 +60,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E402
 from harness.metrics import MOTCounts, mot_counts  # noqa: E402
-from benchmarks._overrides import pipeline_with as _pipeline  # noqa: E402
+from benchmarks._overrides import pipeline_with as _pipeline, scene_overrides  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles")
 KIT_DIR = Path(__file__).resolve().parents[2] / "shared" / "external" / "kit_ais"  # shared/ beside the clone
@@ -87,11 +87,7 @@ def synthetic(args) -> int:
     cache = os.environ.get("AEROBENCH_CACHE", ".aerobench-cache")
     rows = []
     for scene in args.scene:
-        over = {}
-        if args.frames:
-            over["image.n_frames"] = args.frames
-        if args.seed is not None:
-            over["seed"] = args.seed
+        over = scene_overrides(frames=args.frames, seed=args.seed)
         seq = open_sequence(cached_sequence(load_scene_spec(scene, over), cache))
         frames = [seq.frame(i) for i in range(len(seq))]
         truth = seq.tracks
