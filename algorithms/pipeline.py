@@ -209,7 +209,8 @@ def _translation(s) -> np.ndarray:
 # (split_px, merge_px, parallax_perp_px) are not scaled: a method's noise in px does not grow with the frame.
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
-                  "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length"},
+                  "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length",
+                  "box_reach_px": "length"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
 PX_REFERENCE_SIDE = 480

@@ -300,6 +300,8 @@ class DetectionSpec(_Section):
     box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     box_join: float = DETECTION_DEFAULTS["box_join"]
     box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]
+    box_reach_px: StrictInt = DETECTION_DEFAULTS["box_reach_px"]
+    box_reach_join: float = DETECTION_DEFAULTS["box_reach_join"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")
