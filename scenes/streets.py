@@ -269,8 +269,8 @@ def _shadow(poly: np.ndarray, away: np.ndarray, height_m: float) -> np.ndarray:
     return cv2.convexHull(pts)[:, 0].astype(np.float64)
 
 
-def paint_clutter(canvas, *, roads, cells, kinds, buildings=(), widths_m: tuple[float, float], material, clearance,
-                  density: float, away: np.ndarray | None, rng: np.random.Generator,
+def paint_clutter(canvas, *, roads, cells, kinds, buildings=(), row_angles=None, widths_m: tuple[float, float],
+                  material, clearance, density: float, away: np.ndarray | None, rng: np.random.Generator,
                   kerb_parking: bool = False) -> list[np.ndarray]:
     """Paint the small things of streets and yards onto ``canvas``; returns their shadows' polygons (metres).
 
@@ -281,8 +281,10 @@ def paint_clutter(canvas, *, roads, cells, kinds, buildings=(), widths_m: tuple[
     planters, benches (0.5-2.5 m, of varied albedo), half of them against the walls of ``buildings``
     (:class:`scenes.world.Building`), and garden walls. ``away`` (2,) is a shadow's ground offset per
     metre of height (None: no shadows, as under ``light.mode: sun``, which casts them itself); the
-    caller paints the shadows with the buildings', as one union. ``density`` scales every count
-    (``world.clutter``).
+    caller paints the shadows with the buildings', as one union. Fields under a crop (``row_angles``:
+    {block key: the rows' direction, radians}) get tramlines, the tractor's wheel tracks along the
+    rows every 18-24 m (a sprayer's width), 1.8 m apart, bare and darker. ``density`` scales every
+    count (``world.clutter``).
     """
     from scenes.traffic import lane_layout  # here: scenes.traffic builds on scenes.world
 
@@ -362,6 +364,25 @@ def paint_clutter(canvas, *, roads, cells, kinds, buildings=(), widths_m: tuple[
             shaft = _quads(q[None] + away * h / 2, (away / max(1e-9, float(np.hypot(*away))))[None],
                            np.array([float(np.hypot(*away)) * h]), np.array([0.18]))[0]
             shadows.append(shaft)
+
+    # -- tramlines in fields under a crop: pairs of wheel tracks along the rows, a headland clear ----
+    tracks = []
+    for key, ang in (row_angles or {}).items():
+        poly = cells[key][0]
+        contour = poly.astype(np.float32).reshape(-1, 1, 2)
+        u, v = np.array([np.cos(ang), np.sin(ang)]), np.array([-np.sin(ang), np.cos(ang)])
+        c = poly.mean(axis=0)
+        reach = float(np.hypot(*(poly.max(axis=0) - poly.min(axis=0))))
+        along = np.arange(-reach / 2, reach / 2, 1.0)
+        for off in np.arange(-reach / 2 + rng.uniform(0, 24), reach / 2, rng.uniform(18.0, 24.0)):
+            for wheel in (-0.9, 0.9):
+                pts = c + v * (off + wheel) + along[:, None] * u
+                inside = np.array([cv2.pointPolygonTest(contour, (float(x), float(y)), True) > 6.0 for x, y in pts])
+                # runs of points inside the headland: one polyline each
+                edges = np.flatnonzero(np.diff(np.concatenate([[0], inside.astype(np.int8), [0]])))
+                tracks += [pts[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 3]
+    if tracks:
+        canvas.lines(tracks, 0.4, 0.86, mode="mul")
 
     # -- yards: small objects and garden walls, away from the streets -------------------------------
     palette = np.asarray(CLUTTER_PALETTE, np.float64)

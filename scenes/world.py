@@ -702,6 +702,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     # -- land use, block by block ------------------------------------------------------------
     stalls: list[tuple[float, float, float]] = []
     kinds: dict[tuple[int, int], str] = {}
+    row_angles: dict[tuple[int, int], float] = {}  # fields under a crop: the rows' direction, radians
     for key, (poly, ks) in cells.items():
         if not overlaps(poly, extent):
             continue
@@ -720,6 +721,8 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
             crop = ["wheat", "crop", "young", "ploughed"][int(rng.integers(0, 4))]
             e = poly[np.argmax(np.hypot(*(poly - poly[0]).T))] - poly[0]
             rows = field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0]))
+            if crop != "ploughed":
+                row_angles[key] = rows.ang
             canvas.polygon([poly], material("crop", under=rows), feather_m=0.5)
         elif kind == "parking":
             canvas.polygon([poly], material("yard", jitter), feather_m=0.5)
@@ -785,7 +788,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
         buildings = [_roof_rows(b, rng_clutter) for b in buildings]
         clutter_shadows = paint_clutter(
             canvas, roads=[r for r in roads if overlaps(r.centre_m, extent)], cells=cells,
-            kinds=kinds, buildings=buildings,
+            kinds=kinds, buildings=buildings, row_angles=row_angles,
             widths_m=(w_major, w_minor), clearance=road_index.clearance,
             material=lambda name, gain=(1.0, 1.0, 1.0): material(name, gain, draw=rng_clutter),
             density=ws.clutter, away=-to_sun[:2] / max(1e-9, to_sun[2]) if flat_shadows else None,

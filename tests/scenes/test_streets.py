@@ -185,3 +185,30 @@ def test_lane_lines_stop_at_the_junction_mouth():
         assert (disc > 160).mean() < 4e-4, (n, (disc > 160).mean())  # a texel or two of a stop line's edge
         checked += 1
     assert checked >= 1
+
+
+def test_tramlines_run_along_a_fields_rows_in_pairs_inside_a_headland():
+    from scenes.streets import paint_clutter
+    from scenes.world import _Canvas
+
+    texel = 0.1
+    field = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 80.0], [0.0, 80.0]])
+    canvas = _Canvas(0.0, 0.0, texel, 1000, 800)
+    paint_clutter(canvas, roads=[], cells={(0, 0): (field, None)}, kinds={(0, 0): "field"},
+                  row_angles={(0, 0): 0.0}, widths_m=(10.0, 7.5), material=None,
+                  clearance=lambda p: np.full(len(p), 50.0), density=1.0, away=None, rng=np.random.default_rng(2))
+    buf = np.ones((800, 1000, 3), np.float32)
+    xs, ys = (np.arange(1000) + 0.5) * texel, (np.arange(800) + 0.5) * texel
+    for op in canvas.ops:
+        op.apply(buf, 0, xs, ys)
+    g = buf[..., 0]
+    rows = g[:, 300:700].mean(axis=1)  # along x, the rows' direction: tracks are dark rows of texels
+    dark = np.flatnonzero(rows < 0.95) * texel
+    assert len(dark) and dark.min() > 6.0 - 0.3 and dark.max() < 80.0 - 6.0 + 0.3  # a 6 m headland
+    # wheel tracks in pairs 1.8 m apart, the pairs 18-24 m apart
+    centres = [float(np.mean(r)) for r in np.split(dark, np.flatnonzero(np.diff(dark) > 0.5) + 1)]
+    gaps = np.diff(centres)
+    assert np.allclose(gaps[::2], 1.8, atol=0.15), centres
+    assert np.all((gaps[1::2] > 18.0 - 1.8 - 0.2) & (gaps[1::2] < 24.0 - 1.8 + 0.2)), centres
+    # the tracks are darker than the crop, not painted over it
+    assert 0.8 < g.min() < 0.9
