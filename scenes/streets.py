@@ -8,9 +8,13 @@ asphalt over the ends of the lane markings; ``crosswalk_fraction`` of them have 
 crossing on every road into them, and the lanes that enter a junction end at a stop
 line (right-hand traffic: the right half of the road, seen driving toward the junction).
 
+Lane markings on main roads and on any road of two lanes a direction, from a junction's mouth to
+the next (corners where two marked roads meet at an angle are paved plain, as junctions are).
+
 Small things (:func:`paint_clutter`, ``world.clutter``): manholes, gullies, patched cuts, sealed
-cracks, oil strips down the lanes, lamp posts and their shadows, and in built blocks bins, sheds,
-planters and garden walls with theirs.
+cracks, oil strips down the lanes, direction arrows before junctions, lamp posts and their
+shadows, tramlines in fields, and in built blocks bins, sheds, planters and garden walls with
+theirs (the dormer rows on roofs that come with them: :func:`scenes.world._roof_rows`).
 
 Painting only: shapes in metres go to the ground canvas of :func:`scenes.world.build_world`.
 """
