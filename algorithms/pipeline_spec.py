@@ -300,6 +300,8 @@ class DetectionSpec(_Section):
     box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     box_join: float = DETECTION_DEFAULTS["box_join"]
     box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]
+    change_noise_k: float = DETECTION_DEFAULTS["change_noise_k"]
+    change_enough: float = DETECTION_DEFAULTS["change_enough"]
     gsd_m_per_px: Any = None
 
     @model_validator(mode="after")
