@@ -33,7 +33,9 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
 6. **box**: the pixels the region's motion explains better than the ground's
    (``box_from_frames``; with frame t-1, ``box_three_frames``: those that explain
    the change from t-1 too, the vehicle at t without the ground it covers next),
-   their parts joined unless static texture lies between them (``box_join``); a
+   their parts joined unless static texture lies between them (``box_join``), sought
+   within 4 px (with frame t-1, plus ``box_margin_rel`` times the region's motion)
+   of its box; a
    region with fewer than ``min_area_px`` such pixels is no mover;
 7. **changed at rest**: a mover carries its content away from its place between
    frames t and t+1, and brought it there since t-1; static texture that the flow
@@ -131,6 +133,10 @@ class Detection(NamedTuple):
 #   vehicles that follow each other; 0: the largest part alone);
 # box_three_frames: with the previous frame (Pipeline.run passes it) a vehicle pixel must also explain the
 #   change from frame t-1, which leaves out the ground the vehicle covers next (false: frames t, t+1 only);
+# box_margin_rel: with frame t-1, those pixels are sought within 4 px plus this many times the region's motion (px)
+#   of the region's box (without it within 4 px: frames t, t+1 alone mark the place it moves to as well; a flow method that finds a vehicle's motion at its edges only, TV-L1 on a uniform roof, or follows part
+#   of a fast one, leaves the region short of the vehicle by up to a motion: the changed bands at its front and
+#   rear edges are a motion wide; 0: 4 px alone);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
@@ -153,6 +159,7 @@ DETECTION_DEFAULTS = {
     "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
     "box_join": 0.5, "box_three_frames": True, "change_noise_k": 5.0, "change_enough": 0.5,
+    "box_margin_rel": 1.0,
 }
 
 
@@ -830,7 +837,11 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             u, v, margin = chosen
         x0, y0, x1, y1 = c.box()
         if frames is not None and p["box_from_frames"]:
-            box = _moved_box(c, frames, u, v, ground, prev_frame if p["box_three_frames"] else None, join=p["box_join"])
+            prev = prev_frame if p["box_three_frames"] else None
+            # a motion beyond the region only with frame t-1: its test leaves out the places the vehicle moves to
+            # and comes from, which frames t, t+1 alone would join to it
+            reach = 4 + (int(math.ceil(p["box_margin_rel"] * max(abs(u), abs(v)))) if prev is not None else 0)
+            box = _moved_box(c, frames, u, v, ground, prev, join=p["box_join"], margin_px=reach)
             # the evidence of a mover: at least min_area_px pixels that its motion explains better than the
             # ground's (a region of flow noise, or of an edge the registration left, holds a few)
             if box is None or box[4] < p["min_area_px"]:

@@ -381,6 +381,7 @@ def test_the_change_noise_alone_gives_a_static_patch_is_what_the_test_expects():
     ({"change_noise_k": -1.0}, r"change_noise_k: expected a finite number >= 0, got -1.0"),
     ({"change_noise_k": math.nan}, r"change_noise_k: expected a finite number >= 0, got nan"),
     ({"change_enough": 1.5}, r"change_enough: expected a fraction in \[0, 1\], got 1.5"),
+    ({"box_margin_rel": -0.5}, r"box_margin_rel: expected a finite number >= 0, got -0.5"),
 ])
 def test_bad_change_keys_are_rejected_naming_them(kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -388,3 +389,25 @@ def test_bad_change_keys_are_rejected_naming_them(kwargs, match):
     (key,) = kwargs
     with pytest.raises(PipelineError, match=rf"detection\.{key}: expected a (finite number|fraction)"):
         Pipeline.from_dict({**BASE, "detection": kwargs})
+
+
+def test_a_fast_car_whose_flow_covers_part_of_it_gets_its_whole_box():
+    # 30 x 14 px car with a textured roof (racks, windows), 8 px a frame to the right; the flow (TV-L1, a method
+    # that follows part of a fast car) found its motion on its front 16 px only
+    rng = np.random.default_rng(11)
+    g = _ground(rng)
+    roof = cv2.GaussianBlur(rng.uniform(0, 255, (14, 30)).astype(np.float32), (0, 0), 1.0)
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        f[50:64, 52 + 8 * k:82 + 8 * k] = roof
+        frames.append(f)
+    flow = _field(rng, [(50, 64, 74, 90, (8.0, 0.0))], blur=0.7)
+    valid = np.ones((H, W), bool)
+    car = (60, 50, 89, 63)
+    (d,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    assert d.u_px == pytest.approx(8.0, abs=0.5)
+    assert _iou(d, car) >= 0.8, d
+    # sought within 4 px of the region alone, the box stops short of the car's rear
+    (part,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_margin_rel=0.0)
+    assert _iou(part, car) < 0.7, part
