@@ -33,10 +33,11 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
 6. **box**: the pixels the region's motion explains better than the ground's
    (``box_from_frames``; with frame t-1, ``box_three_frames``: those that explain
    the change from t-1 too, the vehicle at t without the ground it covers next),
-   their parts joined unless static texture lies between them (``box_join``), sought
-   within 4 px (with frame t-1, plus ``box_margin_rel`` times the region's motion)
-   of its box; a
-   region with fewer than ``min_area_px`` such pixels is no mover;
+   their parts joined unless static texture lies between them (``box_join``), and
+   parts further along its lane too (``box_reach_px``: a long uniform roof whose
+   flow reached the threshold at one edge alone), sought within 4 px (with frame
+   t-1, plus ``box_margin_rel`` times the region's motion) of its box; a region
+   with fewer than ``min_area_px`` such pixels is no mover;
 7. **changed at rest**: a mover carries its content away from its place between
    frames t and t+1, and brought it there since t-1; static texture that the flow
    saw move (aliasing of road markings and kerbs, compression, the flicker of tree
@@ -130,12 +131,18 @@ class Detection(NamedTuple):
 #   such pixels is no mover: flow noise, an edge the registration left), else of the region's fast core;
 # box_join: parts of those pixels (a slow car with a uniform roof changes at its front and rear edges only)
 #   join the box when at most this fraction of the pixels between them is static texture (ground between two
-#   vehicles that follow each other; 0: the largest part alone);
+#   vehicles that follow each other; 0: the largest part alone, and box_reach_px is off too);
 # box_three_frames: with the previous frame (Pipeline.run passes it) a vehicle pixel must also explain the
 #   change from frame t-1, which leaves out the ground the vehicle covers next (false: frames t, t+1 only);
+# box_reach_px, box_reach_join: parts of those pixels up to box_reach_px beyond the region's box join its box
+#   when they lie in its lane (across the motion they overlap it by half the narrower) and at most
+#   box_reach_join of the pixels in the convex hull of both that neither marks are static texture (a bus or
+#   a long uniform roof moving about a pixel a frame: the flow reaches the threshold at one edge alone, the
+#   other edge is the rest of it; ground between two cars that follow each other is textured; 0: off);
 # box_margin_rel: with frame t-1, those pixels are sought within 4 px plus this many times the region's motion (px)
-#   of the region's box (without it within 4 px: frames t, t+1 alone mark the place it moves to as well; a flow method that finds a vehicle's motion at its edges only, TV-L1 on a uniform roof, or follows part
-#   of a fast one, leaves the region short of the vehicle by up to a motion: the changed bands at its front and
+#   of the region's box (without it within 4 px: frames t, t+1 alone mark the place it moves to as
+#   well; a flow method that finds a vehicle's motion at its edges only, TV-L1 on a uniform roof, or follows part of
+#   a fast one, leaves the region short of the vehicle by up to a motion: the changed bands at its front and
 #   rear edges are a motion wide; 0: 4 px alone);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
@@ -158,8 +165,8 @@ DETECTION_DEFAULTS = {
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
     "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
-    "box_join": 0.5, "box_three_frames": True, "change_noise_k": 5.0, "change_enough": 0.5,
-    "box_margin_rel": 1.0,
+    "box_join": 0.5, "box_three_frames": True, "box_reach_px": 48, "box_reach_join": 0.2,
+    "change_noise_k": 5.0, "change_enough": 0.5, "box_margin_rel": 1.0,
 }
 
 
@@ -221,10 +228,10 @@ def _check_keys(params: dict) -> dict:
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise ValueError(f"{k}: expected a finite number >= 0, got {v!r}")
-    for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px"):
+    for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px", "box_reach_px"):
         if not isinstance(p[k], (int, np.integer)):
             raise ValueError(f"{k}: expected an integer >= 0, got {p[k]!r}")
-    for k in ("min_explained", "box_join", "change_enough"):
+    for k in ("min_explained", "box_join", "box_reach_join", "change_enough"):
         if not p[k] <= 1:
             raise ValueError(f"{k}: expected a fraction in [0, 1], got {p[k]!r}")
     return p
@@ -428,7 +435,8 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
 
 
 def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), prev=None, *, join: float = 0.5,
-               margin_px: int = 4, gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
+               reach_px: int = 0, reach_join: float = 0.2, margin_px: int = 4,
+               gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
     """The box of the pixels around the region that its motion explains better than the ground's.
 
     A flow region is larger than its vehicle: the flow window carries the vehicle's motion onto the
@@ -444,15 +452,20 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     at least half in the region when at most ``join`` of the pixels between them are static
     texture (warping by the motion makes them worse by ``gain_grey``: ground between two
     vehicles that follow each other; a uniform roof between a car's front and rear edges changes
-    neither way). Without ``prev`` the box reaches one motion ahead, taken off, unless the vehicle
-    moved more than its length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
+    neither way). With ``reach_px``, parts up to that far from the region's box join too when they
+    lie in its lane (across the motion they overlap the box by half the narrower one) and at most
+    ``join`` of the pixels inside the convex hull of both that neither part marks are static texture:
+    a long uniform roof (a bus) moving about a pixel a frame gives the flow its rear or front edge
+    alone, and the other edge is the rest of the vehicle (see :func:`_join_in_lane`). Without
+    ``prev`` the box reaches one motion ahead, taken off, unless the vehicle moved more than its
+    length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
     of marked pixels in its parts; None when no pixel qualifies.
     """
     g0, g1 = frames
     h, w = g0.shape
     gu, gv = ground
     x0, y0, x1, y1 = region.box()
-    pad = margin_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
+    pad = margin_px + reach_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
     xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
     a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
     gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
@@ -487,6 +500,13 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
                 bx0, by0, bx1, by1 = c0, r0, c1, r1
                 count += int(stats[j, cv2.CC_STAT_AREA])
+        if reach_px > 0 and math.hypot(u, v) >= 0.25:
+            zone = np.zeros_like(moved)
+            zone[max(0, y0 - reach_px) - ya:min(h - 1, y1 + reach_px) - ya + 1,
+                 max(0, x0 - reach_px) - xa:min(w - 1, x1 + reach_px) - xa + 1] = 1
+            far = cv2.morphologyEx((gain > gain_grey).astype(np.uint8) & zone, cv2.MORPH_CLOSE, _disk(2))
+            bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join)
+            count += extra
     bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya
     if prev is None:
         # the marked pixels are the vehicle and the ground it covers next: one motion ahead taken off, unless
@@ -500,6 +520,55 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     if bx1 < bx0 or by1 < by0:
         return None
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
+
+
+def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float, join: float,
+                  min_part_px: int = 9) -> tuple[int, int, int, int, int]:
+    """``box`` grown by the parts of ``moved`` that lie in its lane, nearest first (:func:`_moved_box`).
+
+    A part joins when, across the motion (u, v), its extent and the box's overlap by at least half
+    the narrower of the two, and at most ``join`` of the pixels inside the convex hull of the box
+    and the part that ``moved`` does not mark are ``static`` (texture that warping by the motion
+    makes worse: ground between two vehicles that follow each other; a uniform roof is neither).
+    Parts smaller than ``min_part_px`` (a 3 x 3 speck) and those the box already touches are left
+    alone. Returns the grown box ``(x0, y0, x1, y1)`` (patch pixels, inclusive) and the number of
+    pixels joined.
+    """
+    bx0, by0, bx1, by1 = box
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(moved, connectivity=8)
+    speed = math.hypot(u, v)
+    du, dv = u / speed, v / speed  # along the motion; (-dv, du) across it
+
+    def across(xs, ys):
+        t = -dv * np.asarray(xs, np.float64) + du * np.asarray(ys, np.float64)
+        return float(t.min()), float(t.max())
+
+    order = np.argsort(np.hypot(centroids[:, 0] - (bx0 + bx1) / 2, centroids[:, 1] - (by0 + by1) / 2))
+    extra = 0
+    for j in order:
+        left, top = int(stats[j, cv2.CC_STAT_LEFT]), int(stats[j, cv2.CC_STAT_TOP])
+        right, bottom = left + int(stats[j, cv2.CC_STAT_WIDTH]) - 1, top + int(stats[j, cv2.CC_STAT_HEIGHT]) - 1
+        if j == 0 or stats[j, cv2.CC_STAT_AREA] < min_part_px:
+            continue
+        if left <= bx1 + 1 and right >= bx0 - 1 and top <= by1 + 1 and bottom >= by0 - 1:
+            continue  # touching the box: the box's own part or a neighbour the first pass judged
+        ys, xs = np.nonzero(labels[top:bottom + 1, left:right + 1] == j)
+        xs, ys = xs + left, ys + top
+        a0, a1 = across([bx0, bx1, bx0, bx1], [by0, by0, by1, by1])
+        p0, p1 = across(xs, ys)
+        if min(a1, p1) - max(a0, p0) < 0.5 * min(a1 - a0, p1 - p0):
+            continue
+        pts = np.concatenate([np.array([[bx0, by0], [bx1, by0], [bx0, by1], [bx1, by1]]),
+                              np.stack([xs, ys], axis=1)]).astype(np.int32)
+        hull = np.zeros(moved.shape, np.uint8)
+        cv2.fillConvexPoly(hull, cv2.convexHull(pts), 1)
+        between = (hull == 1) & (moved == 0)
+        between[by0:by1 + 1, bx0:bx1 + 1] = False
+        if between.any() and static[between].mean() > join:
+            continue
+        bx0, by0, bx1, by1 = min(bx0, left), min(by0, top), max(bx1, right), max(by1, bottom)
+        extra += int(stats[j, cv2.CC_STAT_AREA])
+    return bx0, by0, bx1, by1, extra
 
 
 def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -> float:
@@ -841,7 +910,8 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             # a motion beyond the region only with frame t-1: its test leaves out the places the vehicle moves to
             # and comes from, which frames t, t+1 alone would join to it
             reach = 4 + (int(math.ceil(p["box_margin_rel"] * max(abs(u), abs(v)))) if prev is not None else 0)
-            box = _moved_box(c, frames, u, v, ground, prev, join=p["box_join"], margin_px=reach)
+            box = _moved_box(c, frames, u, v, ground, prev, join=p["box_join"], reach_px=p["box_reach_px"],
+                             reach_join=p["box_reach_join"], margin_px=reach)
             # the evidence of a mover: at least min_area_px pixels that its motion explains better than the
             # ground's (a region of flow noise, or of an edge the registration left, holds a few)
             if box is None or box[4] < p["min_area_px"]:

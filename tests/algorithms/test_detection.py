@@ -249,6 +249,31 @@ def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     assert (d2.x0_px, d2.y0_px, d2.x1_px, d2.y1_px) == pytest.approx(car, abs=2)
 
 
+def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_and_no_follower():
+    # 56 x 16 px bus with a uniform roof, 1 px a frame to the right: a window flow method reaches the threshold
+    # at its front alone (a 20 px region), and the rear edge, 40 px behind that region, is the rest of it
+    rng = np.random.default_rng(10)
+    g = _ground(rng)
+    frames = [_paint_car(g, 40 + k - 1, 50, 56, 16) for k in range(3)]  # t-1, t, t+1
+    flow = _field(rng, [(48, 68, 80, 100, (1.0, 0.0))])
+    valid = np.ones((H, W), bool)
+    bus = (40, 50, 95, 65)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0])
+    (front,) = detect_vehicles(flow, valid, box_reach_px=0, **kw)
+    assert _iou(front, bus) < 0.5, front
+    (d,) = detect_vehicles(flow, valid, box_reach_px=48, **kw)
+    assert _iou(d, bus) >= 0.8, d
+    # too short a reach: the rear edge stays out
+    (short,) = detect_vehicles(flow, valid, box_reach_px=20, **kw)
+    assert _iou(short, bus) < 0.5, short
+    # a car 12 px behind another at the same speed: textured ground lies between them, so the follower stays
+    # out of the leader's box, and a follower in the next lane (not across the motion's path) does too
+    for x_rear, y_rear in ((40, 50), (66, 30)):
+        frames = [_paint_car(_paint_car(g, x_rear + k - 1, y_rear, 24, 16), 76 + k - 1, 50, 24, 16) for k in range(3)]
+        (lead,) = detect_vehicles(flow, valid, box_reach_px=48, frames=(frames[1], frames[2]), prev_frame=frames[0])
+        assert lead.x0_px >= 74 and lead.y0_px >= 48, (x_rear, y_rear, lead)
+
+
 def test_a_car_faster_than_its_length_whose_flow_broke_in_two_is_one_detection_at_its_motion():
     # 24 x 12 px car moving 30 px a frame; the flow found a third of that on its rear half and all of it on its
     # front half (a flow method that cannot follow such a motion)
@@ -308,6 +333,8 @@ def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"box_join": 1.5}, r"box_join: expected a fraction in \[0, 1\], got 1.5"),
+    ({"box_reach_join": -0.1}, r"box_reach_join: expected a finite number >= 0, got -0.1"),
+    ({"box_reach_px": 2.5}, r"box_reach_px: expected an integer >= 0, got 2.5"),
     ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
     ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
 ])
