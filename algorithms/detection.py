@@ -810,10 +810,11 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         Without it the parallax test is off.
     frames : (ndarray, ndarray), optional
         Gray frame t and the compensated frame t+1, (H, W): for the ``min_explained`` test,
-        the refinement and the box (off without them).
+        the refinement, the box and the change at rest (off without them).
     prev_frame : ndarray, (H, W), optional
         Gray frame t-1 compensated into frame t's pixels (``I_{t-1}(M^-1 x)``, ``M`` the global
-        model of pair t-1): the box test of ``box_three_frames`` (frames t, t+1 alone without it).
+        model of pair t-1): the box test of ``box_three_frames`` and the change at rest from t-1 (frames
+        t, t+1 alone without it).
     gsd_m_per_px : float, optional
         Ground sampling distance, m/px: fills ``area_m2`` and applies ``min_area_m2``, ``max_area_m2``.
     **params
