@@ -9,18 +9,24 @@ the ground does not grow (one flow over the long pair, not a sum of ``k`` noisy 
 
 :func:`long_baseline_detections` runs the one-pair detector,
 :func:`algorithms.detection.detect_vehicles`, on the pair (frame t, frame t-k in frame t's
-pixels): the flow of that pair is ``-k`` times a vehicle's velocity, the global motion of the pair
-is that of the composed models inverted (the parallax test scales with it: a roof's parallax
-over ``k`` frames is ``k`` times a pair's, as is the camera's motion), and the ``min_explained``
-test and the box compare frames t and t-k, whose change the slow vehicle's ``k``-frame
-motion explains and flow noise does not. The detections it finds are kept where they are slow
-(at most ``max_speed_px`` a frame: a faster vehicle is the one-pair detector's, and over ``k``
-frames it leaves a ghost where it was) and where no one-pair detection lies (``nms_iou`` of the
-detection keys, or the centre of one inside the other's box), with the velocity ``-flow / k``.
+pixels, :func:`register_into` by the composed pair models, :func:`compose_models`): the flow of
+that pair is ``-k`` times a vehicle's velocity; the global motion of the pair is that of the
+composed model inverted (the parallax test scales with it: a roof's parallax over ``k`` frames is
+``k`` times a pair's, as is the camera's motion); the ``min_explained`` test and the box compare
+frames t and t-k, whose change the slow vehicle's ``k``-frame motion explains and flow noise does
+not. Three things the long pair sees that a pair does not are left out: the camera's residual
+rotation and tilt, ``k`` times a pair's (a quadratic ground fit, ``ground_model``); the edge of
+what frame t-k covers, ``k`` camera motions into the frame (:func:`register_into`'s margin, the
+detector's ``border_px``); and anything faster than ``max_speed_px`` a frame, by its ``k``-frame
+motion or by the pair's own flow over its box (a fast vehicle whose flow the long pair lost, a
+roof whose parallax the one-pair detector rejected). :func:`merge_detections` then adds the slow
+movers where no one-pair detection lies, nor the path a fast one swept over the ``k`` frames, and
+puts one in place of a slow one-pair detection of a part of the same vehicle.
 
-Keys (the pipeline's ``detection.long_baseline`` section, :data:`LONG_BASELINE_DEFAULTS`):
-``frames`` (``k``; 0 turns the stage off; the first pairs of a sequence use the frames there are,
-from 2), ``max_speed_px`` (px/frame, scaled with ``detection.px_scale``).
+The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
+section; ``frames: 0`` turns the stage off). The pipeline keeps the last ``k`` gray frames and pair
+models, and runs its own flow method once more a pair (the stage's cost: about one flow and one
+detection a pair; ``benchmarks/pipeline_speed.py``).
 """
 
 from __future__ import annotations
@@ -50,7 +56,7 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   frames is k times a pair's; a quadratic fit keeps it off the image's corners);
 # replace_rel: a slow one-pair detection (at most max_speed_px) whose box is under this many times the box of
 #   the long-baseline detection over it is replaced by that one (0: never).
-LONG_BASELINE_DEFAULTS = {"frames": 6, "min_displacement_px": 1.5, "max_speed_px": 1.0, "ground_model": "quadratic",
+LONG_BASELINE_DEFAULTS = {"frames": 6, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
                           "replace_rel": 0.5}
 
 
