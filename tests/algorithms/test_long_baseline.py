@@ -183,3 +183,33 @@ def test_the_defaults_are_the_pipeline_keys_and_the_function_checks_refuse_bad_i
         long_baseline_detections(f, v, baseline_frames=2, frames=fr, composed=np.eye(2))
     with pytest.raises(ValueError, match=r"flow: expected \(H, W, 2\)"):
         long_baseline_detections(f[..., 0], v, baseline_frames=2, frames=fr, composed=np.eye(3))
+
+
+def test_the_inside_mask_leaves_a_margin_at_the_edge_frame_t_k_covers_and_not_at_the_image_border():
+    g = np.zeros((H, W), np.float32)
+    shift = np.eye(3)
+    shift[0, 2] = 5.0  # the ground moved 5 px right: frame t's first 5 columns were outside frame t-k
+    _, inside = register_into(g, shift, margin_px=3)
+    assert not inside[:, :8].any() and inside[:, 8:].all()  # 5 px uncovered + 3 px margin; other edges kept
+    _, plain = register_into(g, shift)
+    assert not plain[:, :5].any() and plain[:, 5:].all()
+    with pytest.raises(ValueError, match=r"margin_px: expected an integer >= 0, got -1"):
+        register_into(g, shift, margin_px=-1)
+
+
+def test_a_long_baseline_region_where_the_pair_flow_is_fast_is_no_slow_mover():
+    k = 6
+    frames = _sequence(k + 2)
+    t = k
+    C = compose_models([np.eye(3)] * k)
+    old, inside = register_into(frames[t - k], C)
+    wk, vk = dis(_u8(frames[t]), _u8(old))
+    kw = dict(baseline_frames=k, frames=(frames[t], old), composed=C)
+    still = np.zeros((H, W, 2), np.float32)
+    assert len(long_baseline_detections(wk, vk & inside, pair_flow=still, **kw)) == 1
+    # the pair's flow says the same place moves 8 px a frame: a fast vehicle the long pair lost
+    fast = still.copy()
+    fast[50:70, 55:90] = (8.0, 0.0)
+    assert long_baseline_detections(wk, vk & inside, pair_flow=fast, **kw) == []
+    with pytest.raises(ValueError, match=r"pair_flow, pair_valid: expected"):
+        long_baseline_detections(wk, vk & inside, pair_flow=still[:10], **kw)
