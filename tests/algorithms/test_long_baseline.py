@@ -136,7 +136,7 @@ def test_merge_adds_where_nothing_lies_replaces_a_slow_part_and_drops_a_fast_veh
     assert len(merge_detections([fast], [trail], baseline_frames=2)) == 2  # two frames back it was elsewhere
 
 
-def _pipeline(**long_baseline):
+def _pipeline(**long_baseline):  # long_baseline {}: the defaults (the stage off)
     return Pipeline.from_dict({
         "name": "slow", "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 4}},
         "jitter": None, "compensation": "shift", "flow": {"method": "dis"}, "threshold": None,
@@ -147,10 +147,10 @@ def _pipeline(**long_baseline):
 
 def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_it():
     frames = _sequence(10)
-    on = [e.detections for e in _pipeline().run(frames) if hasattr(e, "detections")]
-    off = [e.detections for e in _pipeline(frames=0).run(frames) if hasattr(e, "detections")]
-    assert all(d == [] for d in off)
-    k = LONG_BASELINE_DEFAULTS["frames"]
+    k = 6
+    on = [e.detections for e in _pipeline(frames=k).run(frames) if hasattr(e, "detections")]
+    off = [e.detections for e in _pipeline().run(frames) if hasattr(e, "detections")]
+    assert LONG_BASELINE_DEFAULTS["frames"] == 0 and all(d == [] for d in off)
     found = [t for t, ds in enumerate(on) if any(_iou(d, _car_box(t)) >= 0.5 for d in ds)]
     assert set(range(k, len(on))) <= set(found), found  # every pair with k frames behind it
     assert all(len(ds) <= 1 for ds in on)
