@@ -48,12 +48,17 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # them with check_long_baseline):
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
-#   are, from 2. Off by default: with 6, 30 frames of tracking_quality.py gained on realistic (MOTA dis 0.296 ->
-#   0.389, pyramidal-hs 0.276 -> 0.433, pyramidal-lk 0.202 -> 0.429, farneback 0.192 -> 0.429, tv-l1 0.389 -> 0.389)
-#   and kept nominal and urban-parallax, but lost on fast-vehicles (farneback 0.451 -> 0.347) and city
-#   (farneback -0.137 -> -0.396), and on the 1080p city stand-in for the held-out clip (no ground sampling
-#   distance, so no size limit in m^2) walking pedestrians and pieces of a slow bus became tracks: dis MOTA
-#   0.166 -> -0.705, farneback 0.179 -> -1.821;
+#   are, from 2. Off by default, on in the dis pipeline: with 6 (and the other defaults), 30 frames of
+#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, main -> with:
+#     realistic  dis 0.296 -> 0.537, pyramidal-hs 0.276 -> 0.433, pyramidal-lk 0.202 -> 0.429, tv-l1 0.389 -> 0.527,
+#                farneback 0.192 -> 0.384;
+#     city       dis -0.196 -> -0.071, pyramidal-hs -0.137 -> -0.012, pyramidal-lk -0.117 -> -0.113,
+#                tv-l1 -0.217 -> -0.129, farneback -0.137 -> -0.171;
+#     fast-vehicles dis 0.392 -> 0.373, pyramidal-hs 0.590 -> 0.590, pyramidal-lk 0.601 -> 0.608,
+#                farneback 0.451 -> 0.429; nominal and urban-parallax unchanged (tv-l1 urban-parallax 0.642 -> 0.679);
+#   on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60)
+#   dis 0.166 -> 0.166 (FN 300 -> 289), farneback 0.179 -> -0.166 (its long-pair flow makes 160 more false
+#   tracks there);
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6;
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
@@ -61,10 +66,13 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   the camera's motion over k frames makes look like a mover, a fast vehicle's trail);
 # ground_model: the detector's ground_model on the long pair (the camera's residual rotation and tilt over k
 #   frames is k times a pair's; a quadratic fit keeps it off the image's corners);
+# min_box_px: a long-baseline detection whose box holds fewer pixels is left out (px-scaled area: a car's top
+#   view is 24 x 16 px at 0.22 m/px; a pedestrian walking 1.4 m/s is a slow mover too, and without a ground
+#   sampling distance nothing else tells it);
 # replace_rel: a slow one-pair detection (at most max_speed_px) whose box is under this many times the box of
 #   the long-baseline detection over it is replaced by that one (0: never).
 LONG_BASELINE_DEFAULTS = {"frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
-                          "replace_rel": 0.5}
+                          "replace_rel": 0.5, "min_box_px": 300}
 
 
 def check_long_baseline(params: Mapping) -> dict:
@@ -82,6 +90,9 @@ def check_long_baseline(params: Mapping) -> dict:
             raise ValueError(f"{key}: expected a finite number > 0, got {s!r}")
     if p["ground_model"] not in ("affine", "quadratic", "none"):
         raise ValueError(f"ground_model: expected affine, quadratic or none, got {p['ground_model']!r}")
+    b = p["min_box_px"]
+    if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < 0:
+        raise ValueError(f"min_box_px: expected an integer >= 0, got {b!r}")
     r = p["replace_rel"]
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 0:
         raise ValueError(f"replace_rel: expected a finite number >= 0, got {r!r}")
@@ -158,7 +169,7 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
                              ground_model: str = LONG_BASELINE_DEFAULTS["ground_model"],
                              gsd_m_per_px: float | None = None, detection_params: Mapping | None = None,
                              pair_flow: np.ndarray | None = None, pair_valid: np.ndarray | None = None,
-                             ) -> list[Detection]:
+                             min_box_px: int = LONG_BASELINE_DEFAULTS["min_box_px"]) -> list[Detection]:
     """The slow movers of frame t over the pair (frame t, frame t-k registered into it) (module docstring).
 
     Parameters
@@ -187,6 +198,9 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
     detection_params : mapping, optional
         Keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (the pipeline's, px-scaled);
         ``box_three_frames`` is off (no frame t+k).
+    min_box_px : int
+        A detection whose box holds fewer pixels is left out (a walking pedestrian over ``k`` frames:
+        where the ground sampling distance is unknown, the size limits in m^2 do not apply).
     pair_flow, pair_valid : ndarray (H, W, 2) float and (H, W) bool, optional
         The local flow of pair t -> t+1 and where it is defined: a detection whose box's median pair
         flow, about the median of the whole valid field, is faster than ``max_speed_px`` is left out
@@ -227,7 +241,7 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
     out = []
     for d in found:
         u, v = -d.u_px / k, -d.v_px / k
-        if math.hypot(u, v) > max_speed_px:
+        if math.hypot(u, v) > max_speed_px or _box_area(d) < min_box_px:
             continue
         if ref is not None:
             x0, y0, x1, y1 = (int(round(c)) for c in (d.x0_px, d.y0_px, d.x1_px, d.y1_px))

@@ -212,7 +212,7 @@ def _translation(s) -> np.ndarray:
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
                   "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length"},
-    "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length"},
+    "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length", "min_box_px": "area"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
 PX_REFERENCE_SIDE = 480
@@ -494,7 +494,7 @@ class Pipeline:
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
                     gsd_m_per_px=gsd, detection_params=det_params, pair_flow=cur["flow_local"],
-                    pair_valid=cur["valid"])
+                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"])
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
             ms["detection"] = _ms(t0)

@@ -276,6 +276,7 @@ class LongBaselineSpec(_Section):
     max_speed_px: float = LONG_BASELINE_DEFAULTS["max_speed_px"]
     ground_model: StrictStr = LONG_BASELINE_DEFAULTS["ground_model"]
     replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]
+    min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:

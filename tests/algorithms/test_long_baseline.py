@@ -11,7 +11,7 @@ from algorithms.pipeline import Pipeline, PipelineError
 from algorithms.reference import dis
 
 H, W = 120, 160
-CAR = (24, 12)  # length, width px
+CAR = (26, 14)  # length, width px (364 px: above min_box_px)
 SPEED_PX = 0.4  # px a frame, to the right: under the one-pair threshold (0.5 px)
 X0, Y0 = 60.0, 54.0  # the car's top-left at frame 0
 
@@ -82,6 +82,9 @@ def test_a_car_at_0_4_px_a_frame_is_found_over_six_frames_and_not_over_one():
     (d,) = long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C)
     assert (d.u_px, d.v_px) == pytest.approx((SPEED_PX, 0.0), abs=0.12)  # the per-frame velocity
     assert _iou(d, _car_box(t)) >= 0.6, d
+    # a box that small is no vehicle: a walking pedestrian over k frames
+    assert long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C,
+                                    min_box_px=2 * 26 * 14) == []
 
 
 def test_a_static_textured_scene_gives_nothing_over_the_long_baseline():
@@ -163,6 +166,7 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
     ({"min_displacement_px": -1.0}, r"detection.long_baseline.min_displacement_px: expected a finite number > 0"),
     ({"ground_model": "cubic"}, r"detection.long_baseline.ground_model: expected affine, quadratic or none"),
     ({"replace_rel": -0.5}, r"detection.long_baseline.replace_rel: expected a finite number >= 0"),
+    ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
     ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
 ])
 def test_bad_long_baseline_keys_are_rejected_naming_them(section, match):
