@@ -3,7 +3,7 @@
 Beyond the thesis (its 4.1 follows seeded pixels; it detects nothing). After the
 global model is compensated, the local flow ``w`` of a pair is the motion the
 camera does not explain: vehicles, and the parallax of whatever stands above the
-ground. :func:`detect_vehicles` turns it into :class:`Detection` s in six steps,
+ground. :func:`detect_vehicles` turns it into :class:`Detection` s in seven steps,
 each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section):
 
 1. **mask**: valid pixels with ``|w| >= min_magnitude_px``, opened (``open_px``:
@@ -33,8 +33,21 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
 6. **box**: the pixels the region's motion explains better than the ground's
    (``box_from_frames``; with frame t-1, ``box_three_frames``: those that explain
    the change from t-1 too, the vehicle at t without the ground it covers next),
-   their parts joined unless static texture lies between them (``box_join``); a
-   region with fewer than ``min_area_px`` such pixels is no mover.
+   their parts joined unless static texture lies between them (``box_join``), and
+   parts further along its lane too (``box_reach_px``: a long uniform roof whose
+   flow reached the threshold at one edge alone), sought within 4 px (with frame
+   t-1, plus ``box_margin_rel`` times the region's motion) of its box; a region
+   with fewer than ``min_area_px`` such pixels is no mover;
+7. **changed at rest**: a mover carries its content away from its place between
+   frames t and t+1, and brought it there since t-1; static texture that the flow
+   saw move (aliasing of road markings and kerbs, compression, the flicker of tree
+   crowns, a roof edge the registration left) keeps it up to noise. The box's
+   dissimilarity ``1 - NCC`` to the same place in frame t+1 (and, with frame t-1,
+   in t-1) must reach ``change_noise_k`` times what the pair's noise alone gives a
+   static patch of its contrast (``sigma_d^2 / (2 var)``, ``sigma_d`` the robust
+   spread of the frame difference, which static ground dominates), or
+   ``change_enough`` (half decorrelated: a flat patch's noise test asks more than a
+   replaced content gives). NCC leaves a change of brightness or contrast out.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
@@ -118,13 +131,28 @@ class Detection(NamedTuple):
 #   such pixels is no mover: flow noise, an edge the registration left), else of the region's fast core;
 # box_join: parts of those pixels (a slow car with a uniform roof changes at its front and rear edges only)
 #   join the box when at most this fraction of the pixels between them is static texture (ground between two
-#   vehicles that follow each other; 0: the largest part alone);
+#   vehicles that follow each other; 0: the largest part alone, and box_reach_px is off too);
 # box_three_frames: with the previous frame (Pipeline.run passes it) a vehicle pixel must also explain the
 #   change from frame t-1, which leaves out the ground the vehicle covers next (false: frames t, t+1 only);
+# box_reach_px, box_reach_join: parts of those pixels up to box_reach_px beyond the region's box join its box
+#   when they lie in its lane (across the motion they overlap it by half the narrower) and at most
+#   box_reach_join of the pixels in the convex hull of both that neither marks are static texture (a bus or
+#   a long uniform roof moving about a pixel a frame: the flow reaches the threshold at one edge alone, the
+#   other edge is the rest of it; ground between two cars that follow each other is textured; 0: off);
+# box_margin_rel: with frame t-1, those pixels are sought within 4 px plus this many times the region's motion (px)
+#   of the region's box (without it within 4 px: frames t, t+1 alone mark the place it moves to as
+#   well; a flow method that finds a vehicle's motion at its edges only, TV-L1 on a uniform roof, or follows part of
+#   a fast one, leaves the region short of the vehicle by up to a motion: the changed bands at its front and
+#   rear edges are a motion wide; 0: 4 px alone);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
 #   flow method's noise on this pair: sensor noise, compression; 0 turns it off);
+# change_noise_k, change_enough: a region whose content changed at its place, from frame t to t+1 (and, with
+#   frame t-1, from t-1 to t), less than change_noise_k times what the pair's noise alone changes a static patch
+#   of its contrast, and by less than change_enough (1 - NCC) at all, is no mover (_changed_at_rest: static
+#   texture the flow saw move through aliasing, compression or flicker keeps its content; a vehicle carries its
+#   own away; needs the frames; change_noise_k 0 turns it off);
 # ground_model: "affine" or "quadratic" subtracts a robust fit of the local flow first (ground_residual: the
 #   camera's rotation jitter, a tilted view, lens distortion leave the ground a smooth residual a shift model
 #   cannot remove), "none" not;
@@ -137,7 +165,8 @@ DETECTION_DEFAULTS = {
     "parallax_max_ratio": 0.25, "parallax_perp_px": 0.5, "parallax_perp_rel": 0.25,
     "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
-    "box_join": 0.5, "box_three_frames": True,
+    "box_join": 0.5, "box_three_frames": True, "box_reach_px": 48, "box_reach_join": 0.2,
+    "change_noise_k": 5.0, "change_enough": 0.5, "box_margin_rel": 1.0,
 }
 
 
@@ -199,10 +228,10 @@ def _check_keys(params: dict) -> dict:
             continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise ValueError(f"{k}: expected a finite number >= 0, got {v!r}")
-    for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px"):
+    for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px", "box_reach_px"):
         if not isinstance(p[k], (int, np.integer)):
             raise ValueError(f"{k}: expected an integer >= 0, got {p[k]!r}")
-    for k in ("min_explained", "box_join"):
+    for k in ("min_explained", "box_join", "box_reach_join", "change_enough"):
         if not p[k] <= 1:
             raise ValueError(f"{k}: expected a fraction in [0, 1], got {p[k]!r}")
     return p
@@ -406,7 +435,8 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
 
 
 def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), prev=None, *, join: float = 0.5,
-               margin_px: int = 4, gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
+               reach_px: int = 0, reach_join: float = 0.2, margin_px: int = 4,
+               gain_grey: float = 2.0) -> tuple[int, int, int, int, int] | None:
     """The box of the pixels around the region that its motion explains better than the ground's.
 
     A flow region is larger than its vehicle: the flow window carries the vehicle's motion onto the
@@ -422,15 +452,20 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     at least half in the region when at most ``join`` of the pixels between them are static
     texture (warping by the motion makes them worse by ``gain_grey``: ground between two
     vehicles that follow each other; a uniform roof between a car's front and rear edges changes
-    neither way). Without ``prev`` the box reaches one motion ahead, taken off, unless the vehicle
-    moved more than its length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
+    neither way). With ``reach_px``, parts up to that far from the region's box join too when they
+    lie in its lane (across the motion they overlap the box by half the narrower one) and at most
+    ``join`` of the pixels inside the convex hull of both that neither part marks are static texture:
+    a long uniform roof (a bus) moving about a pixel a frame gives the flow its rear or front edge
+    alone, and the other edge is the rest of the vehicle (see :func:`_join_in_lane`). Without
+    ``prev`` the box reaches one motion ahead, taken off, unless the vehicle moved more than its
+    length. Returns ``(x0, y0, x1, y1, n)``, the inclusive box and the number
     of marked pixels in its parts; None when no pixel qualifies.
     """
     g0, g1 = frames
     h, w = g0.shape
     gu, gv = ground
     x0, y0, x1, y1 = region.box()
-    pad = margin_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
+    pad = margin_px + reach_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
     xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
     a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
     gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
@@ -465,6 +500,13 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
                 bx0, by0, bx1, by1 = c0, r0, c1, r1
                 count += int(stats[j, cv2.CC_STAT_AREA])
+        if reach_px > 0 and math.hypot(u, v) >= 0.25:
+            zone = np.zeros_like(moved)
+            zone[max(0, y0 - reach_px) - ya:min(h - 1, y1 + reach_px) - ya + 1,
+                 max(0, x0 - reach_px) - xa:min(w - 1, x1 + reach_px) - xa + 1] = 1
+            far = cv2.morphologyEx((gain > gain_grey).astype(np.uint8) & zone, cv2.MORPH_CLOSE, _disk(2))
+            bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join)
+            count += extra
     bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya
     if prev is None:
         # the marked pixels are the vehicle and the ground it covers next: one motion ahead taken off, unless
@@ -478,6 +520,55 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     if bx1 < bx0 or by1 < by0:
         return None
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
+
+
+def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float, join: float,
+                  min_part_px: int = 9) -> tuple[int, int, int, int, int]:
+    """``box`` grown by the parts of ``moved`` that lie in its lane, nearest first (:func:`_moved_box`).
+
+    A part joins when, across the motion (u, v), its extent and the box's overlap by at least half
+    the narrower of the two, and at most ``join`` of the pixels inside the convex hull of the box
+    and the part that ``moved`` does not mark are ``static`` (texture that warping by the motion
+    makes worse: ground between two vehicles that follow each other; a uniform roof is neither).
+    Parts smaller than ``min_part_px`` (a 3 x 3 speck) and those the box already touches are left
+    alone. Returns the grown box ``(x0, y0, x1, y1)`` (patch pixels, inclusive) and the number of
+    pixels joined.
+    """
+    bx0, by0, bx1, by1 = box
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(moved, connectivity=8)
+    speed = math.hypot(u, v)
+    du, dv = u / speed, v / speed  # along the motion; (-dv, du) across it
+
+    def across(xs, ys):
+        t = -dv * np.asarray(xs, np.float64) + du * np.asarray(ys, np.float64)
+        return float(t.min()), float(t.max())
+
+    order = np.argsort(np.hypot(centroids[:, 0] - (bx0 + bx1) / 2, centroids[:, 1] - (by0 + by1) / 2))
+    extra = 0
+    for j in order:
+        left, top = int(stats[j, cv2.CC_STAT_LEFT]), int(stats[j, cv2.CC_STAT_TOP])
+        right, bottom = left + int(stats[j, cv2.CC_STAT_WIDTH]) - 1, top + int(stats[j, cv2.CC_STAT_HEIGHT]) - 1
+        if j == 0 or stats[j, cv2.CC_STAT_AREA] < min_part_px:
+            continue
+        if left <= bx1 + 1 and right >= bx0 - 1 and top <= by1 + 1 and bottom >= by0 - 1:
+            continue  # touching the box: the box's own part or a neighbour the first pass judged
+        ys, xs = np.nonzero(labels[top:bottom + 1, left:right + 1] == j)
+        xs, ys = xs + left, ys + top
+        a0, a1 = across([bx0, bx1, bx0, bx1], [by0, by0, by1, by1])
+        p0, p1 = across(xs, ys)
+        if min(a1, p1) - max(a0, p0) < 0.5 * min(a1 - a0, p1 - p0):
+            continue
+        pts = np.concatenate([np.array([[bx0, by0], [bx1, by0], [bx0, by1], [bx1, by1]]),
+                              np.stack([xs, ys], axis=1)]).astype(np.int32)
+        hull = np.zeros(moved.shape, np.uint8)
+        cv2.fillConvexPoly(hull, cv2.convexHull(pts), 1)
+        between = (hull == 1) & (moved == 0)
+        between[by0:by1 + 1, bx0:bx1 + 1] = False
+        if between.any() and static[between].mean() > join:
+            continue
+        bx0, by0, bx1, by1 = min(bx0, left), min(by0, top), max(bx1, right), max(by1, bottom)
+        extra += int(stats[j, cv2.CC_STAT_AREA])
+    return bx0, by0, bx1, by1, extra
 
 
 def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -> float:
@@ -506,6 +597,64 @@ def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -
     changed = (before >= np.percentile(before, 75)) & (before > 0)
     total = float(before[changed].sum())
     return 1.0 - float(after[changed].sum()) / total if total > 0 else 0.0
+
+
+def _difference_variance(a: np.ndarray, b: np.ndarray, *, step_px: int = 2, border_px: int = 8) -> float:
+    """The robust variance of ``b - a`` over the frame, grey levels^2: what noise alone changes between two frames.
+
+    Most of a frame is static ground, so the median absolute deviation of the difference on a grid
+    (every ``step_px``-th pixel, ``border_px`` left out where the compensation brings in content) is
+    that of the ground: sensor noise, compression, the registration's residual. For independent noise of
+    standard deviation sigma in each frame it is ``2 sigma^2`` (``(1.4826 MAD)^2``).
+    """
+    d = (np.asarray(b, np.float32) - np.asarray(a, np.float32))[border_px:-border_px or None:step_px,
+                                                                   border_px:-border_px or None:step_px]
+    if d.size == 0:
+        return 0.0
+    mad = float(np.median(np.abs(d - np.median(d))))
+    return (1.4826 * mad) ** 2
+
+
+def _changed_at_rest(a: np.ndarray, b: np.ndarray, box, ground, diff_var: float) -> tuple[float, float] | None:
+    """How much the patch ``box`` of frame ``a`` changed at its place in frame ``b``, and what noise alone would change.
+
+    ``(1 - NCC(a[box], b[box + ground]), diff_var / (2 var(a[box])))``: ``b`` sampled at the motion the
+    ground keeps there (``ground``, px). For a static patch of signal variance ``s^2`` under independent noise
+    ``sigma`` in each frame, ``NCC = s^2 / (s^2 + sigma^2)``, so ``1 - NCC = sigma^2 / var(a[box])`` =
+    ``diff_var / (2 var(a[box]))`` (``diff_var``: :func:`_difference_variance` of the pair). A patch whose
+    content moved (a vehicle leaving its place) decorrelates towards ``1 - NCC = 1``. None where either
+    patch is flat (no NCC: nothing to tell, e.g. a box on a uniform outline).
+    """
+    h, w = a.shape
+    x0, y0, x1, y1 = (int(round(c)) for c in box)
+    x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w - 1, x1), min(h - 1, y1)
+    gu, gv = ground
+    pad = int(math.ceil(max(abs(gu), abs(gv)))) + 2
+    xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
+    pb = _patch(b, xa, ya, xb, yb)
+    q = (_shifted(pb, gu, gv) if gu or gv else pb)[y0 - ya:y1 - ya + 1, x0 - xa:x1 - xa + 1].astype(np.float64)
+    pa = np.asarray(a[y0:y1 + 1, x0:x1 + 1], np.float64)
+    pa, q = pa - pa.mean(), q - q.mean()
+    var_a, var_q = float((pa * pa).mean()), float((q * q).mean())
+    if not var_a > 0 or not var_q > 0:
+        return None
+    return 1.0 - float((pa * q).mean()) / math.sqrt(var_a * var_q), diff_var / (2.0 * var_a)
+
+
+def _changed(d: Detection, ground, frame: np.ndarray, others, p: dict) -> bool:
+    """Whether the content of ``d``'s box in ``frame`` (t) changed at its place beyond noise.
+
+    ``others``: ``(frame, sign, difference variance)`` of frame t+1 (sign 1) and, where known, of frame
+    t-1 (sign -1, the motion the ground keeps there taken as the same in both pairs). Each change must
+    reach ``min(change_noise_k * noise change, change_enough)`` (:func:`_changed_at_rest`); a flat box
+    is not judged.
+    """
+    for other, sign, dv in others:
+        cn = _changed_at_rest(frame, other, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), (sign * ground[0], sign * ground[1]),
+                              dv)
+        if cn is not None and cn[0] < min(p["change_noise_k"] * cn[1], p["change_enough"]):
+            return False
+    return True
 
 
 def ground_residual(flow: np.ndarray, valid: np.ndarray, *, model: str = "affine", step_px: int = 8,
@@ -661,10 +810,11 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         Without it the parallax test is off.
     frames : (ndarray, ndarray), optional
         Gray frame t and the compensated frame t+1, (H, W): for the ``min_explained`` test,
-        the refinement and the box (off without them).
+        the refinement, the box and the change at rest (off without them).
     prev_frame : ndarray, (H, W), optional
         Gray frame t-1 compensated into frame t's pixels (``I_{t-1}(M^-1 x)``, ``M`` the global
-        model of pair t-1): the box test of ``box_three_frames`` (frames t, t+1 alone without it).
+        model of pair t-1): the box test of ``box_three_frames`` and the change at rest from t-1 (frames
+        t, t+1 alone without it).
     gsd_m_per_px : float, optional
         Ground sampling distance, m/px: fills ``area_m2`` and applies ``min_area_m2``, ``max_area_m2``.
     **params
@@ -730,6 +880,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
     if prev_frame is not None and np.shape(prev_frame) != (h, w):
         raise ValueError(f"prev_frame: expected a gray frame of shape {(h, w)}, got {np.shape(prev_frame)}")
     out, evidence_of = [], []
+    ground_of = []
     cores = [c for r in regions if len(r.ys) >= p["min_area_px"] for c in r.cores(p["core_rel"], p["min_area_px"])]
     cores = _merge(cores, p) if len(cores) > len(regions) else cores
     for group in _overlapping(cores, p["nms_iou"]):
@@ -756,7 +907,12 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             u, v, margin = chosen
         x0, y0, x1, y1 = c.box()
         if frames is not None and p["box_from_frames"]:
-            box = _moved_box(c, frames, u, v, ground, prev_frame if p["box_three_frames"] else None, join=p["box_join"])
+            prev = prev_frame if p["box_three_frames"] else None
+            # a motion beyond the region only with frame t-1: its test leaves out the places the vehicle moves to
+            # and comes from, which frames t, t+1 alone would join to it
+            reach = 4 + (int(math.ceil(p["box_margin_rel"] * max(abs(u), abs(v)))) if prev is not None else 0)
+            box = _moved_box(c, frames, u, v, ground, prev, join=p["box_join"], reach_px=p["box_reach_px"],
+                             reach_join=p["box_reach_join"], margin_px=reach)
             # the evidence of a mover: at least min_area_px pixels that its motion explains better than the
             # ground's (a region of flow noise, or of an edge the registration left, holds a few)
             if box is None or box[4] < p["min_area_px"]:
@@ -765,17 +921,28 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         out.append(Detection(cx, cy, area, float(x0), float(y0), float(x1), float(y1), u, v, area_m2))
         evidence_of.append(margin)
+        ground_of.append(ground)
     # one detection per mover: a vehicle that moves more than its size leaves a second region where the
     # flow method failed (the ground it uncovered or covered); of regions whose boxes overlap by nms_iou,
     # the one whose motion explains the change best stays
     kept: list[Detection] = []
+    kept_ground = []
     for i in np.argsort(-np.asarray(evidence_of, dtype=np.float64), kind="stable"):
         d = out[i]
         if not any(_box_iou(d, k) >= p["nms_iou"] for k in kept):
             kept.append(d)
-    out = [d for d in kept if not _parallax(d, g, p, h, w)]
-    parallax_dir = _common_parallax(out, p, h * w)
+            kept_ground.append(ground_of[i])
+    out = [(d, gr) for d, gr in zip(kept, kept_ground) if not _parallax(d, g, p, h, w)]
+    parallax_dir = _common_parallax([d for d, _ in out], p, h * w)
     if parallax_dir is not None:
         e, bound = parallax_dir
-        out = [d for d in out if not _along(d, e, bound, p)]
+        out = [(d, gr) for d, gr in out if not _along(d, e, bound, p)]
+    if frames is not None and p["change_noise_k"] > 0 and out:
+        # a mover's content left its place from t to t+1 and arrived there since t-1; static texture that the flow
+        # saw move (aliasing of markings, compression, flickering crowns) changed there as noise does. Last: the
+        # parts a rejected detection stood for are the same texture, and the common parallax is judged on all
+        others = [(o, sign, _difference_variance(frames[0], o))
+                  for o, sign in ((frames[1], 1), (prev_frame, -1)) if o is not None]
+        out = [(d, gr) for d, gr in out if _changed(d, gr, frames[0], others, p)]
+    out = [d for d, _ in out]
     return sorted(out, key=lambda d: -d.area_px)

@@ -128,7 +128,8 @@ class SequenceEstimate:
     shifts_px (N-1, 2), shifts_valid (N-1,) bool, cumulative_px / flight_line_px /
     correction_px / jitter_px (N, 2) as in :class:`~algorithms.jitter.JitterResult`
     (float64 px), tracks: DataFrame with ``TRACK_COLUMNS``, stage_ms: totals per stage,
-    frame_shape_px: (H, W) of the frames.
+    frame_shape_px: (H, W) of the frames, trackers: the ``source`` of each tracker that ran
+    ("point" with seeds, "multi"), whether or not it output a row.
     """
 
     shifts_px: np.ndarray
@@ -142,6 +143,7 @@ class SequenceEstimate:
     pipeline_hash: str = ""
     stage_ms: dict = field(default_factory=dict)
     frame_shape_px: tuple[int, int] | None = None
+    trackers: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -211,7 +213,8 @@ def _translation(s) -> np.ndarray:
 # (split_px, merge_px, parallax_perp_px) are not scaled: a method's noise in px does not grow with the frame.
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
-                  "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length"},
+                  "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length",
+                  "box_reach_px": "length"},
     "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length", "min_box_px": "area"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
@@ -539,7 +542,8 @@ class Pipeline:
         yield SequenceEstimate(shifts_px=shifts, shifts_valid=shifts_valid, cumulative_px=cumulative,
                                flight_line_px=line, correction_px=correction, jitter_px=jitter, tracks=tracks,
                                pipeline=self.name, pipeline_hash=self.hash, frame_shape_px=frame_shape,
-                               stage_ms={"global_motion": float(gm_ms.sum()), **totals})
+                               stage_ms={"global_motion": float(gm_ms.sum()), **totals},
+                               trackers=(("point",) if points else ()) + (("multi",) if multi is not None else ()))
 
 
 # ---------------------------------------------------------------------------------------------

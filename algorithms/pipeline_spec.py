@@ -321,6 +321,11 @@ class DetectionSpec(_Section):
     box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     box_join: float = DETECTION_DEFAULTS["box_join"]
     box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]
+    box_reach_px: StrictInt = DETECTION_DEFAULTS["box_reach_px"]
+    box_reach_join: float = DETECTION_DEFAULTS["box_reach_join"]
+    change_noise_k: float = DETECTION_DEFAULTS["change_noise_k"]
+    change_enough: float = DETECTION_DEFAULTS["change_enough"]
+    box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
 
@@ -408,7 +413,8 @@ class MultiSpec(_Section):
     birth_hits: StrictInt = MULTI_DEFAULTS["birth_hits"]
     min_travel_px: float = MULTI_DEFAULTS["min_travel_px"]
     min_travel_rel: float = MULTI_DEFAULTS["min_travel_rel"]
-    min_straightness: float = MULTI_DEFAULTS["min_straightness"]
+    min_trend_f: float = MULTI_DEFAULTS["min_trend_f"]
+    partial_rel: float = MULTI_DEFAULTS["partial_rel"]
     death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
     coast_gate_growth: float = MULTI_DEFAULTS["coast_gate_growth"]
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]

@@ -608,11 +608,11 @@ class _Track:
     pending: list = field(default_factory=list)  # rows held until confirmation
     start: np.ndarray | None = None  # ground-fixed centre of its first detection
     travel: float = 0.0  # farthest its ground-fixed centre has been from start, px
-    path: float = 0.0  # length of the path of its detections' ground-fixed centres, px
-    last_z: np.ndarray | None = None  # ground-fixed centre of its last detection
     template: np.ndarray | None = None  # the image inside its box at its last detection (float32)
     held: int = 0  # consecutive frames placed by the template (no detection)
-    hist: list = field(default_factory=list)  # (frame, ground-fixed centre) of its detections
+    hist: list = field(default_factory=list)  # (frame, filtered ground-fixed centre) at its detections
+    seen: list = field(default_factory=list)  # (frame, ground-fixed centre of the detection) until confirmed
+    sizes: deque = field(default_factory=lambda: deque(maxlen=25))  # filtered (w, h) at its last detections
     ground_checked: bool = False  # its template was compared with the place before the vehicle came
     first: tuple | None = None  # (frame, ground-fixed box, template) of its first detection, to extend it back
 
@@ -627,8 +627,17 @@ class _Track:
 #   its first detection, and this many times its box's larger side (flow noise, compression artefacts, flicker
 #   and a tree crown's sway make regions that recur in place; a vehicle leaves its own box; the rows of the
 #   frames before confirmation are output when it comes, so a slow car loses nothing by the wait);
-# min_straightness: ... and the distance from its first detection is at least this fraction of the length of
-#   the path through its detections (a vehicle drives on; a region that jumps about in place does not);
+# min_trend_f: ... and a constant velocity fitted to its detections' centres explains their scatter: the F
+#   statistic of the fit, (explained / 2) / (residual / (2n - 4)) over its n detections, reaches this (a
+#   vehicle drives on at a steady speed however much its box jitters, and the trend grows with every frame;
+#   a region that jumps about in place has none: with 10, about 1 in 10 places that jitter by the travel
+#   ever pass; a car at 0.4 px a frame whose centre jitters by 1 px passes after about 15 frames; 0: off);
+# partial_rel: a confirmed track's detection whose box is narrower than the largest box the track had at its last 25
+#   detections by more than this fraction along an axis, with one side within this fraction of that box's placed
+#   at the prediction, is a partial view (the vehicle's front under a crown or past the image border, one edge of a
+#   uniform roof): that side is kept and the box completed to that size, so that a vehicle that passes under a
+#   crown a little at a time keeps its size (a top view does not shrink); a box inside on both sides is taken as it
+#   is (1: off);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -658,7 +667,7 @@ class _Track:
 #   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
-                  "min_straightness": 0.5, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
@@ -673,6 +682,29 @@ def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
         box = np.array([d[0], d[1], side, side], dtype=np.float64)
     vel = np.array([d[7], d[8]], dtype=np.float64) if len(d) >= 9 else np.full(2, np.nan)
     return box, vel
+
+
+def _completed(box: np.ndarray, ref: np.ndarray, rel: float) -> np.ndarray:
+    """A detection's box ``(cx, cy, w, h)`` completed to the size of ``ref`` (the track's predicted centre and the
+    largest size it had at its last 25 detections) along each axis where it is a partial view (``partial_rel``):
+    narrower than ``ref`` by more than ``rel`` of its size, with one side within ``rel`` of ``ref``'s (the vehicle's
+    front under a tree crown, its rear past the image border, one edge of a uniform roof). That side is the
+    vehicle's own; the box is ``ref``'s size from it. A box inside ``ref`` on both sides (a track whose box was too
+    large) is no partial view, nor is one wider than ``ref`` by more than half ``rel`` along an axis (a vehicle
+    that turns: its axis-aligned box grows along one axis as it shrinks along the other); both are taken as they
+    are."""
+    out = np.array(box, dtype=np.float64)
+    if (out[2] > (1.0 + rel / 2) * ref[2]) or (out[3] > (1.0 + rel / 2) * ref[3]):
+        return out  # wider along the other axis: a vehicle that turns, whose axis-aligned box changes shape
+    for c, s in ((0, 2), (1, 3)):
+        if out[s] < (1.0 - rel) * ref[s]:
+            lo, hi = out[c] - out[s] / 2, out[c] + out[s] / 2
+            d_lo, d_hi = abs(lo - (ref[c] - ref[s] / 2)), abs(hi - (ref[c] + ref[s] / 2))
+            if min(d_lo, d_hi) > rel * ref[s]:
+                continue
+            out[c] = lo + ref[s] / 2 if d_lo <= d_hi else hi - ref[s] / 2
+            out[s] = ref[s]
+    return out
 
 
 def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float = 2.0) -> np.ndarray | None:
@@ -734,7 +766,7 @@ class MultiTargetTracker:
     ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
     A new track is confirmed after ``birth_hits`` consecutive hits once it has travelled
     ``min_travel_px`` and ``min_travel_rel`` box sides over the ground along a path at least
-    ``min_straightness`` straight (its rows, from its first frame, are then output; a miss
+    steadily (``min_trend_f``; its rows, from its first frame, are then output; a miss
     before that deletes it). A confirmed track without a detection is held where its
     template matches the frame (``hold_*`` keys, given ``image``), else coasts on its
     prediction through up to ``death_misses - 1`` frames (short occlusions) and ends at the
@@ -756,7 +788,7 @@ class MultiTargetTracker:
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
-                     "hold_min_travel_rel"):
+                     "hold_min_travel_rel", "min_trend_f"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -764,9 +796,9 @@ class MultiTargetTracker:
             raise ValueError(f"gate_px: expected > 0, got {p['gate_px']}")
         if not 0 < p["min_iou"] <= 1:
             raise ValueError(f"min_iou: expected a number in (0, 1], got {p['min_iou']}")
-        v = p["min_straightness"]
+        v = p["partial_rel"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            raise ValueError(f"min_straightness: expected a number in [0, 1], got {v!r}")
+            raise ValueError(f"partial_rel: expected a number in [0, 1] (1: off), got {v!r}")
         v = p["hold_min_ncc"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
             raise ValueError(f"hold_min_ncc: expected a number in [0, 1] (0: no holding), got {v!r}")
@@ -825,13 +857,16 @@ class MultiTargetTracker:
             pred = preds[i]
             if i in det_of:
                 c = det_of[i]
-                trk.kf.update(boxes[c], vels[c])
-                trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
                 z = boxes[c]
+                if trk.confirmed and trk.sizes:  # the size it has had lately, against a partial view
+                    z = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
+                trk.kf.update(z, vels[c])
+                trk.sizes.append(trk.kf.x[2:4].copy())
+                trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
                 trk.travel = max(trk.travel, float(np.hypot(*(trk.kf.x[:2] - trk.start))))
-                trk.path += float(np.hypot(*(z[:2] - trk.last_z))) if trk.last_z is not None else 0.0
-                trk.last_z = z[:2].copy()
                 trk.hist.append((int(frame), trk.kf.x[:2].copy()))
+                if not trk.confirmed:
+                    trk.seen.append((int(frame), z[:2].copy()))
                 trk.ground_checked = False
                 if img is not None:
                     trk.template = _crop(img, trk.kf.x[:4], off)
@@ -853,8 +888,8 @@ class MultiTargetTracker:
         for c in range(len(boxes)):
             if c not in taken_d:
                 trk = _Track(self._next_id, BoxKalman(boxes[c], velocity=vels[c], **self._kf_kw),
-                             start=boxes[c][:2].copy(), last_z=boxes[c][:2].copy(),
-                             hist=[(int(frame), boxes[c][:2].copy())])
+                             start=boxes[c][:2].copy(),
+                             hist=[(int(frame), boxes[c][:2].copy())], seen=[(int(frame), boxes[c][:2].copy())])
                 if img is not None and p["hold_min_ncc"] > 0:
                     first = _crop(img, boxes[c], off)
                     trk.first = None if first is None else (int(frame), boxes[c].copy(), first)
@@ -875,13 +910,30 @@ class MultiTargetTracker:
             self._seen.append((int(frame), np.clip(img, 0, 255).astype(np.uint8), off.copy()))
 
     def _travelled(self, trk: _Track) -> bool:
-        """Whether a tentative track has moved enough, and straight enough, to be confirmed (``min_travel_px``,
-        ``min_travel_rel``, ``min_straightness``)."""
+        """Whether a tentative track has moved enough, and steadily enough, to be confirmed (``min_travel_px``,
+        ``min_travel_rel``, ``min_trend_f``).
+
+        A constant velocity is fitted to its detections' centres (ground-fixed) by least squares: the
+        distance it covers over the track's frames must reach the travel, and the fit's F statistic,
+        the scatter it explains per parameter over the residual's per degree of freedom, must reach
+        ``min_trend_f``.
+        """
         p = self.params
-        net = float(np.hypot(*(trk.last_z - trk.start))) if trk.last_z is not None else 0.0
+        t = np.array([f for f, _ in trk.seen], dtype=np.float64)
+        z = np.array([c for _, c in trk.seen])
+        tc, zc = t - t.mean(), z - z.mean(axis=0)
+        span = float(tc @ tc)
+        if span == 0:
+            return False
+        vel = (tc @ zc) / span
+        net = float(np.hypot(*vel)) * float(t[-1] - t[0])
         side = float(max(trk.kf.x[2], trk.kf.x[3]))
-        return (float(np.hypot(*(trk.kf.x[:2] - trk.start))) >= max(p["min_travel_px"], p["min_travel_rel"] * side)
-                and net >= p["min_straightness"] * trk.path)
+        if net < max(p["min_travel_px"], p["min_travel_rel"] * side):
+            return False
+        explained = float(vel @ vel) * span
+        residual = float((zc ** 2).sum()) - explained
+        dof = 2 * len(t) - 4
+        return dof <= 0 or explained / 2 >= p["min_trend_f"] * max(residual, 1e-12) / dof
 
     def _hold(self, trk: _Track, img: np.ndarray, pred: np.ndarray, off: np.ndarray, others: list) -> np.ndarray | None:
         """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.

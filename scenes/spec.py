@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.3.0"
+GENERATOR_VERSION = "2.4.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -181,6 +181,11 @@ class WorldSpec(_Model):
     wood_fraction: float = Field(0.1, ge=0, le=1, description="share of blocks that are woods")
     crosswalk_fraction: float = Field(0.5, ge=0, le=1, description="share of junctions with zebra crossings "
                                                                     "on every road into them")
+    clutter: float = Field(0.0, ge=0, le=4,
+                           description="small things on the ground, relative to a central European city (1): "
+                                       "manholes, gullies, patched cuts, sealed cracks, oil strips down the "
+                                       "lanes, lamp posts, and bins, sheds, planters and garden walls in built "
+                                       "blocks, with their shadows (0: none)")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
     trees: TreesSpec = Field(default_factory=TreesSpec)
 

@@ -695,13 +695,14 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     # -- materials: one tile each, sampled by every block with its own offset and tint -----------
     tiles = {name: material_tile(name, rng, texel) for name in GROUND_MATERIALS}
 
-    def material(name: str, gain=(1.0, 1.0, 1.0), under=None) -> MaterialPattern:
-        off = tuple(int(v) for v in rng.integers(0, TILE_PX, 2))
+    def material(name: str, gain=(1.0, 1.0, 1.0), under=None, *, draw: np.random.Generator = rng) -> MaterialPattern:
+        off = tuple(int(v) for v in draw.integers(0, TILE_PX, 2))
         return MaterialPattern(tiles[name], x0, y0, texel, off, tuple(float(g) for g in gain), under)
 
     # -- land use, block by block ------------------------------------------------------------
     stalls: list[tuple[float, float, float]] = []
     kinds: dict[tuple[int, int], str] = {}
+    row_angles: dict[tuple[int, int], float] = {}  # fields under a crop: the rows' direction, radians
     for key, (poly, ks) in cells.items():
         if not overlaps(poly, extent):
             continue
@@ -720,6 +721,8 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
             crop = ["wheat", "crop", "young", "ploughed"][int(rng.integers(0, 4))]
             e = poly[np.argmax(np.hypot(*(poly - poly[0]).T))] - poly[0]
             rows = field_rows(rng, np.asarray(LAND[crop]) * jitter, math.atan2(e[1], e[0]))
+            if crop != "ploughed":
+                row_angles[key] = rows.ang
             canvas.polygon([poly], material("crop", under=rows), feather_m=0.5)
         elif kind == "parking":
             canvas.polygon([poly], material("yard", jitter), feather_m=0.5)
@@ -772,15 +775,33 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
                   widths_m=(w_major, w_minor), material=material, crosswalk_fraction=ws.crosswalk_fraction,
                   rng=rng, kerb_parking=spec.traffic.kerb_parking_per_km > 0)
 
-    # -- painted shadows of the static world (flat light only: sun light casts real ones) ------
+    # -- small things on streets and in yards (scenes.streets.paint_clutter), their own stream (the seed's
+    # seventh child): the rest of the world does not change with ``world.clutter`` ------------------
     light = spec.light
-    if light.mode == "flat" and light.shadows:
+    flat_shadows = light.mode == "flat" and light.shadows
+    clutter_shadows = []
+    if ws.clutter > 0:
+        from scenes.streets import paint_clutter
+
+        to_sun = sun_direction(light.sun_elevation_deg, light.sun_azimuth_deg)
+        rng_clutter = np.random.Generator(np.random.PCG64(np.random.SeedSequence(spec.seed).spawn(7)[6]))
+        buildings = [_roof_rows(b, rng_clutter) for b in buildings]
+        clutter_shadows = paint_clutter(
+            canvas, roads=[r for r in roads if overlaps(r.centre_m, extent)], cells=cells,
+            kinds=kinds, buildings=buildings, row_angles=row_angles,
+            widths_m=(w_major, w_minor), clearance=road_index.clearance,
+            material=lambda name, gain=(1.0, 1.0, 1.0): material(name, gain, draw=rng_clutter),
+            density=ws.clutter, away=-to_sun[:2] / max(1e-9, to_sun[2]) if flat_shadows else None,
+            rng=rng_clutter, kerb_parking=spec.traffic.kerb_parking_per_km > 0)
+
+    # -- painted shadows of the static world (flat light only: sun light casts real ones) ------
+    if flat_shadows:
         bridge_shadows = []
         if overpasses:
             from scenes.traffic import overpass_shadow_polygons
 
             bridge_shadows = overpass_shadow_polygons(overpasses, light)
-        _paint_shadows(canvas, buildings, trees, canopies, light, extra_polys_m=bridge_shadows)
+        _paint_shadows(canvas, buildings, trees, canopies, light, extra_polys_m=bridge_shadows + clutter_shadows)
 
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
@@ -890,6 +911,33 @@ def _building_parts(sx: float, sy: float, h: float, rng: np.random.Generator) ->
     return tuple(parts)
 
 
+def _roof_rows(b: Building, rng: np.random.Generator) -> Building:
+    """``b`` with a row of dormers or skylights along one or both long sides of its roof (as on KIT AIS's
+    Munich blocks: 1.2-1.6 m wide, 2.8-3.6 m apart, a metre in from the parapet), where no roof unit stands."""
+    sx, sy, h = b.size
+    long_x = sx >= sy
+    length, depth = (sx, sy) if long_x else (sy, sx)
+    if length < 8.0 or depth < 6.0 or rng.uniform() > 0.6:
+        return b
+    units = [_rect_corners(p.centre[0], p.centre[1], p.size[0], p.size[1], 0.0) for p in b.parts[5:]]
+    parts = list(b.parts)
+    w, d, uh = rng.uniform(1.2, 1.6), rng.uniform(1.0, 1.4), rng.uniform(1.0, 1.5)
+    step = rng.uniform(2.8, 3.6)
+    sides = (-1, 1) if rng.uniform() < 0.5 else (int(rng.choice([-1, 1])),)
+    for e in sides:
+        across = e * (depth / 2 - 0.3 - 0.9 - d / 2)
+        n = int((length - 2.0) // step)
+        for k in range(n):
+            along = (k - (n - 1) / 2) * step
+            cx, cy = (along, across) if long_x else (across, along)
+            ux, uy = (w, d) if long_x else (d, w)
+            corners = _rect_corners(cx, cy, ux, uy, 0.0)
+            if any(rects_overlap(corners, o, 0.3) for o in units):
+                continue
+            parts.append(Box(centre=(float(cx), float(cy), h + uh / 2), size=(float(ux), float(uy), float(uh))))
+    return dataclasses.replace(b, parts=tuple(parts))
+
+
 def _place_trees(ws, cells, kinds, edges, road_index: _RoadIndex, buildings: list[Building], extent,
                  rng: np.random.Generator) -> list[Tree]:
     """Single trees on grass, meadows and yards (deciduous with lobed crowns, or conifers); hedges of
@@ -996,6 +1044,10 @@ def _building_textures(rng: np.random.Generator, texel: float):
     seam[::16] = 0.72
     seam[1::16] = 1.12
     g *= seam[None, :]
+    # band-limited to about two texels (0.2 m): a seam is an overlap and its shadow, a few centimetres
+    # wide; a one-texel line of 28 % depth aliased at the pixel and was counted as sensor noise
+    # (realism.py's noise_sigma takes the flat half, where the roofs lie)
+    g = cv2.GaussianBlur(np.pad(g, 4, mode="wrap"), (0, 0), 0.8)[4:-4, 4:-4]  # periodic, as the tile repeats
     roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
     return [wall], [roof]
 

@@ -22,7 +22,7 @@ import pandas as pd
 from harness.metrics.matching import correspondence
 from harness.metrics.registry import _row, register_metric
 from harness.metrics.matching import _linear_sum_assignment
-from harness.metrics.trajectories import _mot_frames, _points_by_frame
+from harness.metrics.trajectories import _mot_frames, _points_by_frame, by_tracker
 
 _OBJ = (" (objects: visible vehicles that move, by `moving`, else `parked` == 0, any speed; parked cars are "
         "not objects; pedestrians, cyclists and ignore regions are distractors: a track on one is dropped)")
@@ -138,7 +138,7 @@ def mot_counts(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float = 20.0,
 
 
 def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
-             ignore: pd.DataFrame | None = None) -> list[dict]:
+             ignore: pd.DataFrame | None = None, trackers=()) -> list[dict]:
     """MOTA, MOTP, IDF1 and the FN / FP counts per tracker (``region`` = ``source``), as summable totals.
 
     One row per metric and tracker, no frame or track id. Each carries the
@@ -147,12 +147,11 @@ def mot_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: f
     ``complement``); ``motp`` sum = matched distances, count = matches; ``idf1``
     sum = 2 IDTP, count = objects + predictions; ``mot_misses``,
     ``mot_false_positives`` totals. Summed over cells or seeds these give the
-    pooled scores, as py-motmetrics' overall row does.
+    pooled scores, as py-motmetrics' overall row does. ``trackers``: the sources
+    the pipeline ran (:func:`~harness.metrics.trajectories.by_tracker`).
     """
     rows: list[dict] = []
-    if est_tracks is None or est_tracks.empty:
-        return rows
-    for source, est in est_tracks.groupby("source"):
+    for source, est in by_tracker(est_tracks, trackers):
         c = mot_counts(est, truth_tracks, gate_px=gate_px, ignore=ignore)
         kw = {"region": str(source), "motion": "track"}
         errors = c.misses + c.false_positives + c.switches
@@ -346,7 +345,7 @@ def alpha_mean_value(metric: str, num: np.ndarray, den: np.ndarray) -> float:
 
 
 def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
-              ignore: pd.DataFrame | None = None) -> list[dict]:
+              ignore: pd.DataFrame | None = None, trackers=()) -> list[dict]:
     """HOTA, DetA, AssA and LocA per tracker (``region`` = ``source``, motion "track"), poolable.
 
     One row per metric and tracker. HOTA is a mean over 19 alphas of per-alpha ratios, so a
@@ -354,14 +353,12 @@ def hota_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: 
     and DetA over TP + FN + FP, AssA over TP with ``ass_sum``, LocA over TP with
     ``loc_sum``), stored in ``hist`` (:func:`harness.metrics.histogram.encode_alpha_totals`);
     :func:`harness.metrics.aggregate` sums them and takes :func:`alpha_mean_value`. ``sum``
-    is NaN, ``count`` the counted vehicle-frames.
+    is NaN, ``count`` the counted vehicle-frames. ``trackers`` as :func:`mot_rows`.
     """
     from harness.metrics.histogram import encode_alpha_totals
 
     rows: list[dict] = []
-    if est_tracks is None or est_tracks.empty:
-        return rows
-    for source, est in est_tracks.groupby("source"):
+    for source, est in by_tracker(est_tracks, trackers):
         c = hota_counts(est, truth_tracks, gate_px=gate_px, ignore=ignore)
         objects = float(c.tp[0] + c.fn[0])
         for metric, (num_name, den_names, _, _) in _ALPHA_RULES.items():

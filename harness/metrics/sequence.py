@@ -16,7 +16,8 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.D
     Parameters
     ----------
     seq_estimate : SequenceEstimate
-        Uses ``shifts_px`` (N-1, 2), ``jitter_px`` (N, 2) and ``tracks`` (DataFrame or None).
+        Uses ``shifts_px`` (N-1, 2), ``jitter_px`` (N, 2), ``tracks`` (DataFrame or None) and ``trackers``
+        (the trackers that ran: each is scored, with no rows if it output none).
     camera_df, tracks_df : DataFrame or None
         camera.csv and tracks.csv of the sequence; None where the sequence has no such truth
         (real footage): the metrics that need it give no rows.
@@ -33,8 +34,10 @@ def score_sequence(seq_estimate, camera_df: pd.DataFrame | None, tracks_df: pd.D
     if camera_df is not None and getattr(seq_estimate, "correction_px", None) is not None and shape is not None:
         rows += stabilisation_rows(seq_estimate.correction_px, camera_df, shape)
     tracks = getattr(seq_estimate, "tracks", None)
-    if tracks is not None and tracks_df is not None and len(tracks):
-        rows += track_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
-        rows += mot_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
-        rows += hota_rows(tracks, tracks_df, gate_px=gate_px, ignore=ignore_df)
+    trackers = tuple(getattr(seq_estimate, "trackers", ()))
+    if tracks is not None and tracks_df is not None and (len(tracks) or trackers):
+        kw = {"gate_px": gate_px, "ignore": ignore_df, "trackers": trackers}
+        rows += track_rows(tracks, tracks_df, **kw)
+        rows += mot_rows(tracks, tracks_df, **kw)
+        rows += hota_rows(tracks, tracks_df, **kw)
     return rows

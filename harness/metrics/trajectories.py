@@ -160,8 +160,17 @@ def associate_tracks(est: pd.DataFrame, truth: pd.DataFrame, *, gate_px: float =
     return pd.DataFrame(out, columns=_ASSOC_COLUMNS)
 
 
+def by_tracker(est_tracks: pd.DataFrame | None, trackers=()) -> list[tuple[str, pd.DataFrame]]:
+    """``(source, its rows)`` for every tracker in ``est_tracks`` and every one named in ``trackers`` (the trackers
+    the pipeline ran), sorted: a tracker that ran and output nothing is scored on no rows (every counted vehicle a
+    miss), so the metrics a cell gives do not depend on whether a track was confirmed."""
+    est = est_tracks if est_tracks is not None else pd.DataFrame(columns=["source"])
+    groups = dict(tuple(est.groupby("source"))) if len(est) else {}
+    return [(str(s), groups[s] if s in groups else est.iloc[0:0]) for s in sorted(set(groups) | set(trackers))]
+
+
 def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px: float = 20.0,
-               ignore: pd.DataFrame | None = None) -> list[dict]:
+               ignore: pd.DataFrame | None = None, trackers=()) -> list[dict]:
     """Trajectory rows per counted vehicle; ``region`` is the tracker (``source``: "point" or "multi").
 
     Counted vehicles: :func:`harness.metrics.objects.counted_objects` (visible vehicles that
@@ -173,13 +182,12 @@ def track_rows(est_tracks: pd.DataFrame, truth_tracks: pd.DataFrame, *, gate_px:
     prediction for frame t made from frame t-1. ``track_id`` of a row is the
     vehicle id; per-frame rows (track_error, track_raw_error, track_pred_error)
     carry the frame, per-vehicle rows (ate, fde, completeness, id_switches) not.
+    ``trackers``: the sources the pipeline ran (:func:`by_tracker`).
     """
     counted = truth_tracks[counted_objects(truth_tracks)]
     vis_n = counted.groupby("vehicle_id").size()
     rows: list[dict] = []
-    if est_tracks is None or est_tracks.empty:
-        return rows
-    for source, est in est_tracks.groupby("source"):
+    for source, est in by_tracker(est_tracks, trackers):
         if source == "point":
             m = est.dropna(subset=["seed_vehicle_id"]).copy()
             m["vehicle_id"] = m["seed_vehicle_id"].astype(np.int64)

@@ -249,6 +249,31 @@ def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     assert (d2.x0_px, d2.y0_px, d2.x1_px, d2.y1_px) == pytest.approx(car, abs=2)
 
 
+def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_and_no_follower():
+    # 56 x 16 px bus with a uniform roof, 1 px a frame to the right: a window flow method reaches the threshold
+    # at its front alone (a 20 px region), and the rear edge, 40 px behind that region, is the rest of it
+    rng = np.random.default_rng(10)
+    g = _ground(rng)
+    frames = [_paint_car(g, 40 + k - 1, 50, 56, 16) for k in range(3)]  # t-1, t, t+1
+    flow = _field(rng, [(48, 68, 80, 100, (1.0, 0.0))])
+    valid = np.ones((H, W), bool)
+    bus = (40, 50, 95, 65)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0])
+    (front,) = detect_vehicles(flow, valid, box_reach_px=0, **kw)
+    assert _iou(front, bus) < 0.5, front
+    (d,) = detect_vehicles(flow, valid, box_reach_px=48, **kw)
+    assert _iou(d, bus) >= 0.8, d
+    # too short a reach: the rear edge stays out
+    (short,) = detect_vehicles(flow, valid, box_reach_px=20, **kw)
+    assert _iou(short, bus) < 0.5, short
+    # a car 12 px behind another at the same speed: textured ground lies between them, so the follower stays
+    # out of the leader's box, and a follower in the next lane (not across the motion's path) does too
+    for x_rear, y_rear in ((40, 50), (66, 30)):
+        frames = [_paint_car(_paint_car(g, x_rear + k - 1, y_rear, 24, 16), 76 + k - 1, 50, 24, 16) for k in range(3)]
+        (lead,) = detect_vehicles(flow, valid, box_reach_px=48, frames=(frames[1], frames[2]), prev_frame=frames[0])
+        assert lead.x0_px >= 74 and lead.y0_px >= 48, (x_rear, y_rear, lead)
+
+
 def test_a_car_faster_than_its_length_whose_flow_broke_in_two_is_one_detection_at_its_motion():
     # 24 x 12 px car moving 30 px a frame; the flow found a third of that on its rear half and all of it on its
     # front half (a flow method that cannot follow such a motion)
@@ -308,6 +333,8 @@ def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"box_join": 1.5}, r"box_join: expected a fraction in \[0, 1\], got 1.5"),
+    ({"box_reach_join": -0.1}, r"box_reach_join: expected a finite number >= 0, got -0.1"),
+    ({"box_reach_px": 2.5}, r"box_reach_px: expected an integer >= 0, got 2.5"),
     ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
     ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
 ])
@@ -315,3 +342,99 @@ def test_bad_box_keys_and_a_misshapen_previous_frame_are_rejected(kwargs, match)
     z = np.zeros((4, 4), np.float32)
     with pytest.raises(ValueError, match=match):
         detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), frames=(z, z), **kwargs)
+
+
+def _patch_frames(rng, step_px, *, contrast=40.0, noise=3.0, gain=(1.0, 1.0, 1.0), offset=(0.0, 0.0, 0.0)):
+    """Frames t-1, t, t+1 of textured ground with a low-contrast textured patch (a tree crown in shade, a dark car)
+    whose content moves ``step_px`` to the right a frame, each frame with its own sensor noise; ``gain`` and
+    ``offset`` change the patch's contrast and brightness per frame (light)."""
+    g = _ground(rng)
+    tex = cv2.GaussianBlur(rng.uniform(-1, 1, (H, W)).astype(np.float32), (0, 0), 1.0) * contrast
+    out = []
+    for k, (a, b) in zip((-1, 0, 1), zip(gain, offset)):
+        moved = cv2.warpAffine(tex, np.float32([[1, 0, -step_px * k], [0, 1, 0]]), (W, H),
+                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+        f = g.copy()
+        f[40:70, 50:90] = 100 + b + a * moved[40:70, 50:90]
+        out.append(f + rng.normal(0, noise, f.shape).astype(np.float32))
+    return out
+
+
+def test_a_patch_that_changes_at_its_place_as_noise_does_is_rejected_and_a_steady_mover_is_kept():
+    valid = np.ones((H, W), bool)
+    flow = lambda rng: _field(rng, [(38, 72, 48, 92, (1.5, 0.0))])  # noqa: E731  the flow's claim
+    # the crown's content sways 1 px a frame under noise of 3 grey levels: the flow's motion explains part of the
+    # change (the tests before pass it), but its box changes at its place by less than 5x what noise does
+    for seed in range(3):
+        rng = np.random.default_rng(20 + seed)
+        f = _patch_frames(rng, 1.0)
+        fl = flow(rng)
+        assert detect_vehicles(fl, valid, frames=(f[1], f[2]), prev_frame=f[0]) == []
+        assert len(detect_vehicles(fl, valid, frames=(f[1], f[2]), prev_frame=f[0], change_noise_k=0.0)) == 1
+    # the same patch carried 3 px a frame over three frames (a vehicle): its content leaves its place, kept;
+    # also when the light changes its brightness and contrast from frame to frame (NCC leaves that out)
+    for gain, offset in (((1.0, 1.0, 1.0), (0.0, 0.0, 0.0)), ((0.8, 1.0, 1.3), (-20.0, 0.0, 25.0))):
+        rng = np.random.default_rng(30)
+        f = _patch_frames(rng, 3.0, gain=gain, offset=offset)
+        fl = _field(rng, [(38, 72, 48, 92, (3.0, 0.0))])
+        (d,) = detect_vehicles(fl, valid, frames=(f[1], f[2]), prev_frame=f[0])
+        assert d.u_px > 1.5 and 50 <= d.x_px <= 89 and 40 <= d.y_px <= 69, d
+        if gain == (1.0, 1.0, 1.0):
+            assert _iou(d, (50, 40, 89, 69)) >= 0.6, d
+
+
+def test_the_change_noise_alone_gives_a_static_patch_is_what_the_test_expects():
+    # sigma_d^2 / (2 var) is the expected 1 - NCC of a static patch under independent noise in both frames
+    from algorithms.detection import _changed_at_rest, _difference_variance
+
+    rng = np.random.default_rng(40)
+    g = _ground(rng, 240, 320)
+    for sigma in (2.0, 6.0):
+        a = g + rng.normal(0, sigma, g.shape).astype(np.float32)
+        b = g + rng.normal(0, sigma, g.shape).astype(np.float32)
+        dv = _difference_variance(a, b)
+        assert dv == pytest.approx(2 * sigma**2, rel=0.1)
+        c, null = _changed_at_rest(a, b, (100, 80, 159, 119), (0.0, 0.0), dv)
+        assert c == pytest.approx(null, rel=0.25)
+        # the same patch moved by 3 px decorrelates far beyond it
+        moved, _ = _changed_at_rest(a, np.roll(b, 3, axis=1), (100, 80, 159, 119), (0.0, 0.0), dv)
+        assert moved > max(4 * null, 0.8)
+    # a flat patch (a box on a car's uniform outline) has nothing to tell
+    flat = np.full((40, 40), 90.0, np.float32)
+    assert _changed_at_rest(flat, flat + rng.normal(0, 2, flat.shape), (5, 5, 30, 30), (0.0, 0.0), 8.0) is None
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"change_noise_k": -1.0}, r"change_noise_k: expected a finite number >= 0, got -1.0"),
+    ({"change_noise_k": math.nan}, r"change_noise_k: expected a finite number >= 0, got nan"),
+    ({"change_enough": 1.5}, r"change_enough: expected a fraction in \[0, 1\], got 1.5"),
+    ({"box_margin_rel": -0.5}, r"box_margin_rel: expected a finite number >= 0, got -0.5"),
+])
+def test_bad_change_keys_are_rejected_naming_them(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), **kwargs)
+    (key,) = kwargs
+    with pytest.raises(PipelineError, match=rf"detection\.{key}: expected a (finite number|fraction)"):
+        Pipeline.from_dict({**BASE, "detection": kwargs})
+
+
+def test_a_fast_car_whose_flow_covers_part_of_it_gets_its_whole_box():
+    # 30 x 14 px car with a textured roof (racks, windows), 8 px a frame to the right; the flow (TV-L1, a method
+    # that follows part of a fast car) found its motion on its front 16 px only
+    rng = np.random.default_rng(11)
+    g = _ground(rng)
+    roof = cv2.GaussianBlur(rng.uniform(0, 255, (14, 30)).astype(np.float32), (0, 0), 1.0)
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        f[50:64, 52 + 8 * k:82 + 8 * k] = roof
+        frames.append(f)
+    flow = _field(rng, [(50, 64, 74, 90, (8.0, 0.0))], blur=0.7)
+    valid = np.ones((H, W), bool)
+    car = (60, 50, 89, 63)
+    (d,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    assert d.u_px == pytest.approx(8.0, abs=0.5)
+    assert _iou(d, car) >= 0.8, d
+    # sought within 4 px of the region alone, the box stops short of the car's rear
+    (part,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_margin_rel=0.0)
+    assert _iou(part, car) < 0.7, part

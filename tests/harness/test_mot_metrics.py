@@ -257,3 +257,22 @@ def test_score_sequence_passes_real_footages_ignore_regions_to_every_tracking_me
     assert plain[("mot_false_positives", "multi")] == 2 and kept[("mot_false_positives", "multi")] == 0
     assert kept[("mota", "multi")] == 1.0 and kept[("idf1", "multi")] == 1.0 and kept[("hota", "multi")] > plain[
         ("hota", "multi")]
+
+
+def test_a_tracker_that_ran_and_output_no_track_is_scored_as_missing_every_vehicle():
+    # the metric set of a cell must not depend on whether a track was confirmed: the gate compares sets
+    from types import SimpleNamespace
+
+    truth = _boxed([(f, 1, 20.0, 20.0, 6.0, {}) for f in (0, 1, 2)])
+    point = _points([(f, 10, 20.0, 20.0) for f in (0, 1, 2)]).assign(source="point", seed_vehicle_id=1)
+    seq = SimpleNamespace(tracks=point, trackers=("point", "multi"))
+    rows = {(r["metric"], r["region"]): r for r in M.score_sequence(seq, None, truth)}
+    assert rows[("mota", "point")]["value"] == 1.0
+    assert rows[("mota", "multi")]["value"] == 0.0 and rows[("mot_misses", "multi")]["sum"] == 3
+    assert rows[("hota", "multi")]["value"] == 0.0 and rows[("track_completeness", "multi")]["value"] == 0.0
+    # without the trackers named, as before: only the tracker that output rows
+    bare = {r["region"] for r in M.score_sequence(SimpleNamespace(tracks=point), None, truth)}
+    assert bare == {"point"}
+    # no rows at all from either tracker: both still scored
+    empty = SimpleNamespace(tracks=point.iloc[0:0], trackers=("point", "multi"))
+    assert {r["region"] for r in M.score_sequence(empty, None, truth) if r["metric"] == "mota"} == {"point", "multi"}

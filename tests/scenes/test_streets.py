@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from scenes.streets import ZEBRA_LENGTH_M, junction_marks
+from scenes.streets import JUNCTION_RADIUS_FACTOR, ZEBRA_LENGTH_M, junction_marks
 from scenes.world import _offset_right
 from tests.scenes.test_world_layout import _world
 
@@ -79,3 +79,136 @@ def test_built_up_blocks_have_a_light_kerb_at_the_road_edge():
     assert len(kerb) > 30
     assert np.median(kerb) > np.median(asphalt) + 25
     assert math.isfinite(float(np.median(kerb)))
+
+
+CLUTTERED = {**BARE, "seed": 3, "world.built_fraction": 0.8, "world.buildings.count": 4,
+             "world.buildings.footprint_range_m": [6.0, 10.0], "world.road_width_m": 12.0}
+
+
+def test_clutter_paints_the_ground_only_and_leaves_the_rest_of_the_world_as_it_was():
+    # its own random stream: roads, buildings and trees (what the truth is made of) stay the same
+    _, _, plain, _ = _world("tiny", **CLUTTERED)
+    _, _, busy, _ = _world("tiny", **CLUTTERED, **{"world.clutter": 1.0})
+    assert len(plain.roads) == len(busy.roads) and len(plain.buildings) == len(busy.buildings) > 0
+    for a, b in zip(plain.roads, busy.roads):
+        assert np.array_equal(a.centre_m, b.centre_m)
+    # the same blocks (only dormer rows on some roofs): footprints, heights and the first parts as they were
+    assert [(b.centre, b.size, b.parts[:5]) for b in plain.buildings] == [(b.centre, b.size, b.parts[:5])
+                                                                          for b in busy.buildings]
+    assert any(len(b.parts) > len(a.parts) for a, b in zip(plain.buildings, busy.buildings))
+    assert [(t.x_m, t.y_m) for t in plain.trees] == [(t.x_m, t.y_m) for t in busy.trees]
+    d = np.abs(plain.ground_texture.astype(int) - busy.ground_texture.astype(int)).max(axis=2)
+    # small things: a few per cent of the ground changes, and where it does, by more than the grain
+    assert 0.01 < (d > 8).mean() < 0.3, (d > 8).mean()
+
+
+def test_clutter_makes_the_ground_busier_at_the_scale_of_a_few_pixels():
+    # what the small things are for: local contrast in 15-texel windows, as benchmarks/realism.py measures it
+    import cv2
+
+    def contrast(world):
+        g = world.ground_texture.astype(np.float32).mean(axis=2)
+        m, s = cv2.blur(g, (15, 15)), cv2.blur(g * g, (15, 15))
+        return float(np.median(np.sqrt(np.maximum(s - m * m, 0))))
+
+    _, _, plain, _ = _world("tiny", **CLUTTERED)
+    _, _, busy, _ = _world("tiny", **CLUTTERED, **{"world.clutter": 2.0})
+    assert contrast(busy) > 1.1 * contrast(plain)
+
+
+def test_clutter_shadows_fall_away_from_the_sun_and_only_under_flat_light():
+    from scenes.streets import paint_clutter
+    from scenes.world import _Canvas
+
+    road = SimpleNamespace(centre_m=np.column_stack([np.linspace(0, 200, 101), np.zeros(101)]), width_m=10.0,
+                           major=True, nodes=(0, 1))
+
+    def run(away):
+        canvas = _Canvas(-20.0, -30.0, 0.1, 2400, 600)
+        shadows = paint_clutter(canvas, roads=[road], cells={}, kinds={}, widths_m=(10.0, 7.5),
+                                material=lambda name, gain=(1, 1, 1): (100, 100, 100),
+                                clearance=lambda p: np.full(len(p), 10.0), density=1.0, away=away,
+                                rng=np.random.default_rng(4))
+        return canvas, shadows
+
+    away = np.array([0.3, -0.8])  # a sun in the south-west, 49 deg up
+    canvas, shadows = run(away)
+    assert canvas.ops and len(shadows) >= 10  # lamp posts every 30 m on both sides
+    u = away / np.hypot(*away)
+    for q in shadows:
+        # a pole's shadow: a thin quad along the sun's direction, 6-9 m tall poles
+        along = (q - q.mean(axis=0)) @ u
+        across = (q - q.mean(axis=0)) @ np.array([-u[1], u[0]])
+        length = along.max() - along.min()
+        assert 6.0 * np.hypot(*away) - 1e-6 <= length <= 9.0 * np.hypot(*away) + 1e-6
+        assert across.max() - across.min() < 0.2
+    _, none = run(None)
+    assert none == []
+
+
+def test_wide_minor_roads_are_marked_and_corners_paved_plain_over_the_lines():
+    from scenes.streets import _marked, _marked_corners
+
+    def road(pts, nodes, width, major=False):
+        t = np.linspace(0.0, 1.0, 20)[:, None]
+        a, b = (np.asarray(p, float) for p in pts)
+        return SimpleNamespace(centre_m=a + t * (b - a), nodes=nodes, width_m=width, major=major)
+
+    # an 18 m minor road has two lanes a direction (with a parking lane): marked; a 9 m one is not
+    assert _marked(road(((0, 0), (50, 0)), (0, 1), 18.0), 2) and not _marked(road(((0, 0), (50, 0)), (0, 1), 9.0), 1)
+    turn = [road(((0, 0), (50, 0)), (0, 1), 18.0), road(((0, 0), (0, 50)), (0, 2), 18.0)]
+    straight = [road(((0, 0), (50, 0)), (0, 1), 18.0), road(((0, 0), (-50, 0)), (0, 2), 18.0)]
+    quiet = [road(((0, 0), (50, 0)), (0, 1), 9.0), road(((0, 0), (0, 50)), (0, 2), 9.0)]
+    deg = np.array([2, 1, 1])
+    assert _marked_corners(turn, deg, True) == {0: 18.0}  # lines of the two roads would cross there
+    assert _marked_corners(straight, deg, True) == {}  # the lines run on
+    assert _marked_corners(quiet, deg, True) == {}  # nothing painted to cover
+
+
+def test_lane_lines_stop_at_the_junction_mouth():
+    # a wide road world: no marking paint inside a junction's crossing carriageway, beyond its stop lines
+    _, _, world, _ = _world("tiny", **BARE, **{"seed": 5, "world.road_width_m": 24.0, "world.crosswalk_fraction": 0.0})
+    g = world.ground_texture.astype(float).mean(axis=2)
+    x0, y0 = world.extent_m[:2]
+    deg = np.bincount(np.array([r.nodes for r in world.roads]).ravel())
+    checked = 0
+    for n in np.nonzero(deg >= 3)[0]:
+        cx, cy = (world.nodes_m[n] - (x0, y0)) / world.texel_m
+        # the junction's plain asphalt reaches 0.55 x the widest road, the stop lines start 0.8 m beyond: the
+        # edge lines of one road, half its width off its centre, would cross the other's carriageway there
+        widest = max(rd.width_m for rd in world.roads if n in rd.nodes)
+        r = int((JUNCTION_RADIUS_FACTOR * widest + 0.6) / world.texel_m)
+        if not (r <= cx < g.shape[1] - r and r <= cy < g.shape[0] - r):
+            continue
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        disc = g[int(cy) + yy, int(cx) + xx][np.hypot(yy, xx) <= r]
+        assert (disc > 160).mean() < 4e-4, (n, (disc > 160).mean())  # a texel or two of a stop line's edge
+        checked += 1
+    assert checked >= 1
+
+
+def test_tramlines_run_along_a_fields_rows_in_pairs_inside_a_headland():
+    from scenes.streets import paint_clutter
+    from scenes.world import _Canvas
+
+    texel = 0.1
+    field = np.array([[0.0, 0.0], [100.0, 0.0], [100.0, 80.0], [0.0, 80.0]])
+    canvas = _Canvas(0.0, 0.0, texel, 1000, 800)
+    paint_clutter(canvas, roads=[], cells={(0, 0): (field, None)}, kinds={(0, 0): "field"},
+                  row_angles={(0, 0): 0.0}, widths_m=(10.0, 7.5), material=None,
+                  clearance=lambda p: np.full(len(p), 50.0), density=1.0, away=None, rng=np.random.default_rng(2))
+    buf = np.ones((800, 1000, 3), np.float32)
+    xs, ys = (np.arange(1000) + 0.5) * texel, (np.arange(800) + 0.5) * texel
+    for op in canvas.ops:
+        op.apply(buf, 0, xs, ys)
+    g = buf[..., 0]
+    rows = g[:, 300:700].mean(axis=1)  # along x, the rows' direction: tracks are dark rows of texels
+    dark = np.flatnonzero(rows < 0.95) * texel
+    assert len(dark) and dark.min() > 6.0 - 0.3 and dark.max() < 80.0 - 6.0 + 0.3  # a 6 m headland
+    # wheel tracks in pairs 1.8 m apart, the pairs 18-24 m apart
+    centres = [float(np.mean(r)) for r in np.split(dark, np.flatnonzero(np.diff(dark) > 0.5) + 1)]
+    gaps = np.diff(centres)
+    assert np.allclose(gaps[::2], 1.8, atol=0.15), centres
+    assert np.all((gaps[1::2] > 18.0 - 1.8 - 0.2) & (gaps[1::2] < 24.0 - 1.8 + 0.2)), centres
+    # the tracks are darker than the crop, not painted over it
+    assert 0.8 < g.min() < 0.9

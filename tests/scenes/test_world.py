@@ -93,3 +93,15 @@ def test_overlapping_shadows_darken_the_ground_once_to_the_ambient_level():
         assert abs(tex[r, int((x + 20.0) / texel)] - 0.45) < 0.02, x
     assert abs(np.median(tex[tex < 0.9]) - 0.45) < 0.02
     assert tex.min() > 0.43  # nowhere ambient^2
+
+
+def test_roof_seams_hold_no_detail_at_the_texel():
+    # a seam is band-limited to about two texels: a one-texel line aliases at the pixel and reads as sensor
+    # noise in a frame's flat half (benchmarks/realism.py's noise_sigma); the seams still show (every 1.6 m)
+    _, roofs = world_mod._building_textures(np.random.default_rng(1), 0.1)
+    g = roofs[0].astype(np.float64).mean(axis=2)
+    across = g[:, 2:] - 2 * g[:, 1:-1] + g[:, :-2]  # second difference across the seams
+    assert across.std() < 2.0 * g.std(), (across.std(), g.std())  # one-texel seams: 2.8x
+    profile = g.mean(axis=0)
+    seams = profile[::16].mean()
+    assert seams < np.median(profile) - 5.0  # darker lines every 16 texels
