@@ -48,17 +48,18 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # them with check_long_baseline):
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
-#   are, from 2. Off by default, on in the dis pipeline: with 6 (and the other defaults), 30 frames of
-#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, main -> with:
-#     realistic  dis 0.296 -> 0.537, pyramidal-hs 0.276 -> 0.433, pyramidal-lk 0.202 -> 0.429, tv-l1 0.389 -> 0.527,
-#                farneback 0.192 -> 0.384;
-#     city       dis -0.196 -> -0.071, pyramidal-hs -0.137 -> -0.012, pyramidal-lk -0.117 -> -0.113,
-#                tv-l1 -0.217 -> -0.129, farneback -0.137 -> -0.171;
-#     fast-vehicles dis 0.392 -> 0.373, pyramidal-hs 0.590 -> 0.590, pyramidal-lk 0.601 -> 0.608,
-#                farneback 0.451 -> 0.429; nominal and urban-parallax unchanged (tv-l1 urban-parallax 0.642 -> 0.679);
-#   on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60)
-#   dis 0.166 -> 0.166 (FN 300 -> 289), farneback 0.179 -> -0.166 (its long-pair flow makes 160 more false
-#   tracks there);
+#   are, from 2. Off by default, on in the dis pipeline. With 6 (and the other defaults), 30 frames of
+#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, off -> on (main of 25 Nov, box_reach_px in):
+#     realistic      dis 0.222 -> 0.360, pyramidal-hs 0.192 -> 0.424, pyramidal-lk 0.138 -> 0.389,
+#                    tv-l1 0.433 -> 0.507, farneback 0.197 -> 0.300;
+#     city           dis 0.162 -> 0.158, pyramidal-hs -0.133 -> -0.092, pyramidal-lk -0.137 -> -0.096,
+#                    tv-l1 -0.079 -> 0.046, farneback -0.212 -> -0.217;
+#     fast-vehicles  dis 0.631 -> 0.705, pyramidal-hs, pyramidal-lk, tv-l1 unchanged, farneback 0.575 -> 0.537;
+#     nominal, urban-parallax: dis unchanged (0.866, 0.667);
+#   on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60,
+#   measured before that merge) dis 0.166 -> 0.166 (FN about 300 -> 289), farneback 0.179 -> -0.166 (its
+#   long-pair flow made about 160 more false tracks there): hence off by default, and the other pipelines
+#   not switched on before the held-out stand-in says so;
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6;
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
