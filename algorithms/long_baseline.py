@@ -24,9 +24,9 @@ movers where no one-pair detection lies, nor the path a fast one swept over the 
 puts one in place of a slow one-pair detection of a part of the same vehicle.
 
 The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
-section; ``frames: 0``, the default, turns the stage off; the ``dis`` pipeline runs it with 6:
-what it gains and loses is measured there). The pipeline keeps the last ``k`` gray frames and pair
-models, and runs its own flow method once more a pair: dis costs twice its CPU time a pair
+section; ``frames: 0``, the default, turns the stage off, and no built-in pipeline turns it on:
+what it gains on the synthetic scenes and loses on the 1080p held-out stand-in is measured there). The pipeline keeps the last ``k`` gray frames and pair
+models, and runs its own flow method once more a pair: dis with it costs twice its CPU time a pair
 (``benchmarks/pipeline_speed.py speed``, 640x480: 75.0 against 37.5 ms a pair).
 """
 
@@ -48,7 +48,7 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # them with check_long_baseline):
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
-#   are, from 2. Off by default, on in the dis pipeline. With 6 (and the other defaults), 30 frames of
+#   are, from 2. Off by default and in every built-in pipeline. With 6 (and the other defaults), 30 frames of
 #   benchmarks/tracking_quality.py, MOTA against the moving vehicles, off -> on (main of 25 Nov, box_reach_px in):
 #     realistic      dis 0.222 -> 0.360, pyramidal-hs 0.192 -> 0.424, pyramidal-lk 0.138 -> 0.389,
 #                    tv-l1 0.433 -> 0.507, farneback 0.197 -> 0.300;
@@ -56,10 +56,9 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #                    tv-l1 -0.079 -> 0.046, farneback -0.212 -> -0.217;
 #     fast-vehicles  dis 0.631 -> 0.705, pyramidal-hs, pyramidal-lk, tv-l1 unchanged, farneback 0.575 -> 0.537;
 #     nominal, urban-parallax: dis unchanged (0.866, 0.667);
-#   on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60,
-#   measured before that merge) dis 0.166 -> 0.166 (FN about 300 -> 289), farneback 0.179 -> -0.166 (its
-#   long-pair flow made about 160 more false tracks there): hence off by default, and the other pipelines
-#   not switched on before the held-out stand-in says so;
+#   but on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60)
+#   dis 0.263 -> 0.200 (FN 290 -> 279, FP 52 -> 92; before that merge farneback 0.179 -> -0.166): the slow
+#   movers it adds there cost more in false tracks than they find, hence off;
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6;
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
