@@ -411,6 +411,7 @@ class MultiSpec(_Section):
     gate_px: float = MULTI_DEFAULTS["gate_px"]
     min_iou: float = MULTI_DEFAULTS["min_iou"]
     birth_hits: StrictInt = MULTI_DEFAULTS["birth_hits"]
+    birth_gap: StrictInt = MULTI_DEFAULTS["birth_gap"]
     min_travel_px: float = MULTI_DEFAULTS["min_travel_px"]
     min_travel_rel: float = MULTI_DEFAULTS["min_travel_rel"]
     min_trend_f: float = MULTI_DEFAULTS["min_trend_f"]

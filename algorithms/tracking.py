@@ -40,9 +40,10 @@ Multi-target tracker (beyond the thesis): the moving regions of
 velocity; each track is a constant-velocity Kalman filter of its box's centre
 and size (:class:`~algorithms.kalman.BoxKalman`); detections are assigned to
 tracks by the Hungarian method on IoU and distance to each track's prediction,
-gated; a track is confirmed after ``birth_hits`` consecutive hits once it has
-left a quarter of its box along a straight path (flicker on a tree crown or a
-roof edge recurs in place), is held where its template matches when it loses
+gated; a track is confirmed after ``birth_hits`` hits (gaps of up to ``birth_gap``
+frames allowed) once it has left a quarter of its box at a steady velocity (flicker
+on a tree crown or a roof edge recurs in place), completes partial views to its
+size, is held where its template matches when it loses
 its detection (a vehicle that slows and stops at a light leaves the motion
 detector but not the image), coasts through short occlusions and is dropped
 after ``death_misses`` consecutive misses. It works in a ground-fixed frame: given the camera path (the
@@ -622,7 +623,9 @@ class _Track:
 #   10 fps, 0.22 m/px moves 16 px a frame; the prediction, not the last position, is what is gated);
 # min_iou: a pair whose boxes overlap at least this much is feasible whatever its distance (a bus's centre
 #   can jump when its region is found whole after being found in part);
-# birth_hits: consecutive detections before a track is confirmed (the detections' minimum persistence);
+# birth_hits: detections before a track is confirmed (the detections' minimum persistence);
+# birth_gap: frames in a row a tentative track may go without a detection (a slow vehicle's flow is near the
+#   threshold and its detection comes and goes; 0: a tentative track ends at its first miss);
 # min_travel_px, min_travel_rel: a track is confirmed only once its ground-fixed centre has moved this far from
 #   its first detection, and this many times its box's larger side (flow noise, compression artefacts, flicker
 #   and a tree crown's sway make regions that recur in place; a vehicle leaves its own box; the rows of the
@@ -666,7 +669,7 @@ class _Track:
 #   the template must not match that place (at hold_min_ncc); a template of ground, a roof edge or a tree crown
 #   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
-MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "min_travel_px": 3.0, "min_travel_rel": 0.25,
+MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 1, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
@@ -764,11 +767,11 @@ class MultiTargetTracker:
     (``scipy.optimize.linear_sum_assignment``) on the cost ``(1 - IoU) + distance / gate``,
     a pair feasible when the distance is within the gate (``gate_px``, growing by
     ``coast_gate_growth`` per frame a track has coasted) or the boxes overlap by ``min_iou``.
-    A new track is confirmed after ``birth_hits`` consecutive hits once it has travelled
-    ``min_travel_px`` and ``min_travel_rel`` box sides over the ground along a path at least
-    steadily (``min_trend_f``; its rows, from its first frame, are then output; a miss
-    before that deletes it). A confirmed track without a detection is held where its
-    template matches the frame (``hold_*`` keys, given ``image``), else coasts on its
+    A new track is confirmed after ``birth_hits`` hits once it has travelled
+    ``min_travel_px`` and ``min_travel_rel`` box sides over the ground at a steady velocity
+    (``min_trend_f``; its rows, from its first frame, are then output; more than
+    ``birth_gap`` misses in a row before that delete it). A confirmed track without a
+    detection is held where its template matches the frame (``hold_*`` keys, given ``image``), else coasts on its
     prediction through up to ``death_misses - 1`` frames (short occlusions) and ends at the
     ``death_misses``-th. Keys and defaults: ``MULTI_DEFAULTS``.
 
@@ -792,6 +795,9 @@ class MultiTargetTracker:
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+        v = p["birth_gap"]
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ValueError(f"birth_gap: expected an integer >= 0, got {v!r}")
         if not p["gate_px"] > 0:
             raise ValueError(f"gate_px: expected > 0, got {p['gate_px']}")
         if not 0 < p["min_iou"] <= 1:
@@ -877,7 +883,7 @@ class MultiTargetTracker:
                     trk.held, trk.misses = trk.held + 1, 0
                 else:
                     trk.misses += 1
-                    if not trk.confirmed or trk.misses >= self.death_misses:
+                    if (not trk.confirmed and trk.misses > p["birth_gap"]) or trk.misses >= self.death_misses:
                         continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
             if not trk.confirmed and trk.hits >= self.birth_hits and self._travelled(trk):

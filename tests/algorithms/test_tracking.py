@@ -456,3 +456,17 @@ def test_a_car_whose_front_goes_under_a_crown_keeps_its_size_and_its_centre():
     assert last["bbox_y1_px"] - last["bbox_y0_px"] + 1 == pytest.approx(30, abs=2)
     with pytest.raises(ValueError, match=r"partial_rel: expected a number in \[0, 1\]"):
         MultiTargetTracker(partial_rel=1.5)
+
+
+def test_a_car_whose_detection_comes_and_goes_is_confirmed_when_a_tentative_track_may_wait_a_frame():
+    # a car at 1 px a frame whose flow is near the threshold: found in two frames of three
+    def run(**kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(30):
+            trk.step(t, [(20.0 + t, 30.0, 100)] if t % 3 != 2 else [])
+        return {r["track_id"] for r in trk.rows()}
+
+    assert run() != set()
+    assert run(birth_gap=0) == set()
+    with pytest.raises(ValueError, match="birth_gap: expected an integer >= 0, got -1"):
+        MultiTargetTracker(birth_gap=-1)
