@@ -25,9 +25,10 @@ puts one in place of a slow one-pair detection of a part of the same vehicle.
 
 The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
 section; ``frames: 0``, the default, turns the stage off, and no built-in pipeline turns it on:
-what it gains on the synthetic scenes and loses on the 1080p held-out stand-in is measured there). The pipeline keeps the last ``k`` gray frames and pair
-models, and runs its own flow method once more a pair: dis with it costs twice its CPU time a pair
-(``benchmarks/pipeline_speed.py speed``, 640x480: 75.0 against 37.5 ms a pair).
+what it gains on the synthetic scenes and loses on the 1080p held-out stand-in is measured there).
+The pipeline keeps the last ``k`` gray frames and pair models, and runs its own flow method once
+more a pair: dis with it costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
+640x480: 75.0 against 37.5 ms a pair).
 """
 
 from __future__ import annotations
