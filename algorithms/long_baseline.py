@@ -50,16 +50,16 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
 #   are, from 2. Off by default and in every built-in pipeline. With 6 (and the other defaults), 30 frames of
-#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, off -> on (main of 25 Nov, box_reach_px in):
-#     realistic      dis 0.222 -> 0.360, pyramidal-hs 0.192 -> 0.424, pyramidal-lk 0.138 -> 0.389,
-#                    tv-l1 0.433 -> 0.507, farneback 0.197 -> 0.300;
-#     city           dis 0.162 -> 0.158, pyramidal-hs -0.133 -> -0.092, pyramidal-lk -0.137 -> -0.096,
-#                    tv-l1 -0.079 -> 0.046, farneback -0.212 -> -0.217;
-#     fast-vehicles  dis 0.631 -> 0.705, pyramidal-hs, pyramidal-lk, tv-l1 unchanged, farneback 0.575 -> 0.537;
-#     nominal, urban-parallax: dis unchanged (0.866, 0.667);
+#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, off -> on (main f005455 and this stage):
+#     realistic      dis 0.246 -> 0.384, pyramidal-hs 0.232 -> 0.424, pyramidal-lk 0.256 -> 0.394,
+#                    tv-l1 0.433 -> 0.507, farneback 0.286 -> 0.355;
+#     city           dis 0.162 -> 0.133, pyramidal-hs -0.133 -> -0.092, pyramidal-lk -0.117 -> -0.096,
+#                    tv-l1 0.025 -> 0.046, farneback -0.212 -> -0.217;
+#     fast-vehicles  dis 0.604 -> 0.690, pyramidal-hs, pyramidal-lk, tv-l1 unchanged, farneback 0.567 -> 0.530;
+#     nominal unchanged; urban-parallax unchanged but tv-l1 0.792 -> 0.818;
 #   but on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60)
-#   dis 0.263 -> 0.200 (FN 290 -> 279, FP 52 -> 92; before that merge farneback 0.179 -> -0.166): the slow
-#   movers it adds there cost more in false tracks than they find, hence off;
+#   dis 0.263 -> 0.209 (FN 290 -> 254, FP 52 -> 113), pyramidal-lk 0.297 -> 0.147 (FN 276 -> 246, FP 50 -> 150):
+#   it finds about an eighth of the misses there and makes more false tracks than that, hence off;
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6;
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
