@@ -29,6 +29,7 @@ local flow ``w`` (``I1'(x + w) ~ I0(x)``) give ``total = s + w``. With a matrix
 from __future__ import annotations
 
 import copy
+from collections import deque
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,6 +49,7 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
 from algorithms.detection import DETECTION_DEFAULTS
+from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, motion_mask
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
@@ -213,6 +215,7 @@ PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
                   "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length",
                   "box_reach_px": "length"},
+    "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length", "min_box_px": "area"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
 PX_REFERENCE_SIDE = 480
@@ -262,7 +265,8 @@ class Pipeline:
         threshold: {direction: -90, tolerance_deg: 45, min_magnitude_px: 0.0, max_magnitude_px: null}  # or null
         spatial: true        # eq. 4.11
         temporal: true       # eq. 4.12
-        detection: {field: local | filtered, gsd_m_per_px: null, <keys of algorithms.detection.DETECTION_DEFAULTS>}
+        detection: {field: local | filtered, gsd_m_per_px: null, <keys of algorithms.detection.DETECTION_DEFAULTS>,
+                    long_baseline: {<keys of algorithms.long_baseline.LONG_BASELINE_DEFAULTS>}}  # frames: 0 is off
         tracking: {point: true | {field: filtered | local, kalman: {x0, p0, q, r}, recentre_px: null | 12.0,
                                   filter: flow | position, sigma_accel_px: 0.5, sigma_meas_px: 1.0,
                                   correlation: null | {template_px: 15, search_px: 3, min_ncc: 0.5, renew_ncc: 0.8}},
@@ -409,6 +413,9 @@ class Pipeline:
         px = px_scale_factor(det_cfg["px_scale"], shared.gray(0).shape)
         det_params = scale_px({k: det_cfg[k] for k in DETECTION_DEFAULTS}, PX_SCALED_KEYS["detection"], px)
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
+        long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
+        # frames t-k .. t-1 (gray, the pair's model), oldest first: the long baseline's frame t-k and models
+        history: deque = deque(maxlen=max(1, long_cfg["frames"]))
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
@@ -479,6 +486,20 @@ class Pipeline:
                           cv2.warpPerspective(gp, Mp, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
                                    frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd, **det_params)
+            if long_cfg["frames"] >= 2 and len(history) >= 2:
+                # slow movers: frame t against frame t-k registered into it (algorithms.long_baseline)
+                C = compose_models([m for _, m in history])
+                g_old, inside = register_into(history[0][0], C, margin_px=det_params["border_px"])
+                g_t = cur["gray"][0]
+                w_long, v_long = flow_fn(g_t, g_old, **flow_params)
+                slow = long_baseline_detections(
+                    w_long, np.asarray(v_long, bool) & inside, baseline_frames=len(history), frames=(g_t, g_old),
+                    composed=C, min_displacement_px=long_cfg["min_displacement_px"],
+                    max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
+                    gsd_m_per_px=gsd, detection_params=det_params, pair_flow=cur["flow_local"],
+                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"])
+                dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
+                                        max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:
@@ -508,6 +529,7 @@ class Pipeline:
                 yield finish(prev_done, cur, nxt)
                 # all the next pair's temporal filter and box test need
                 prev_done = {"cleaned": cur["cleaned"], "gray0": cur["gray"][0], "matrix": cur["matrix"]}
+                history.append((cur["gray"][0], cur["matrix"]))
                 window = [nxt]
                 del cur, nxt
         yield finish(prev_done, window[0], None)

@@ -39,6 +39,7 @@ from algorithms.global_motion import affine_global_motion
 from algorithms.jitter import JITTER_MODELS
 from algorithms.registry import STAGES
 from algorithms.detection import DETECTION_DEFAULTS, detect_vehicles
+from algorithms.long_baseline import LONG_BASELINE_DEFAULTS, check_long_baseline
 from algorithms.tracking import MULTI_DEFAULTS, MultiTargetTracker, PointTracker
 
 __all__ = ["PipelineError", "PipelineSpec", "COMPENSATION_MODELS", "resolve_pipeline", "pipeline_hash",
@@ -267,6 +268,26 @@ class ThresholdSpec(_Section):
         return self
 
 
+class LongBaselineSpec(_Section):
+    """The keys of :data:`algorithms.long_baseline.LONG_BASELINE_DEFAULTS` (defaults and meaning there)."""
+
+    frames: StrictInt = LONG_BASELINE_DEFAULTS["frames"]
+    min_displacement_px: float = LONG_BASELINE_DEFAULTS["min_displacement_px"]
+    max_speed_px: float = LONG_BASELINE_DEFAULTS["max_speed_px"]
+    ground_model: StrictStr = LONG_BASELINE_DEFAULTS["ground_model"]
+    replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]
+    min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
+
+    @model_validator(mode="after")
+    def _checked(self) -> LongBaselineSpec:
+        try:
+            check_long_baseline(_dump(self))
+        except ValueError as e:
+            at, _, msg = str(e).partition(": ")
+            raise _fail(msg, at=at) from None
+        return self
+
+
 class DetectionSpec(_Section):
     """The keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (defaults and meaning there), checked by it."""
 
@@ -306,10 +327,12 @@ class DetectionSpec(_Section):
     change_enough: float = DETECTION_DEFAULTS["change_enough"]
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
     gsd_m_per_px: Any = None
+    long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
 
     @model_validator(mode="after")
     def _detector_accepts(self) -> DetectionSpec:
         d = _dump(self)
+        d.pop("long_baseline")
         gsd = d.pop("gsd_m_per_px")
         if d.pop("field") not in ("local", "filtered"):
             raise _fail(f"expected local or filtered, got {self.field!r}", at="field")

@@ -1,0 +1,314 @@
+"""Slow movers: detection over a longer time baseline, frame t against frame t-k registered into it.
+
+Beyond the thesis. A vehicle that moves under about a pixel a frame (a queue creeping at a
+junction, town traffic at 1 m/s: 0.57 px a frame at 25 fps and 0.07 m/px) stays under the
+one-pair detection's speed threshold (``detection.min_magnitude_px``, and ``noise_k`` times the
+ground's residual), and flow methods under-estimate the sub-pixel motion of a uniform roof
+further. Over ``k`` frames the same vehicle has moved ``k`` times as far while the flow's noise on
+the ground does not grow (one flow over the long pair, not a sum of ``k`` noisy ones).
+
+:func:`long_baseline_detections` runs the one-pair detector,
+:func:`algorithms.detection.detect_vehicles`, on the pair (frame t, frame t-k in frame t's
+pixels, :func:`register_into` by the composed pair models, :func:`compose_models`): the flow of
+that pair is ``-k`` times a vehicle's velocity; the global motion of the pair is that of the
+composed model inverted (the parallax test scales with it: a roof's parallax over ``k`` frames is
+``k`` times a pair's, as is the camera's motion); the ``min_explained`` test and the box compare
+frames t and t-k, whose change the slow vehicle's ``k``-frame motion explains and flow noise does
+not. Three things the long pair sees that a pair does not are left out: the camera's residual
+rotation and tilt, ``k`` times a pair's (a quadratic ground fit, ``ground_model``); the edge of
+what frame t-k covers, ``k`` camera motions into the frame (:func:`register_into`'s margin, the
+detector's ``border_px``); and anything faster than ``max_speed_px`` a frame, by its ``k``-frame
+motion or by the pair's own flow over its box (a fast vehicle whose flow the long pair lost, a
+roof whose parallax the one-pair detector rejected). :func:`merge_detections` then adds the slow
+movers where no one-pair detection lies, nor the path a fast one swept over the ``k`` frames, and
+puts one in place of a slow one-pair detection of a part of the same vehicle.
+
+The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
+section; ``frames: 0``, the default, turns the stage off, and no built-in pipeline turns it on:
+what it gains on the synthetic scenes and loses on the 1080p held-out stand-in is measured there).
+The pipeline keeps the last ``k`` gray frames and pair models, and runs its own flow method once
+more a pair: dis with it costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
+640x480: 75.0 against 37.5 ms a pair).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from algorithms.detection import DETECTION_DEFAULTS, Detection, detect_vehicles
+from algorithms.global_motion import global_flow, is_translation
+
+__all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "register_into",
+           "long_baseline_detections", "merge_detections"]
+
+# The keys of the pipeline's `detection.long_baseline` section and their defaults (one home; pipeline_spec checks
+# them with check_long_baseline):
+# frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
+#   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
+#   are, from 2. Off by default and in every built-in pipeline. With 6 (and the other defaults), 30 frames of
+#   benchmarks/tracking_quality.py, MOTA against the moving vehicles, off -> on (main f005455 and this stage):
+#     realistic      dis 0.246 -> 0.384, pyramidal-hs 0.232 -> 0.424, pyramidal-lk 0.256 -> 0.394,
+#                    tv-l1 0.433 -> 0.507, farneback 0.286 -> 0.355;
+#     city           dis 0.162 -> 0.133, pyramidal-hs -0.133 -> -0.092, pyramidal-lk -0.117 -> -0.096,
+#                    tv-l1 0.025 -> 0.046, farneback -0.212 -> -0.217;
+#     fast-vehicles  dis 0.604 -> 0.690, pyramidal-hs, pyramidal-lk, tv-l1 unchanged, farneback 0.567 -> 0.530;
+#     nominal unchanged; urban-parallax unchanged but tv-l1 0.792 -> 0.818;
+#   but on the 1080p city stand-in for the held-out clip (benchmarks/heldout_rehearsal.py --scene city --frames 60)
+#   dis 0.263 -> 0.209 (FN 290 -> 254, FP 52 -> 113), pyramidal-lk 0.297 -> 0.147 (FN 276 -> 246, FP 50 -> 150):
+#   it finds about an eighth of the misses there and makes more false tracks than that, hence off;
+# min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
+#   there; px-scaled): 0.25 px a frame at k = 6;
+# max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
+#   are the one-pair detector's, and what it did not find at that speed it rejected (parallax of a roof that
+#   the camera's motion over k frames makes look like a mover, a fast vehicle's trail);
+# ground_model: the detector's ground_model on the long pair (the camera's residual rotation and tilt over k
+#   frames is k times a pair's; a quadratic fit keeps it off the image's corners);
+# min_box_px: a long-baseline detection whose box holds fewer pixels is left out (px-scaled area: a car's top
+#   view is 24 x 16 px at 0.22 m/px; a pedestrian walking 1.4 m/s is a slow mover too, and without a ground
+#   sampling distance nothing else tells it);
+# replace_rel: a slow one-pair detection (at most max_speed_px) whose box is under this many times the box of
+#   the long-baseline detection over it is replaced by that one (0: never).
+LONG_BASELINE_DEFAULTS = {"frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
+                          "replace_rel": 0.5, "min_box_px": 300}
+
+
+def check_long_baseline(params: Mapping) -> dict:
+    """``params`` over :data:`LONG_BASELINE_DEFAULTS`, checked; raises ValueError naming the key."""
+    unknown = sorted(set(params) - set(LONG_BASELINE_DEFAULTS))
+    if unknown:
+        raise ValueError(f"long_baseline: unknown key(s) {unknown}; valid: {', '.join(LONG_BASELINE_DEFAULTS)}")
+    p = {**LONG_BASELINE_DEFAULTS, **params}
+    k = p["frames"]
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0 or k == 1:
+        raise ValueError(f"frames: expected 0 (off) or an integer >= 2, got {k!r}")
+    for key in ("min_displacement_px", "max_speed_px"):
+        s = p[key]
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or not s > 0:
+            raise ValueError(f"{key}: expected a finite number > 0, got {s!r}")
+    if p["ground_model"] not in ("affine", "quadratic", "none"):
+        raise ValueError(f"ground_model: expected affine, quadratic or none, got {p['ground_model']!r}")
+    b = p["min_box_px"]
+    if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < 0:
+        raise ValueError(f"min_box_px: expected an integer >= 0, got {b!r}")
+    r = p["replace_rel"]
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 0:
+        raise ValueError(f"replace_rel: expected a finite number >= 0, got {r!r}")
+    return p
+
+
+def compose_models(matrices: Sequence[np.ndarray]) -> np.ndarray:
+    """The global model from frame t-k to frame t: ``M_{t-1} ... M_{t-k}``.
+
+    Parameters
+    ----------
+    matrices : sequence of ndarray, (3, 3) float
+        The pairs' models, oldest first: ``M_j`` maps frame-j points to frame j+1 (as
+        :func:`algorithms.global_motion.global_flow` reads it).
+
+    Returns
+    -------
+    ndarray, (3, 3) float64
+        Maps frame t-k points to frame t (the identity for no matrix).
+    """
+    C = np.eye(3)
+    for M in matrices:
+        M = np.asarray(M, dtype=np.float64)
+        if M.shape != (3, 3) or not np.isfinite(M).all():
+            raise ValueError(f"matrices: expected finite (3, 3) arrays, got {M.shape}")
+        C = M @ C
+    return C / C[2, 2]
+
+
+def register_into(gray: np.ndarray, C: np.ndarray, *, margin_px: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Frame t-k in frame t's pixels, ``I_{t-k}(C^-1 x)``, and where that falls inside frame t-k.
+
+    Parameters
+    ----------
+    gray : ndarray, (H, W)
+        Frame t-k (any dtype cv2 warps; the output keeps it).
+    C : ndarray, (3, 3)
+        Frame t-k points to frame t (:func:`compose_models`).
+    margin_px : int
+        The inside mask leaves out this many px along the edge of what frame t-k covers (as
+        ``detection.border_px`` does at the image's border: a flow window that the edge clips, content
+        that entered; over ``k`` frames that edge lies ``k`` camera motions into the frame).
+
+    Returns
+    -------
+    (ndarray (H, W), ndarray (H, W) bool)
+        The registered frame (border replicated) and its inside mask.
+    """
+    if isinstance(margin_px, bool) or not isinstance(margin_px, (int, np.integer)) or margin_px < 0:
+        raise ValueError(f"margin_px: expected an integer >= 0, got {margin_px!r}")
+    g = np.asarray(gray)
+    if g.ndim != 2:
+        raise ValueError(f"gray: expected (H, W), got {g.shape}")
+    h, w = g.shape
+    size = (w, h)
+    affine = np.allclose(C[2], [0, 0, 1])
+    # cv2 maps dst(x) = src(C^-1 x) without WARP_INVERSE_MAP
+    warp = ((lambda a, bm: cv2.warpAffine(a, C[:2], size, flags=cv2.INTER_LINEAR, borderMode=bm)) if affine else
+            (lambda a, bm: cv2.warpPerspective(a, C, size, flags=cv2.INTER_LINEAR, borderMode=bm)))
+    out = warp(g, cv2.BORDER_REPLICATE)
+    inside = warp(np.ones((h, w), np.uint8), cv2.BORDER_CONSTANT)
+    if margin_px:
+        # the image's own border stays in: that is border_px's
+        pad = cv2.copyMakeBorder(inside, margin_px, margin_px, margin_px, margin_px, cv2.BORDER_REPLICATE)
+        inside = cv2.erode(pad, np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8))[
+            margin_px:-margin_px, margin_px:-margin_px]
+    return out, inside > 0
+
+
+def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_frames: int, frames,
+                             composed: np.ndarray,
+                             min_displacement_px: float = LONG_BASELINE_DEFAULTS["min_displacement_px"],
+                             max_speed_px: float = LONG_BASELINE_DEFAULTS["max_speed_px"],
+                             ground_model: str = LONG_BASELINE_DEFAULTS["ground_model"],
+                             gsd_m_per_px: float | None = None, detection_params: Mapping | None = None,
+                             pair_flow: np.ndarray | None = None, pair_valid: np.ndarray | None = None,
+                             min_box_px: int = LONG_BASELINE_DEFAULTS["min_box_px"]) -> list[Detection]:
+    """The slow movers of frame t over the pair (frame t, frame t-k registered into it) (module docstring).
+
+    Parameters
+    ----------
+    flow : ndarray, (H, W, 2) float
+        Flow from frame t to frame t-k registered into frame t (the pair ``frames``), px; frame t
+        pixels: a vehicle of velocity ``v`` px/frame shows ``-k v``.
+    valid : ndarray, (H, W) bool
+        Where it is defined (and frame t-k covers frame t).
+    baseline_frames : int
+        ``k`` >= 1.
+    frames : (ndarray, ndarray)
+        Gray frame t and frame t-k registered into it, (H, W) (:func:`register_into`).
+    composed : ndarray, (3, 3)
+        The model from frame t-k to frame t (:func:`compose_models`): the long pair's global motion
+        is its inverse's field (the parallax test).
+    min_displacement_px : float
+        The detector's ``min_magnitude_px`` on the long pair: the least motion over the ``k`` frames, px.
+    max_speed_px : float
+        Per-frame speed above which a detection is left out, px/frame.
+    ground_model : str
+        The detector's ``ground_model`` on the long pair (the residual of the camera's rotation and
+        of the lens over ``k`` frames is ``k`` times a pair's: ``"quadratic"`` by default).
+    gsd_m_per_px : float, optional
+        As :func:`algorithms.detection.detect_vehicles`; the m^2 size limits also apply to the box.
+    detection_params : mapping, optional
+        Keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (the pipeline's, px-scaled);
+        ``box_three_frames`` is off (no frame t+k).
+    min_box_px : int
+        A detection whose box holds fewer pixels is left out (a walking pedestrian over ``k`` frames:
+        where the ground sampling distance is unknown, the size limits in m^2 do not apply).
+    pair_flow, pair_valid : ndarray (H, W, 2) float and (H, W) bool, optional
+        The local flow of pair t -> t+1 and where it is defined: a detection whose box's median pair
+        flow, about the median of the whole valid field, is faster than ``max_speed_px`` is left out
+        (a fast vehicle whose flow the long pair lost: the k-frame motion found there is no velocity).
+
+    Returns
+    -------
+    list of Detection
+        Boxes in frame t; ``u_px, v_px`` the per-frame velocity, ``-flow / k``, px/frame.
+    """
+    k = baseline_frames
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"baseline_frames: expected an integer >= 1, got {k!r}")
+    for key, x in (("min_displacement_px", min_displacement_px), ("max_speed_px", max_speed_px)):
+        if not (math.isfinite(x) and x > 0):
+            raise ValueError(f"{key}: expected a finite number > 0, got {x!r}")
+    f = np.asarray(flow)
+    if f.ndim != 3 or f.shape[2] != 2:
+        raise ValueError(f"flow: expected (H, W, 2), got {tuple(f.shape)}")
+    h, w = f.shape[:2]
+    C = np.asarray(composed, dtype=np.float64)
+    if C.shape != (3, 3) or not np.isfinite(C).all():
+        raise ValueError(f"composed: expected a finite (3, 3) matrix, got {C.shape}")
+    # the long pair runs from frame t back to frame t-k: its global motion is the composed model's inverse
+    g = -C[:2, 2] if is_translation(C) else global_flow(np.linalg.inv(C), (h, w))
+    params = {**(detection_params or {}), "box_three_frames": False, "ground_model": ground_model,
+              "min_magnitude_px": min_displacement_px}
+    found = detect_vehicles(f, valid, global_flow_px=g, frames=frames, gsd_m_per_px=gsd_m_per_px, **params)
+    lo, hi = params.get("min_area_m2", DETECTION_DEFAULTS["min_area_m2"]), params.get("max_area_m2")
+    ref = None
+    if pair_flow is not None:
+        pf = np.asarray(pair_flow)
+        pv = np.ones((h, w), bool) if pair_valid is None else np.asarray(pair_valid, bool)
+        if pf.shape != (h, w, 2) or pv.shape != (h, w):
+            raise ValueError(f"pair_flow, pair_valid: expected {(h, w, 2)} and {(h, w)}, got {pf.shape} and {pv.shape}")
+        grid = pf[4::8, 4::8][pv[4::8, 4::8]]
+        ref = np.median(grid, axis=0) if len(grid) else np.zeros(2)
+    out = []
+    for d in found:
+        u, v = -d.u_px / k, -d.v_px / k
+        if math.hypot(u, v) > max_speed_px or _box_area(d) < min_box_px:
+            continue
+        if ref is not None:
+            x0, y0, x1, y1 = (int(round(c)) for c in (d.x0_px, d.y0_px, d.x1_px, d.y1_px))
+            box, ok = pf[y0:y1 + 1, x0:x1 + 1], pv[y0:y1 + 1, x0:x1 + 1]
+            if ok.any() and math.hypot(*(np.median(box[ok], axis=0) - ref)) > max_speed_px:
+                continue
+        if gsd_m_per_px is not None:
+            # the region over k frames holds the ground the vehicle crossed: its box is the size to check
+            box_m2 = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) * gsd_m_per_px ** 2
+            if (lo is not None and box_m2 < lo) or (hi is not None and box_m2 > hi):
+                continue
+        out.append(d._replace(u_px=u, v_px=v))
+    return out
+
+
+def merge_detections(pair: Sequence[Detection], long: Sequence[Detection], *, baseline_frames: int,
+                     nms_iou: float = 0.1, max_speed_px: float = LONG_BASELINE_DEFAULTS["max_speed_px"],
+                     replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]) -> list[Detection]:
+    """The one-pair detections of frame t with the long-baseline ones added where none lies.
+
+    A long-baseline detection joins when no one-pair detection overlaps it (boxes at ``nms_iou``,
+    or the centre of one inside the other's box) nor the path a one-pair detection swept over the
+    ``baseline_frames`` frames (its box and the box ``k`` of its motions back: a fast vehicle leaves
+    the long pair a region where it was at t-k, and the flow between two places that far apart
+    is no motion). Where a one-pair detection overlaps it, that one stays unless it is slow (at most
+    ``max_speed_px``) and its box is under ``replace_rel`` times the long one's (a slow car whose
+    uniform roof moved too little between two frames is found by its front or rear edge alone, and
+    its centre wanders from frame to frame; over ``k`` frames its whole top changed): then the long
+    one takes its place.
+
+    Returns
+    -------
+    list of Detection
+        Largest region first, as :func:`algorithms.detection.detect_vehicles` orders them.
+    """
+    k = baseline_frames
+    swept = [e._replace(x0_px=min(e.x0_px, e.x0_px - k * e.u_px), x1_px=max(e.x1_px, e.x1_px - k * e.u_px),
+                        y0_px=min(e.y0_px, e.y0_px - k * e.v_px), y1_px=max(e.y1_px, e.y1_px - k * e.v_px))
+             for e in pair if math.isfinite(e.u_px) and math.isfinite(e.v_px)]
+    out = list(pair)
+    for d in long:
+        hits = [i for i, e in enumerate(out) if _overlaps(d, e, nms_iou)]
+        if not hits:
+            if not any(_overlaps(d, e, nms_iou) for e in swept):
+                out.append(d)
+            continue
+        if len(hits) == 1 and replace_rel > 0:
+            e = out[hits[0]]
+            if math.hypot(e.u_px, e.v_px) <= max_speed_px and _box_area(e) < replace_rel * _box_area(d):
+                out[hits[0]] = d
+    return sorted(out, key=lambda d: -d.area_px)
+
+
+def _box_area(d: Detection) -> float:
+    return (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1)
+
+
+def _overlaps(a: Detection, b: Detection, iou: float) -> bool:
+    """Boxes overlap by ``iou``, or the centre of one lies in the other's box."""
+    def inside(p: Detection, q: Detection) -> bool:
+        return q.x0_px <= p.x_px <= q.x1_px and q.y0_px <= p.y_px <= q.y1_px
+
+    iw = min(a.x1_px, b.x1_px) - max(a.x0_px, b.x0_px) + 1
+    ih = min(a.y1_px, b.y1_px) - max(a.y0_px, b.y0_px) + 1
+    if iw > 0 and ih > 0:
+        inter = iw * ih
+        if inter / (_box_area(a) + _box_area(b) - inter) >= iou:
+            return True
+    return inside(a, b) or inside(b, a)

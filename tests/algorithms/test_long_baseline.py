@@ -1,0 +1,219 @@
+"""Slow movers over a longer time baseline (algorithms.long_baseline) and its pipeline keys."""
+
+import cv2
+import numpy as np
+import pytest
+
+from algorithms.detection import Detection, detect_vehicles
+from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baseline, compose_models,
+                                      long_baseline_detections, merge_detections, register_into)
+from algorithms.pipeline import Pipeline, PipelineError
+from algorithms.reference import dis
+
+H, W = 120, 160
+CAR = (26, 14)  # length, width px (364 px: above min_box_px)
+SPEED_PX = 0.4  # px a frame, to the right: under the one-pair threshold (0.5 px)
+X0, Y0 = 60.0, 54.0  # the car's top-left at frame 0
+
+
+def _ground(rng):
+    """Textured ground: smoothed noise, grey levels about 60..200."""
+    return cv2.GaussianBlur(rng.uniform(40, 220, (H, W)).astype(np.float32), (0, 0), 1.2)
+
+
+def _car_layer(rng):
+    """A car seen from above at (0, 0) of an (H, W) layer: dark outline, a roof with a few light patches."""
+    img = np.zeros((H, W), np.float32)
+    alpha = np.zeros((H, W), np.float32)
+    length, width = CAR
+    img[:width, :length], alpha[:width, :length] = 25.0, 1.0
+    img[2:width - 2, 2:length - 2] = 150.0
+    for _ in range(4):
+        x, y = int(rng.integers(3, length - 6)), int(rng.integers(3, width - 5))
+        img[y:y + 2, x:x + 3] = 235.0
+    return img, alpha
+
+
+def _sequence(n, *, speed_px=SPEED_PX, seed=0):
+    """``n`` gray frames (float32, 0..255) of a still camera over textured ground and one car at ``speed_px``."""
+    rng = np.random.default_rng(seed)
+    g = _ground(rng)
+    car, alpha = _car_layer(rng)
+    frames = []
+    for t in range(n):
+        M = np.float32([[1, 0, X0 + speed_px * t], [0, 1, Y0]])
+        c = cv2.warpAffine(car, M, (W, H), flags=cv2.INTER_LINEAR)
+        a = cv2.warpAffine(alpha, M, (W, H), flags=cv2.INTER_LINEAR)
+        frames.append((g * (1 - a) + c).astype(np.float32))
+    return frames
+
+
+def _car_box(t, speed_px=SPEED_PX):
+    x = X0 + speed_px * t
+    return x, Y0, x + CAR[0] - 1, Y0 + CAR[1] - 1
+
+
+def _iou(d, box):
+    iw = min(d.x1_px, box[2]) - max(d.x0_px, box[0]) + 1
+    ih = min(d.y1_px, box[3]) - max(d.y0_px, box[1]) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    a = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (box[2] - box[0] + 1) * (box[3] - box[1] + 1)
+    return iw * ih / (a - iw * ih)
+
+
+def _u8(a):
+    return np.clip(a, 0, 255).astype(np.uint8)
+
+
+def test_a_car_at_0_4_px_a_frame_is_found_over_six_frames_and_not_over_one():
+    k = 6
+    frames = _sequence(k + 2)
+    t = k
+    valid = np.ones((H, W), bool)
+    # one pair: the car's 0.4 px stays under the detector's threshold
+    w1, v1 = dis(_u8(frames[t]), _u8(frames[t + 1]))
+    assert detect_vehicles(w1, v1 & valid, frames=(frames[t], frames[t + 1])) == []
+    # frame t against frame t-k (a still camera: the composed model is the identity)
+    C = compose_models([np.eye(3)] * k)
+    old, inside = register_into(frames[t - k], C)
+    assert inside.all()
+    wk, vk = dis(_u8(frames[t]), _u8(old))
+    (d,) = long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C)
+    assert (d.u_px, d.v_px) == pytest.approx((SPEED_PX, 0.0), abs=0.12)  # the per-frame velocity
+    assert _iou(d, _car_box(t)) >= 0.6, d
+    # a box that small is no vehicle: a walking pedestrian over k frames
+    assert long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C,
+                                    min_box_px=2 * 26 * 14) == []
+
+
+def test_a_static_textured_scene_gives_nothing_over_the_long_baseline():
+    frames = _sequence(7, speed_px=0.0)
+    rng = np.random.default_rng(1)
+    noisy = [f + rng.normal(0, 2.0, f.shape).astype(np.float32) for f in frames]  # sensor noise, frame by frame
+    C = compose_models([np.eye(3)] * 6)
+    old, inside = register_into(noisy[0], C)
+    wk, vk = dis(_u8(noisy[6]), _u8(old))
+    assert long_baseline_detections(wk, vk & inside, baseline_frames=6, frames=(noisy[6], old), composed=C) == []
+
+
+def test_models_compose_oldest_first_and_registration_undoes_them():
+    A = np.array([[1.0, 0, 2.0], [0, 1.0, -1.0], [0, 0, 1.0]])
+    B = np.array([[np.cos(0.01), -np.sin(0.01), 0.5], [np.sin(0.01), np.cos(0.01), 0.25], [0, 0, 1.0]])
+    np.testing.assert_allclose(compose_models([A, B]), B @ A)
+    np.testing.assert_allclose(compose_models([]), np.eye(3))
+    # frame t-2 of a ground that moved (3, -2) px in two frames, registered into frame t: the same pixels
+    rng = np.random.default_rng(2)
+    g = _ground(rng)
+    shift = np.eye(3)
+    shift[:2, 2] = (1.5, -1.0)
+    C = compose_models([shift, shift])
+    moved = cv2.warpAffine(g, np.float32([[1, 0, 3.0], [0, 1, -2.0]]), (W, H))  # frame t: content 3 px right, 2 up
+    old, inside = register_into(g, C)
+    assert not inside[:, :3].any() and not inside[-2:, :].any() and inside[10:-10, 10:-10].all()
+    np.testing.assert_allclose(old[10:-10, 10:-10], moved[10:-10, 10:-10], atol=1e-3)
+    with pytest.raises(ValueError, match=r"matrices: expected finite \(3, 3\) arrays"):
+        compose_models([np.eye(2)])
+
+
+def _det(x0, y0, x1, y1, u, v, area=None):
+    return Detection((x0 + x1) / 2, (y0 + y1) / 2, area or (x1 - x0 + 1) * (y1 - y0 + 1), x0, y0, x1, y1, u, v)
+
+
+def test_merge_adds_where_nothing_lies_replaces_a_slow_part_and_drops_a_fast_vehicles_trail():
+    long_car = _det(100, 50, 123, 61, 0.4, 0.0)
+    # nothing there: added
+    assert merge_detections([], [long_car], baseline_frames=6) == [long_car]
+    # a slow one-pair detection of the car's front edge (a quarter of its box): the long one takes its place
+    edge = _det(118, 50, 123, 61, 0.45, 0.0)
+    assert merge_detections([edge], [long_car], baseline_frames=6) == [long_car]
+    # ... unless replacing is off, or the one-pair detection is the car's whole box
+    assert merge_detections([edge], [long_car], baseline_frames=6, replace_rel=0.0) == [edge]
+    whole = _det(101, 50, 123, 61, 0.45, 0.0)
+    assert merge_detections([whole], [long_car], baseline_frames=6) == [whole]
+    # a car at 10 px a frame now at x 200..223: six frames back it was at x 140..163; the long pair's region
+    # there is its trail, not a mover
+    fast = _det(200, 50, 223, 61, 10.0, 0.0)
+    trail = _det(140, 50, 163, 61, 0.3, 0.0)
+    assert merge_detections([fast], [trail], baseline_frames=6) == [fast]
+    assert len(merge_detections([fast], [trail], baseline_frames=2)) == 2  # two frames back it was elsewhere
+
+
+def _pipeline(**long_baseline):  # long_baseline {}: the defaults (the stage off)
+    return Pipeline.from_dict({
+        "name": "slow", "global_motion": {"method": "ncc_global_motion", "params": {"max_shift": 4}},
+        "jitter": None, "compensation": "shift", "flow": {"method": "dis"}, "threshold": None,
+        "spatial": False, "temporal": False,
+        "detection": {"long_baseline": long_baseline} if long_baseline else {},
+        "tracking": {"point": False, "multi": None}})
+
+
+def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_it():
+    frames = _sequence(10)
+    k = 6
+    on = [e.detections for e in _pipeline(frames=k).run(frames) if hasattr(e, "detections")]
+    off = [e.detections for e in _pipeline().run(frames) if hasattr(e, "detections")]
+    assert LONG_BASELINE_DEFAULTS["frames"] == 0 and all(d == [] for d in off)
+    found = [t for t, ds in enumerate(on) if any(_iou(d, _car_box(t)) >= 0.5 for d in ds)]
+    assert set(range(k, len(on))) <= set(found), found  # every pair with k frames behind it
+    assert all(len(ds) <= 1 for ds in on)
+
+
+@pytest.mark.parametrize("section, match", [
+    ({"frames": 1}, r"detection.long_baseline.frames: expected 0 \(off\) or an integer >= 2, got 1"),
+    ({"frames": 2.5}, r"detection.long_baseline.frames: expected an integer"),
+    ({"max_speed_px": 0}, r"detection.long_baseline.max_speed_px: expected a finite number > 0"),
+    ({"min_displacement_px": -1.0}, r"detection.long_baseline.min_displacement_px: expected a finite number > 0"),
+    ({"ground_model": "cubic"}, r"detection.long_baseline.ground_model: expected affine, quadratic or none"),
+    ({"replace_rel": -0.5}, r"detection.long_baseline.replace_rel: expected a finite number >= 0"),
+    ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
+    ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
+])
+def test_bad_long_baseline_keys_are_rejected_naming_them(section, match):
+    with pytest.raises(PipelineError, match=match):
+        _pipeline(**section)
+
+
+def test_the_defaults_are_the_pipeline_keys_and_the_function_checks_refuse_bad_input():
+    assert _pipeline().config["detection"]["long_baseline"] == LONG_BASELINE_DEFAULTS
+    assert check_long_baseline({}) == LONG_BASELINE_DEFAULTS
+    with pytest.raises(ValueError, match=r"long_baseline: unknown key\(s\) \['bogus'\]"):
+        check_long_baseline({"bogus": 1})
+    f, v = np.zeros((8, 8, 2), np.float32), np.ones((8, 8), bool)
+    fr = (np.zeros((8, 8), np.float32),) * 2
+    with pytest.raises(ValueError, match=r"baseline_frames: expected an integer >= 1, got 0"):
+        long_baseline_detections(f, v, baseline_frames=0, frames=fr, composed=np.eye(3))
+    with pytest.raises(ValueError, match=r"composed: expected a finite \(3, 3\) matrix"):
+        long_baseline_detections(f, v, baseline_frames=2, frames=fr, composed=np.eye(2))
+    with pytest.raises(ValueError, match=r"flow: expected \(H, W, 2\)"):
+        long_baseline_detections(f[..., 0], v, baseline_frames=2, frames=fr, composed=np.eye(3))
+
+
+def test_the_inside_mask_leaves_a_margin_at_the_edge_frame_t_k_covers_and_not_at_the_image_border():
+    g = np.zeros((H, W), np.float32)
+    shift = np.eye(3)
+    shift[0, 2] = 5.0  # the ground moved 5 px right: frame t's first 5 columns were outside frame t-k
+    _, inside = register_into(g, shift, margin_px=3)
+    assert not inside[:, :8].any() and inside[:, 8:].all()  # 5 px uncovered + 3 px margin; other edges kept
+    _, plain = register_into(g, shift)
+    assert not plain[:, :5].any() and plain[:, 5:].all()
+    with pytest.raises(ValueError, match=r"margin_px: expected an integer >= 0, got -1"):
+        register_into(g, shift, margin_px=-1)
+
+
+def test_a_long_baseline_region_where_the_pair_flow_is_fast_is_no_slow_mover():
+    k = 6
+    frames = _sequence(k + 2)
+    t = k
+    C = compose_models([np.eye(3)] * k)
+    old, inside = register_into(frames[t - k], C)
+    wk, vk = dis(_u8(frames[t]), _u8(old))
+    kw = dict(baseline_frames=k, frames=(frames[t], old), composed=C)
+    still = np.zeros((H, W, 2), np.float32)
+    assert len(long_baseline_detections(wk, vk & inside, pair_flow=still, **kw)) == 1
+    # the pair's flow says the same place moves 8 px a frame: a fast vehicle the long pair lost
+    fast = still.copy()
+    fast[50:70, 55:90] = (8.0, 0.0)
+    assert long_baseline_detections(wk, vk & inside, pair_flow=fast, **kw) == []
+    with pytest.raises(ValueError, match=r"pair_flow, pair_valid: expected"):
+        long_baseline_detections(wk, vk & inside, pair_flow=still[:10], **kw)
