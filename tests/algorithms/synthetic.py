@@ -1,4 +1,4 @@
-"""Synthetic textured frames with exactly known motion, for the flow tests.
+"""Synthetic textured frames with exactly known motion, for the flow tests, and the box IoU the detection tests use.
 
 A frame is a sum of random plane waves, evaluated analytically, so any affine
 motion, sub-pixel included, is exact: ``frame1(A x) = frame0(x)`` for the
@@ -55,3 +55,13 @@ def affine_field(M: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     ys, xs = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
     return np.stack([M[0, 0] * xs + M[0, 1] * ys + M[0, 2] - xs,
                      M[1, 0] * xs + M[1, 1] * ys + M[1, 2] - ys], axis=-1)
+
+
+def box_iou(d, box) -> float:
+    """IoU of a detection's inclusive box (``x0_px .. y1_px``) with an inclusive box ``(x0, y0, x1, y1)``, px."""
+    iw = min(d.x1_px, box[2]) - max(d.x0_px, box[0]) + 1
+    ih = min(d.y1_px, box[3]) - max(d.y0_px, box[1]) + 1
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    a = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (box[2] - box[0] + 1) * (box[3] - box[1] + 1)
+    return iw * ih / (a - iw * ih)

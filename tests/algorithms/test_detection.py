@@ -10,6 +10,7 @@ from algorithms.detection import DETECTION_DEFAULTS, Detection, detect_vehicles,
 from algorithms.kalman import BoxKalman
 from algorithms.pipeline import Pipeline, PipelineError
 from algorithms.tracking import MultiTargetTracker
+from tests.algorithms.synthetic import box_iou
 
 H, W = 120, 160
 
@@ -220,16 +221,6 @@ def _paint_car(img, x0, y0, length, width, *, roof=150.0, outline=30.0):
     return out
 
 
-def _iou(d, box):
-    """IoU of a detection's inclusive box with an inclusive box (x0, y0, x1, y1)."""
-    iw = min(d.x1_px, box[2]) - max(d.x0_px, box[0]) + 1
-    ih = min(d.y1_px, box[3]) - max(d.y0_px, box[1]) + 1
-    if iw <= 0 or ih <= 0:
-        return 0.0
-    a = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (box[2] - box[0] + 1) * (box[3] - box[1] + 1)
-    return iw * ih / (a - iw * ih)
-
-
 def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     # 40 x 16 px, 1.5 px a frame to the right: only its front and rear edges change, the roof between does not
     rng = np.random.default_rng(6)
@@ -240,10 +231,10 @@ def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     car = (60, 50, 99, 65)
     (d,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0])
     assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.3)
-    assert _iou(d, car) >= 0.8, d
+    assert box_iou(d, car) >= 0.8, d
     # the front and rear edge parts joined: the largest part alone is about half the car
     (one,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_join=0.0)
-    assert _iou(one, car) < 0.6, one
+    assert box_iou(one, car) < 0.6, one
     # two frames only: the ground the car covers next is taken off, the box still the car within 2 px
     (d2,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]))
     assert (d2.x0_px, d2.y0_px, d2.x1_px, d2.y1_px) == pytest.approx(car, abs=2)
@@ -260,12 +251,12 @@ def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_
     bus = (40, 50, 95, 65)
     kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0])
     (front,) = detect_vehicles(flow, valid, box_reach_px=0, **kw)
-    assert _iou(front, bus) < 0.5, front
+    assert box_iou(front, bus) < 0.5, front
     (d,) = detect_vehicles(flow, valid, box_reach_px=48, **kw)
-    assert _iou(d, bus) >= 0.8, d
+    assert box_iou(d, bus) >= 0.8, d
     # too short a reach: the rear edge stays out
     (short,) = detect_vehicles(flow, valid, box_reach_px=20, **kw)
-    assert _iou(short, bus) < 0.5, short
+    assert box_iou(short, bus) < 0.5, short
     # a car 12 px behind another at the same speed: textured ground lies between them, so the follower stays
     # out of the leader's box, and a follower in the next lane (not across the motion's path) does too
     for x_rear, y_rear in ((40, 50), (66, 30)):
@@ -287,7 +278,7 @@ def test_a_car_faster_than_its_length_whose_flow_broke_in_two_is_one_detection_a
         assert len(dets) == 1, dets
         (d,) = dets
         assert (d.u_px, d.v_px) == pytest.approx((30.0, 0.0), abs=0.5)
-        assert _iou(d, (70, 60, 93, 71)) >= 0.7, (prev is None, d)
+        assert box_iou(d, (70, 60, 93, 71)) >= 0.7, (prev is None, d)
 
 
 def test_the_frames_are_compared_about_the_residual_the_ground_keeps():
@@ -307,7 +298,7 @@ def test_the_frames_are_compared_about_the_residual_the_ground_keeps():
     flow[..., 0] += 1.5  # the local flow carries the ground's residual
     (d,) = detect_vehicles(flow, np.ones((H, W), bool), frames=(g0, g1))
     assert d.u_px == pytest.approx(1.5, abs=0.4)  # relative to the ground
-    assert _iou(d, (60, 50, 89, 63)) >= 0.7, d
+    assert box_iou(d, (60, 50, 89, 63)) >= 0.7, d
 
 
 def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
@@ -380,7 +371,7 @@ def test_a_patch_that_changes_at_its_place_as_noise_does_is_rejected_and_a_stead
         (d,) = detect_vehicles(fl, valid, frames=(f[1], f[2]), prev_frame=f[0])
         assert d.u_px > 1.5 and 50 <= d.x_px <= 89 and 40 <= d.y_px <= 69, d
         if gain == (1.0, 1.0, 1.0):
-            assert _iou(d, (50, 40, 89, 69)) >= 0.6, d
+            assert box_iou(d, (50, 40, 89, 69)) >= 0.6, d
 
 
 def test_the_change_noise_alone_gives_a_static_patch_is_what_the_test_expects():
@@ -434,7 +425,7 @@ def test_a_fast_car_whose_flow_covers_part_of_it_gets_its_whole_box():
     car = (60, 50, 89, 63)
     (d,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0])
     assert d.u_px == pytest.approx(8.0, abs=0.5)
-    assert _iou(d, car) >= 0.8, d
+    assert box_iou(d, car) >= 0.8, d
     # sought within 4 px of the region alone, the box stops short of the car's rear
     (part,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_margin_rel=0.0)
-    assert _iou(part, car) < 0.7, part
+    assert box_iou(part, car) < 0.7, part

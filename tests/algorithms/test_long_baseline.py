@@ -9,6 +9,7 @@ from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baselin
                                       long_baseline_detections, merge_detections, register_into)
 from algorithms.pipeline import Pipeline, PipelineError
 from algorithms.reference import dis
+from tests.algorithms.synthetic import box_iou
 
 H, W = 120, 160
 CAR = (26, 14)  # length, width px (364 px: above min_box_px)
@@ -53,15 +54,6 @@ def _car_box(t, speed_px=SPEED_PX):
     return x, Y0, x + CAR[0] - 1, Y0 + CAR[1] - 1
 
 
-def _iou(d, box):
-    iw = min(d.x1_px, box[2]) - max(d.x0_px, box[0]) + 1
-    ih = min(d.y1_px, box[3]) - max(d.y0_px, box[1]) + 1
-    if iw <= 0 or ih <= 0:
-        return 0.0
-    a = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (box[2] - box[0] + 1) * (box[3] - box[1] + 1)
-    return iw * ih / (a - iw * ih)
-
-
 def _u8(a):
     return np.clip(a, 0, 255).astype(np.uint8)
 
@@ -81,7 +73,7 @@ def test_a_car_at_0_4_px_a_frame_is_found_over_six_frames_and_not_over_one():
     wk, vk = dis(_u8(frames[t]), _u8(old))
     (d,) = long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C)
     assert (d.u_px, d.v_px) == pytest.approx((SPEED_PX, 0.0), abs=0.12)  # the per-frame velocity
-    assert _iou(d, _car_box(t)) >= 0.6, d
+    assert box_iou(d, _car_box(t)) >= 0.6, d
     # a box that small is no vehicle: a walking pedestrian over k frames
     assert long_baseline_detections(wk, vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C,
                                     min_box_px=2 * 26 * 14) == []
@@ -154,7 +146,7 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
     on = [e.detections for e in _pipeline(frames=k).run(frames) if hasattr(e, "detections")]
     off = [e.detections for e in _pipeline().run(frames) if hasattr(e, "detections")]
     assert LONG_BASELINE_DEFAULTS["frames"] == 0 and all(d == [] for d in off)
-    found = [t for t, ds in enumerate(on) if any(_iou(d, _car_box(t)) >= 0.5 for d in ds)]
+    found = [t for t, ds in enumerate(on) if any(box_iou(d, _car_box(t)) >= 0.5 for d in ds)]
     assert set(range(k, len(on))) <= set(found), found  # every pair with k frames behind it
     assert all(len(ds) <= 1 for ds in on)
 
