@@ -454,7 +454,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     vehicles that follow each other; a uniform roof between a car's front and rear edges changes
     neither way). With ``reach_px``, parts up to that far from the region's box join too when they
     lie in its lane (across the motion they overlap the box by half the narrower one) and at most
-    ``join`` of the pixels inside the convex hull of both that neither part marks are static texture:
+    ``reach_join`` of the pixels inside the convex hull of both that neither part marks are static texture:
     a long uniform roof (a bus) moving about a pixel a frame gives the flow its rear or front edge
     alone, and the other edge is the rest of the vehicle (see :func:`_join_in_lane`). Without
     ``prev`` the box reaches one motion ahead, taken off, unless the vehicle moved more than its
@@ -473,11 +473,11 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
         c = _patch(prev, xa, ya, xb, yb)
         gain = np.minimum(gain, cv2.blur(np.abs(_shifted(c, -gu, -gv) - a) - np.abs(_shifted(c, -u - gu, -v - gv) - a),
                                          (3, 3)))
-    moved = (gain > gain_grey).astype(np.uint8)
-    inner = np.zeros_like(moved)  # within margin_px of the region's box
+    marked = (gain > gain_grey).astype(np.uint8)
+    inner = np.zeros_like(marked)  # within margin_px of the region's box
     inner[max(0, y0 - margin_px) - ya:min(h - 1, y1 + margin_px) - ya + 1,
           max(0, x0 - margin_px) - xa:min(w - 1, x1 + margin_px) - xa + 1] = 1
-    moved = cv2.morphologyEx(moved & inner, cv2.MORPH_CLOSE, _disk(2))
+    moved = cv2.morphologyEx(marked & inner, cv2.MORPH_CLOSE, _disk(2))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(moved, connectivity=8)
     if n < 2:
         return None
@@ -504,7 +504,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             zone = np.zeros_like(moved)
             zone[max(0, y0 - reach_px) - ya:min(h - 1, y1 + reach_px) - ya + 1,
                  max(0, x0 - reach_px) - xa:min(w - 1, x1 + reach_px) - xa + 1] = 1
-            far = cv2.morphologyEx((gain > gain_grey).astype(np.uint8) & zone, cv2.MORPH_CLOSE, _disk(2))
+            far = cv2.morphologyEx(marked & zone, cv2.MORPH_CLOSE, _disk(2))
             bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join)
             count += extra
     bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya

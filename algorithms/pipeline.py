@@ -29,8 +29,8 @@ local flow ``w`` (``I1'(x + w) ~ I0(x)``) give ``total = s + w``. With a matrix
 from __future__ import annotations
 
 import copy
-from collections import deque
 import time
+from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any

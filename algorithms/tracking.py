@@ -637,7 +637,7 @@ class _Track:
 #   vehicle drives on at a steady speed however much its box jitters, and the trend grows with every frame;
 #   a region that jumps about in place has none: with 10, about 1 in 10 places that jitter by the travel
 #   ever pass; a car at 0.4 px a frame whose centre jitters by 1 px passes after about 15 frames; 0: off);
-# partial_rel: a confirmed track's detection whose box is narrower than the largest box the track had at its last 25
+# partial_rel: a confirmed track's detection whose box is narrower than the median box the track had at its last 25
 #   detections by more than this fraction along an axis, with one side within this fraction of that box's placed
 #   at the prediction, is a partial view (the vehicle's front under a crown or past the image border, one edge of a
 #   uniform roof): that side is kept and the box completed to that size, so that a vehicle that passes under a
@@ -691,7 +691,7 @@ def _box_of(d) -> tuple[np.ndarray, np.ndarray]:
 
 def _completed(box: np.ndarray, ref: np.ndarray, rel: float) -> np.ndarray:
     """A detection's box ``(cx, cy, w, h)`` completed to the size of ``ref`` (the track's predicted centre and the
-    largest size it had at its last 25 detections) along each axis where it is a partial view (``partial_rel``):
+    median size it had at its last 25 detections) along each axis where it is a partial view (``partial_rel``):
     narrower than ``ref`` by more than ``rel`` of its size, with one side within ``rel`` of ``ref``'s (the vehicle's
     front under a tree crown, its rear past the image border, one edge of a uniform roof). That side is the
     vehicle's own; the box is ``ref``'s size from it. A box inside ``ref`` on both sides (a track whose box was too
@@ -924,7 +924,7 @@ class MultiTargetTracker:
         A constant velocity is fitted to its detections' centres (ground-fixed) by least squares: the
         distance it covers over the track's frames must reach the travel, and the fit's F statistic,
         the scatter it explains per parameter over the residual's per degree of freedom, must reach
-        ``min_trend_f``.
+        ``min_trend_f`` (with ``birth_hits`` under 3 there is no residual to test: the travel decides).
         """
         p = self.params
         t = np.array([f for f, _ in trk.seen], dtype=np.float64)
