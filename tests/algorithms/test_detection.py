@@ -429,3 +429,25 @@ def test_a_fast_car_whose_flow_covers_part_of_it_gets_its_whole_box():
     # sought within 4 px of the region alone, the box stops short of the car's rear
     (part,) = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_margin_rel=0.0)
     assert box_iou(part, car) < 0.7, part
+
+
+def test_the_size_limit_judges_the_box_from_the_frames_not_the_flow_halo():
+    # 20 x 12 px car, 8 px a frame to the right; the flow (Farneback at its default window) spread its motion
+    # over a 60 x 44 px halo around it. At 0.2 m/px the halo is 106 m^2, over a max_area_m2 of 80, the car 9.6 m^2
+    rng = np.random.default_rng(12)
+    g = _ground(rng)
+    frames = [_paint_car(g, 62 + 8 * k - 8, 52, 20, 12) for k in range(3)]  # t-1, t, t+1
+    flow = _field(rng, [(36, 80, 42, 102, (8.0, 0.0))], blur=0.7)
+    valid = np.ones((H, W), bool)
+    car = (62, 52, 81, 63)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], gsd_m_per_px=0.2, max_area_m2=80.0)
+    (d,) = detect_vehicles(flow, valid, **kw)
+    assert d.u_px == pytest.approx(8.0, abs=0.5)
+    assert box_iou(d, car) >= 0.7, d
+    # the same limit in px judges the box too
+    assert len(detect_vehicles(flow, valid, **{**kw, "max_area_px": 2000})) == 1
+    # a limit under the car's box rejects it, in m^2 and in px
+    assert detect_vehicles(flow, valid, **{**kw, "max_area_m2": 6.0}) == []
+    assert detect_vehicles(flow, valid, **{**kw, "max_area_px": 150}) == []
+    # without the frames there is no box but the region's: the halo is judged, and is too large
+    assert detect_vehicles(flow, valid, gsd_m_per_px=0.2, max_area_m2=80.0) == []
