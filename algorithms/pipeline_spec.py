@@ -326,6 +326,7 @@ class DetectionSpec(_Section):
     change_noise_k: float = DETECTION_DEFAULTS["change_noise_k"]
     change_enough: float = DETECTION_DEFAULTS["change_enough"]
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
+    box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
 

@@ -451,3 +451,39 @@ def test_the_size_limit_judges_the_box_from_the_frames_not_the_flow_halo():
     assert detect_vehicles(flow, valid, **{**kw, "max_area_px": 150}) == []
     # without the frames there is no box but the region's: the halo is judged, and is too large
     assert detect_vehicles(flow, valid, gsd_m_per_px=0.2, max_area_m2=80.0) == []
+
+
+def test_two_cars_one_smoothed_flow_region_joined_are_split_by_box_split_rel():
+    # two 20 x 12 px cars with textured roofs 14 px apart in one lane, both 3 px a frame to the right: a smoothing
+    # flow (Farneback's window) gave them one region with the ground between them, which is textured
+    rng = np.random.default_rng(13)
+    g = _ground(rng)
+    roofs = [cv2.GaussianBlur(rng.uniform(0, 255, (12, 20)).astype(np.float32), (0, 0), 1.0) for _ in range(2)]
+
+    def scene(cars):
+        out = []
+        for k in range(3):  # frames t-1, t, t+1
+            f = g.copy()
+            for (x, y), roof in zip(cars, roofs):
+                h, w = min(12, roof.shape[0]), min(20, roof.shape[1])
+                f[y:y + h, x + 3 * k - 3:x + 3 * k - 3 + w] = roof[:h, :w]
+            out.append(f)
+        return dict(frames=(out[1], out[2]), prev_frame=out[0])
+
+    flow = _field(rng, [(44, 72, 32, 102, (3.0, 0.0))], blur=1.5)
+    valid = np.ones((H, W), bool)
+    rear, front = (40, 52, 59, 63), (74, 52, 93, 63)
+    kw = dict(parallax_min_fraction=0.0, **scene([(40, 52), (74, 52)]))  # three movers of one direction: no field
+    (one,) = detect_vehicles(flow, valid, **kw)  # the default: the part holding most of the region alone
+    assert max(box_iou(one, rear), box_iou(one, front)) >= 0.7, one
+    two = detect_vehicles(flow, valid, box_split_rel=0.8, **kw)
+    assert len(two) == 2, two
+    for car in (rear, front):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
+        assert (d.u_px, d.v_px) == pytest.approx((3.0, 0.0), abs=0.5)
+    # a second part much smaller than the first (a 6 x 6 px thing ahead) is no second vehicle at 0.8
+    roofs[1] = roofs[1][:6, :6]
+    kw = dict(parallax_min_fraction=0.0, **scene([(40, 52), (78, 55)]))
+    assert len(detect_vehicles(flow, valid, box_split_rel=0.8, **kw)) == 1
+    with pytest.raises(ValueError, match="box_split_rel"):
+        detect_vehicles(flow, valid, box_split_rel=-0.5)
