@@ -174,6 +174,9 @@ class Detection(NamedTuple):
 #   and the frames the maximum judges the detection's box (width x height), not the flow region: Farneback's
 #   window spread a car moving 8-14 px a frame over 160-230 m^2 on fast-vehicles (a 22 px car is 23 m^2 there),
 #   which the region test rejected (farneback MOTA 0.575 -> 0.687 there, the other pipelines unchanged).
+# max_area_halo_rel: with the box from the frames, a flow region larger than this many times max_area_px or
+#   max_area_m2 is rejected on the region's area before its box is sought (no halo is that large: roofs, a
+#   parallax field; the box of such a region is the costliest part of the stage); >= 1.
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
@@ -182,6 +185,7 @@ DETECTION_DEFAULTS = {
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
     "box_join": 0.5, "box_three_frames": True, "box_reach_px": 48, "box_reach_join": 0.2,
     "change_noise_k": 5.0, "change_enough": 0.5, "box_margin_rel": 1.0, "box_split_rel": 0.0,
+    "max_area_halo_rel": 4.0,
 }
 
 
@@ -246,6 +250,8 @@ def _check_keys(params: dict) -> dict:
     for k in ("open_px", "close_px", "min_area_px", "border_px", "refine_px", "box_reach_px"):
         if not isinstance(p[k], (int, np.integer)):
             raise ValueError(f"{k}: expected an integer >= 0, got {p[k]!r}")
+    if not p["max_area_halo_rel"] >= 1:
+        raise ValueError(f"max_area_halo_rel: expected a number >= 1, got {p['max_area_halo_rel']!r}")
     for k in ("min_explained", "box_join", "box_reach_join", "change_enough"):
         if not p[k] <= 1:
             raise ValueError(f"{k}: expected a fraction in [0, 1], got {p[k]!r}")
@@ -927,8 +933,9 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         area = len(c.ys)
         boxed = frames is not None and p["box_from_frames"]
         # with the box from the frames the upper limits judge that box: a flow halo (a smoothing window
-        # that spreads a fast car's motion over three times its area) is no larger vehicle
-        if not boxed and _too_large(area, p, gsd_m_per_px):
+        # that spreads a fast car's motion over two to three times its area) is no larger vehicle; a region
+        # beyond max_area_halo_rel times them is rejected before its costly box (roofs, a parallax field)
+        if _too_large(area / p["max_area_halo_rel"] if boxed else area, p, gsd_m_per_px):
             continue
         area_m2 = area * gsd_m_per_px**2 if gsd_m_per_px is not None else math.nan
         if gsd_m_per_px is not None and p["min_area_m2"] is not None and area_m2 < p["min_area_m2"]:

@@ -327,6 +327,7 @@ class DetectionSpec(_Section):
     change_enough: float = DETECTION_DEFAULTS["change_enough"]
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
     box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
+    max_area_halo_rel: float = DETECTION_DEFAULTS["max_area_halo_rel"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
 

@@ -487,3 +487,18 @@ def test_two_cars_one_smoothed_flow_region_joined_are_split_by_box_split_rel():
     assert len(detect_vehicles(flow, valid, box_split_rel=0.8, **kw)) == 1
     with pytest.raises(ValueError, match="box_split_rel"):
         detect_vehicles(flow, valid, box_split_rel=-0.5)
+
+
+def test_a_region_beyond_max_area_halo_rel_is_rejected_before_its_box():
+    # the halo test's car (test_the_size_limit_judges_the_box_from_the_frames_not_the_flow_halo): its 106 m^2
+    # region is 1.3 times a max_area_m2 of 80, inside the default 4 and beyond 1.2
+    rng = np.random.default_rng(12)
+    g = _ground(rng)
+    frames = [_paint_car(g, 62 + 8 * k - 8, 52, 20, 12) for k in range(3)]
+    flow = _field(rng, [(36, 80, 42, 102, (8.0, 0.0))], blur=0.7)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], gsd_m_per_px=0.2, max_area_m2=80.0)
+    valid = np.ones((H, W), bool)
+    assert len(detect_vehicles(flow, valid, **kw)) == 1
+    assert detect_vehicles(flow, valid, max_area_halo_rel=1.2, **kw) == []
+    with pytest.raises(ValueError, match="max_area_halo_rel"):
+        detect_vehicles(flow, valid, max_area_halo_rel=0.5)
