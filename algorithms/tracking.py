@@ -770,6 +770,23 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
+def _trend(t: np.ndarray, z: np.ndarray) -> tuple[float, float, np.ndarray] | None:
+    """Least-squares constant velocity through positions ``z`` (N, 2) px at frames ``t`` (N,): the distance it
+    covers from the first frame to the last (px), its F statistic ((explained / 2) / (residual / (2N - 4)),
+    infinite for N <= 2) and each position's squared distance from the fit (N,); None when all frames are one."""
+    tc, zc = t - t.mean(), z - z.mean(axis=0)
+    span = float(tc @ tc)
+    if span == 0:
+        return None
+    vel = (tc @ zc) / span
+    net = float(np.hypot(*vel)) * float(t.max() - t.min())
+    explained = float(vel @ vel) * span
+    off = zc - tc[:, None] * vel[None, :]
+    dof = 2 * len(t) - 4
+    f = math.inf if dof <= 0 else (explained / 2) / (max(float((off ** 2).sum()), 1e-12) / dof)
+    return net, f, (off ** 2).sum(axis=1)
+
+
 class MultiTargetTracker:
     """Boxes tracked by constant-velocity Kalman filters, Hungarian assignment on IoU and distance, birth / death.
 
@@ -939,23 +956,28 @@ class MultiTargetTracker:
         distance it covers over the track's frames must reach the travel, and the fit's F statistic,
         the scatter it explains per parameter over the residual's per degree of freedom, must reach
         ``min_trend_f`` (with ``birth_hits`` under 3 there is no residual to test: the travel decides).
+        If it fails, the n // 8 detections farthest from the fit are left out and the fit made again,
+        and passes at twice ``min_trend_f`` (a frame whose region split gives a box of part of the
+        vehicle, its centre many pixels off: a long track should not wait for that frame's scatter to be
+        outweighed; twice, because leaving out the worst points makes any scatter look steadier: a crown
+        swaying in place was confirmed in 21 of 100 clips at 1x, 14 at 2x, 13 without the second fit).
         """
         p = self.params
         t = np.array([f for f, _ in trk.seen], dtype=np.float64)
         z = np.array([c for _, c in trk.seen])
-        tc, zc = t - t.mean(), z - z.mean(axis=0)
-        span = float(tc @ tc)
-        if span == 0:
-            return False
-        vel = (tc @ zc) / span
-        net = float(np.hypot(*vel)) * float(t[-1] - t[0])
         side = float(max(trk.kf.x[2], trk.kf.x[3]))
-        if net < max(p["min_travel_px"], p["min_travel_rel"] * side):
+        need = max(p["min_travel_px"], p["min_travel_rel"] * side)
+        fit = _trend(t, z)
+        if fit is None:
             return False
-        explained = float(vel @ vel) * span
-        residual = float((zc ** 2).sum()) - explained
-        dof = 2 * len(t) - 4
-        return dof <= 0 or explained / 2 >= p["min_trend_f"] * max(residual, 1e-12) / dof
+        if fit[0] >= need and fit[1] >= p["min_trend_f"]:
+            return True
+        drop = len(t) // 8
+        if drop == 0:
+            return False
+        keep = np.argsort(fit[2], kind="stable")[:len(t) - drop]
+        fit = _trend(t[keep], z[keep])
+        return fit is not None and fit[0] >= need and fit[1] >= 2 * p["min_trend_f"]
 
     def _hold(self, trk: _Track, img: np.ndarray, pred: np.ndarray, off: np.ndarray, others: list) -> np.ndarray | None:
         """The ground-fixed box where ``trk``'s template matches ``img`` (``hold_min_ncc``), or None.
