@@ -1,11 +1,12 @@
 """How close synthetic footage is to real aerial video: image and scene statistics, synthetic / real.
 
-    python benchmarks/realism.py [SEQ ...] [--frames N] [--real DIR] [--image PNG] [--spectrum PNG]
+    python benchmarks/realism.py [SEQ ...] [--frames N] [--seeds S ...] [--real DIR] [--image PNG] [--spectrum PNG]
 
 ``SEQ`` is a preset name or a scene YAML (rendered into ``$AEROBENCH_CACHE`` first as it stands:
 a preset's own ``image.n_frames``, the sequence ``aerobench render`` and ``run`` make; ``--frames N``
 renders N frames instead, which is another world, as the world and its traffic are laid out over
-the whole flight's footprint) or a sequence folder (any: another branch's world, a real clip
+the whole flight's footprint; ``--seeds S ...`` renders it once per seed and pools the worlds, as
+one world is a small sample of a preset) or a sequence folder (any: another branch's world, a real clip
 written as a sequence folder); default ``realistic``. The real side is the three KIT AIS sequences in
 ``--real`` (default ``../shared/external/kit_ais`` beside the clone: nadir views of Munich streets, every
 vehicle boxed in YOLO format; see ``SOURCES.md`` there).
@@ -389,7 +390,21 @@ def real_side(root: Path) -> list[Side]:
     return sides
 
 
-def synthetic_side(arg: str, frames: int | None = None) -> Side:
+def synthetic_sides(arg: str, frames: int | None = None, seeds: list[int] | None = None) -> Side:
+    """:func:`synthetic_side` of ``arg`` once per seed (``seeds`` None: its own), pooled into one side.
+
+    One world is a small sample: a preset's saturation, vehicle density and moving fraction change
+    by factors of 1.5-10 from one seed to another (``docs/realism.md``); pooled over several seeds
+    the statistics describe the preset, not one of its worlds. A sequence folder takes no seeds.
+    """
+    if not seeds or Path(arg).is_dir():
+        return synthetic_side(arg, frames)
+    parts = [synthetic_side(arg, frames, seed=s) for s in seeds]
+    return Side(f"{Path(arg).stem} seeds {', '.join(str(s) for s in seeds)}",
+                [f for p in parts for f in p.frames], [b for p in parts for b in p.boxes])
+
+
+def synthetic_side(arg: str, frames: int | None = None, *, seed: int | None = None) -> Side:
     """A sequence folder, or a preset / scene YAML rendered into the cache first.
 
     ``frames`` None renders the spec as it stands (a preset's own ``image.n_frames``: the sequence
@@ -402,7 +417,10 @@ def synthetic_side(arg: str, frames: int | None = None) -> Side:
 
     path = Path(arg)
     if not (path.is_dir() and (path / "frames").is_dir()):
-        spec = load_scene_spec(arg, {} if frames is None else {"image.n_frames": frames})
+        overrides = {} if frames is None else {"image.n_frames": frames}
+        if seed is not None:
+            overrides["seed"] = seed
+        spec = load_scene_spec(arg, overrides)
         cache = Path(os.environ.get("AEROBENCH_CACHE", Path.home() / ".cache" / "aerobench"))
         path = cached_sequence(spec, cache)
     seq = Sequence(path)
@@ -621,6 +639,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="render each preset or YAML with this many frames instead of its own image.n_frames "
                          "(another world: it is laid out over the flight's footprint)")
     ap.add_argument("--spectrum", default=None, help="also plot the radially averaged power spectra here, PNG")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None,
+                    help="render each preset or YAML once per seed and pool them (default: its own seed)")
     ap.add_argument("--real", default=str(KIT_AIS), help="folder of KIT AIS sequences (default %(default)s)")
     ap.add_argument("--image", default="realism_side_by_side.png", help="the side-by-side crop, PNG")
     args = ap.parse_args(argv)
@@ -630,7 +650,7 @@ def main(argv: list[str] | None = None) -> int:
     if not real_root.is_dir():
         ap.error(f"--real: {real_root}: no such folder")
     real = real_side(real_root)
-    synth = [synthetic_side(s, args.frames) for s in args.sequences]
+    synth = [synthetic_sides(s, args.frames, args.seeds) for s in args.sequences]
     # every sequence, synthetic and real, is scaled down to the smallest median vehicle among them (one
     # factor for the whole real side: its three sequences share a camera); sequences at other ground
     # sampling distances are so compared at the same vehicle size each, not at a pooled median

@@ -168,6 +168,26 @@ def test_moving_fraction_pools_every_frame_and_skips_unknown_motion():
     assert np.isnan(realism.moving_fraction([realism.Side("t", [], [])]))
 
 
+def test_several_seeds_are_rendered_each_and_pooled_into_one_side(monkeypatch):
+    calls = []
+
+    def one(arg, frames=None, *, seed=None):
+        calls.append((arg, frames, seed))
+        n = seed or 1  # the seed's number of boxes, to tell the worlds apart
+        b = realism.SceneBoxes(np.zeros((n, 2)), np.ones((n, 2)))
+        return realism.Side(f"{arg}-{seed}", [np.full((4, 4, 3), n, np.uint8)], [b])
+
+    monkeypatch.setattr(realism, "synthetic_side", one)
+    side = realism.synthetic_sides("city", 20, [3, 5])
+    assert calls == [("city", 20, 3), ("city", 20, 5)]
+    assert [int(f[0, 0, 0]) for f in side.frames] == [3, 5] and [len(b.centres) for b in side.boxes] == [3, 5]
+    assert side.name == "city seeds 3, 5"
+    # without seeds: the spec's own world, once
+    calls.clear()
+    realism.synthetic_sides("city", None, None)
+    assert calls == [("city", None, None)]
+
+
 def _side(name: str, frame: np.ndarray, length_px: float, speeds_mps=()) -> "realism.Side":
     n = len(speeds_mps)
     b = realism.SceneBoxes(centres=np.full((n, 2), 20.0), sizes=np.tile([length_px, length_px / 2], (n, 1)))
