@@ -393,9 +393,10 @@ def real_side(root: Path) -> list[Side]:
 def synthetic_sides(arg: str, frames: int | None = None, seeds: list[int] | None = None) -> Side:
     """:func:`synthetic_side` of ``arg`` once per seed (``seeds`` None: its own), pooled into one side.
 
-    One world is a small sample: a preset's saturation, vehicle density and moving fraction change
-    by factors of 1.5-10 from one seed to another (``docs/realism.md``); pooled over several seeds
-    the statistics describe the preset, not one of its worlds. A sequence folder takes no seeds.
+    One world is a small sample: a preset's saturation and vehicle density change by factors of
+    1.5-3, its moving fraction by up to 25, from one seed to another (``docs/realism.md``); pooled
+    over several seeds the statistics describe the preset, not one of its worlds. A sequence folder
+    takes no seeds.
     """
     if not seeds or Path(arg).is_dir():
         return synthetic_side(arg, frames)
