@@ -471,8 +471,8 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     of the two change masks, each made motion-aware). The gain, averaged over 3 x 3 px, above
     ``gain_grey`` grey levels, closed over 2 px, within ``margin_px`` of the region's box: its
     8-connected part that holds most of the region's pixels, joined by the other parts that lie
-    at least half in the region when at most ``join`` of the pixels between them are static
-    texture (warping by the motion makes them worse by ``gain_grey``: ground between two
+    at least half in the region when at most ``join`` of the pixels between them (in the convex hull
+    of the parts) are static texture (warping by the motion makes them worse by ``gain_grey``: ground between two
     vehicles that follow each other; a uniform roof between a car's front and rear edges changes
     neither way). With ``reach_px``, parts up to that far from the region's box join too when they
     lie in its lane (across the motion they overlap the box by half the narrower one) and at most
@@ -518,14 +518,22 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     apart = []  # parts in the region that did not join: static texture between them and the box
     if join > 0:
         static = gain < -gain_grey
+        taken = labels == k  # the parts joined so far
         for j in np.argsort(-votes, kind="stable"):
             if j == k or votes[j] == 0 or 2 * votes[j] < stats[j, cv2.CC_STAT_AREA]:
                 continue
             c0, r0, c1, r1 = min(bx0, left[j]), min(by0, top[j]), max(bx1, right[j]), max(by1, bottom[j])
-            between = moved[r0:r1 + 1, c0:c1 + 1] == 0
+            # between: inside the convex hull of the parts, not marked (a box would add the ground beside a
+            # vehicle that drives diagonally, and a diagonal car's front and rear would never join)
+            both = taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == j)
+            ys, xs = np.nonzero(both)
+            hull = np.zeros(both.shape, np.uint8)
+            cv2.fillConvexPoly(hull, cv2.convexHull(np.stack([xs, ys], axis=1).astype(np.int32)), 1)
+            between = (hull == 1) & (moved[r0:r1 + 1, c0:c1 + 1] == 0)
             if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
                 bx0, by0, bx1, by1 = c0, r0, c1, r1
                 count += int(stats[j, cv2.CC_STAT_AREA])
+                taken |= labels == j
             else:
                 apart.append(j)
         if reach_px > 0 and math.hypot(u, v) >= 0.25:

@@ -421,6 +421,8 @@ class MultiSpec(_Section):
     death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
     coast_gate_growth: float = MULTI_DEFAULTS["coast_gate_growth"]
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]
+    fill_gaps: StrictBool = MULTI_DEFAULTS["fill_gaps"]
+    fill_min_ncc: float = MULTI_DEFAULTS["fill_min_ncc"]
     use_velocity: StrictBool = MULTI_DEFAULTS["use_velocity"]
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]

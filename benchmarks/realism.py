@@ -1,10 +1,13 @@
 """How close synthetic footage is to real aerial video: image and scene statistics, synthetic / real.
 
-    python benchmarks/realism.py [SEQ ...] [--frames N] [--real DIR] [--image PNG]
+    python benchmarks/realism.py [SEQ ...] [--frames N] [--seeds S ...] [--real DIR] [--image PNG] [--spectrum PNG]
 
-``SEQ`` is a preset name or a scene YAML (rendered into ``$AEROBENCH_CACHE`` first, ``--frames``
-frames, default 20) or a sequence folder (any: another branch's world, a real clip written as a
-sequence folder); default ``realistic``. The real side is the three KIT AIS sequences in
+``SEQ`` is a preset name or a scene YAML (rendered into ``$AEROBENCH_CACHE`` first as it stands:
+a preset's own ``image.n_frames``, the sequence ``aerobench render`` and ``run`` make; ``--frames N``
+renders N frames instead, which is another world, as the world and its traffic are laid out over
+the whole flight's footprint; ``--seeds S ...`` renders it once per seed and pools the worlds, as
+one world is a small sample of a preset) or a sequence folder (any: another branch's world, a real clip
+written as a sequence folder); default ``realistic``. The real side is the three KIT AIS sequences in
 ``--real`` (default ``../shared/external/kit_ais`` beside the clone: nadir views of Munich streets, every
 vehicle boxed in YOLO format; see ``SOURCES.md`` there).
 
@@ -39,8 +42,13 @@ them, and the size-dependent statistics (spectrum,
 gradients, local contrast, saturation, vehicles per megapixel, speeds) are computed on the scaled
 frames; noise and blockiness belong to the pixel grid of the sensor and its codec and are measured
 at each side's own resolution. Each statistic is reported as synthetic / real with PASS when the
-ratio lies within +/-25 % (``TOLERANCE``). A side-by-side crop (synthetic left, real right, at the
-matched scale) is written to ``--image`` for people.
+ratio lies within +/-25 % (``TOLERANCE``); with several sequences, each one's ratios alone follow
+(the same real frames, the same common size). Then the real sequences' own moving fractions (how
+much the statistic varies from one street to the next), and the power spectrum by octave of
+wavelength at the common size, synthetic / real (where the slope's difference comes from). A
+side-by-side crop (synthetic left, real right, at the matched scale) is written to ``--image``
+for people, and with ``--spectrum`` a plot of the radially averaged spectra, at the common size
+and at each side's own pixels.
 
 Figures before and after issue 22's look and traffic work, and why each failing statistic fails:
 ``docs/realism.md``.
@@ -78,6 +86,9 @@ NOT_COMPARABLE = {
 MATCH_GATE_PX = 25.0
 KIT_AIS = Path(__file__).resolve().parents[2] / "shared" / "external" / "kit_ais"  # shared/ beside the clone
 SPECTRUM_BAND_CYCLES_PER_PX = (1.0 / 64.0, 0.25)
+# octave bands of wavelength, px at the common vehicle size, for the spectrum's power side by side
+BANDS_PX = (2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0)
+SPECTRUM_RINGS = np.geomspace(1.0 / 256.0, 0.5, 41)  # rings of the plotted spectrum, cycles per pixel
 CONTRAST_WINDOW_PX = 15
 BLOCK_PX = 8
 
@@ -93,6 +104,43 @@ def as_gray(img: np.ndarray) -> np.ndarray:
     if img.ndim == 2:
         return img.astype(np.float64)
     raise ValueError(f"expected an (H, W) or (H, W, 3) image, got shape {img.shape}")
+
+
+def power_spectrum(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Power spectrum of a gray image under a Hann window: radial frequency and power of every bin.
+
+    Parameters
+    ----------
+    gray : (H, W) float, gray levels; H, W >= 32
+
+    Returns
+    -------
+    f : (H * W,) float64, cycles per pixel (0 .. 0.707)
+    P : (H * W,) float64, ``|FFT|^2`` of the windowed, mean-free image over the window's energy
+        (gray levels^2 per bin: images of other sizes compare)
+    """
+    g = np.asarray(gray, np.float64)
+    if g.ndim != 2 or min(g.shape) < 32:
+        raise ValueError(f"power_spectrum: expected an (H, W) image with H, W >= 32, got shape {g.shape}")
+    h, w = g.shape
+    win = np.outer(np.hanning(h), np.hanning(w))
+    P = np.abs(np.fft.fft2((g - g.mean()) * win)) ** 2 / np.sum(win ** 2)
+    f = np.hypot(np.fft.fftfreq(h)[:, None], np.fft.fftfreq(w)[None, :])
+    return f.ravel(), P.ravel()
+
+
+def radial_average(f: np.ndarray, P: np.ndarray, edges_cycles_per_px: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean frequency and mean power in each ring ``[edges[k], edges[k+1])`` (NaN for an empty ring)."""
+    edges = np.asarray(edges_cycles_per_px, np.float64)
+    which = np.digitize(f, edges) - 1
+    ok = (which >= 0) & (which < len(edges) - 1)
+    n = len(edges) - 1
+    counts = np.bincount(which[ok], minlength=n).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fm = np.bincount(which[ok], weights=f[ok], minlength=n) / counts
+        pm = np.bincount(which[ok], weights=P[ok], minlength=n) / counts
+    return fm, pm
 
 
 def spectrum_slope(gray: np.ndarray, *, band_cycles_per_px: tuple[float, float] = SPECTRUM_BAND_CYCLES_PER_PX
@@ -112,23 +160,24 @@ def spectrum_slope(gray: np.ndarray, *, band_cycles_per_px: tuple[float, float] 
     g = np.asarray(gray, np.float64)
     if g.ndim != 2 or min(g.shape) < 32:
         raise ValueError(f"spectrum_slope: expected an (H, W) image with H, W >= 32, got shape {g.shape}")
-    h, w = g.shape
-    win = np.outer(np.hanning(h), np.hanning(w))
-    F = np.fft.fft2((g - g.mean()) * win)
-    P = np.abs(F) ** 2
-    fy = np.fft.fftfreq(h)[:, None]
-    fx = np.fft.fftfreq(w)[None, :]
-    f = np.hypot(fx, fy)
+    return slope_of(*power_spectrum(g), band_cycles_per_px=band_cycles_per_px)
+
+
+def slope_of(f: np.ndarray, P: np.ndarray, *, band_cycles_per_px: tuple[float, float] = SPECTRUM_BAND_CYCLES_PER_PX
+             ) -> float:
+    """:func:`spectrum_slope` of a spectrum from :func:`power_spectrum`: 24 log-spaced rings over the
+    band (every octave weighs the same in the fit)."""
     lo, hi = band_cycles_per_px
-    edges = np.geomspace(lo, hi, 25)  # log-spaced rings: every octave weighs the same in the fit
-    which = np.digitize(f.ravel(), edges) - 1
-    ok = (which >= 0) & (which < len(edges) - 1)
-    sums = np.bincount(which[ok], weights=P.ravel()[ok], minlength=len(edges) - 1)
-    counts = np.bincount(which[ok], minlength=len(edges) - 1)
-    fsum = np.bincount(which[ok], weights=f.ravel()[ok], minlength=len(edges) - 1)
-    keep = counts > 0
-    slope, _ = np.polyfit(np.log(fsum[keep] / counts[keep]), np.log(sums[keep] / counts[keep]), 1)
+    fm, pm = radial_average(f, P, np.geomspace(lo, hi, 25))
+    keep = np.isfinite(pm) & (pm > 0)
+    slope, _ = np.polyfit(np.log(fm[keep]), np.log(pm[keep]), 1)
     return float(slope)
+
+
+def band_powers(f: np.ndarray, P: np.ndarray, *, bands_px: tuple[float, ...] = BANDS_PX) -> np.ndarray:
+    """Mean power in octave bands of wavelength: ``bands_px[k] <= 1 / f < bands_px[k + 1]`` px, (len - 1,)."""
+    edges = 1.0 / np.asarray(bands_px, np.float64)[::-1]
+    return radial_average(f, P, edges)[1][::-1]
 
 
 def gradient_magnitude(gray: np.ndarray) -> np.ndarray:
@@ -341,18 +390,42 @@ def real_side(root: Path) -> list[Side]:
     return sides
 
 
-def synthetic_side(arg: str, frames: int) -> Side:
-    """A sequence folder, or a preset / scene YAML rendered into the cache first."""
+def synthetic_sides(arg: str, frames: int | None = None, seeds: list[int] | None = None) -> Side:
+    """:func:`synthetic_side` of ``arg`` once per seed (``seeds`` None: its own), pooled into one side.
+
+    One world is a small sample: a preset's saturation and vehicle density change by factors of
+    1.5-3, its moving fraction by up to 25, from one seed to another (``docs/realism.md``); pooled
+    over several seeds the statistics describe the preset, not one of its worlds. A sequence folder
+    takes no seeds.
+    """
+    if not seeds or Path(arg).is_dir():
+        return synthetic_side(arg, frames)
+    parts = [synthetic_side(arg, frames, seed=s) for s in seeds]
+    return Side(f"{Path(arg).stem} seeds {', '.join(str(s) for s in seeds)}",
+                [f for p in parts for f in p.frames], [b for p in parts for b in p.boxes])
+
+
+def synthetic_side(arg: str, frames: int | None = None, *, seed: int | None = None) -> Side:
+    """A sequence folder, or a preset / scene YAML rendered into the cache first.
+
+    ``frames`` None renders the spec as it stands (a preset's own ``image.n_frames``: the sequence
+    ``aerobench render`` and ``run`` make, from the same cache); a number renders that many frames
+    instead, which is another scene (the world and its traffic are laid out over the whole
+    flight's footprint), and reads at most that many of a folder.
+    """
     from scenes import cached_sequence, load_scene_spec
     from scenes.sequence import Sequence
 
     path = Path(arg)
     if not (path.is_dir() and (path / "frames").is_dir()):
-        spec = load_scene_spec(arg, {"image.n_frames": frames})
+        overrides = {} if frames is None else {"image.n_frames": frames}
+        if seed is not None:
+            overrides["seed"] = seed
+        spec = load_scene_spec(arg, overrides)
         cache = Path(os.environ.get("AEROBENCH_CACHE", Path.home() / ".cache" / "aerobench"))
         path = cached_sequence(spec, cache)
     seq = Sequence(path)
-    n = min(len(seq), frames)
+    n = len(seq) if frames is None else min(len(seq), frames)
     imgs = [seq.frame(i) for i in range(n)]
     boxes = []
     tracks = seq.tracks if (path / "tracks.csv").is_file() else None
@@ -404,20 +477,33 @@ def scaled(img: np.ndarray, s: float) -> np.ndarray:
     return cv2.resize(img, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
 
 
-def side_statistics(sides: list[Side], scale: float | list[float]) -> dict[str, float]:
+def side_statistics(sides: list[Side], scale: float | list[float], *, native_spectrum: bool = False) -> dict:
     """Every statistic of one side; ``scale`` the factor its frames are resized by to match vehicle size
-    (one for all its sequences, or one per sequence)."""
+    (one for all its sequences, or one per sequence).
+
+    The statistics are floats (medians over frames, or counts over all of them); besides them
+    ``band_power`` (len(BANDS_PX) - 1,) is the mean power in each octave band of wavelength at the
+    common size and ``spectrum_f``, ``spectrum_P`` the radially averaged spectrum there
+    (``SPECTRUM_RINGS``), both geometric means over frames; with ``native_spectrum`` also
+    ``native_f``, ``native_P`` at each frame's own pixels.
+    """
     scales = list(scale) if isinstance(scale, (list, tuple)) else [scale] * len(sides)
     if len(scales) != len(sides):
         raise ValueError(f"side_statistics: expected one scale per sequence ({len(sides)}), got {len(scales)}")
     per: dict[str, list[float]] = {k: [] for k in ("spectrum_slope", "gradient_median", "gradient_p90",
                                                    "local_contrast", "saturation", "noise_sigma", "blockiness")}
     n_boxes, mpx, moving, known, lengths, speeds, speeds_mps = 0, 0.0, 0, 0, [], [], []
+    bands, rings, native = [], [], []
     for side, scale in zip(sides, scales):
         for img, b in zip(side.frames, side.boxes):
             small = scaled(img, scale)
             g_small, g_native = as_gray(small), as_gray(img)
-            per["spectrum_slope"].append(spectrum_slope(g_small))
+            f, P = power_spectrum(g_small)
+            per["spectrum_slope"].append(slope_of(f, P))
+            bands.append(band_powers(f, P))
+            rings.append(radial_average(f, P, SPECTRUM_RINGS))
+            if native_spectrum:
+                native.append(radial_average(*power_spectrum(g_native), SPECTRUM_RINGS))
             med, p90 = gradient_stats(g_small)
             per["gradient_median"].append(med)
             per["gradient_p90"].append(p90)
@@ -443,6 +529,19 @@ def side_statistics(sides: list[Side], scale: float | list[float]) -> dict[str, 
     out["speed_px_per_frame"] = float(np.median(sp)) if sp.size else float("nan")
     sm = np.concatenate(speeds_mps) if speeds_mps else np.zeros(0)
     out["speed_mps"] = float(np.median(sm)) if sm.size else float("nan")  # printed, not compared
+
+    def geomean(rows):  # over frames, column by column; NaN where no frame has a value (a ring too wide)
+        if not len(rows):
+            return np.zeros(0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logs = np.log(np.asarray(rows, np.float64))
+            ok = np.isfinite(logs)
+            return np.exp(np.where(ok, logs, 0.0).sum(axis=0) / ok.sum(axis=0))
+
+    out["band_power"] = geomean(bands)
+    out["spectrum_f"], out["spectrum_P"] = (geomean([r[0] for r in rings]), geomean([r[1] for r in rings]))
+    if native_spectrum:
+        out["native_f"], out["native_P"] = geomean([r[0] for r in native]), geomean([r[1] for r in native])
     return out
 
 
@@ -481,21 +580,78 @@ def side_by_side(synthetic: np.ndarray, real: np.ndarray, *, crop_px: int = 256,
     return canvas
 
 
+def moving_fraction(sides: list[Side]) -> float:
+    """Moving vehicles over vehicles whose motion is known, all frames of ``sides`` together (NaN: none known)."""
+    moving = known = 0
+    for side in sides:
+        for b in side.boxes:
+            if b.moving is not None:
+                moving += int(b.moving[b.moving_known].sum())
+                known += int(b.moving_known.sum())
+    return moving / known if known else float("nan")
+
+
+def plot_spectra(path: str, real: dict, synthetic: list[dict], labels: list[str], *, target_px: float,
+                 lengths_px: tuple[float, list[float]]) -> None:
+    """Radially averaged spectra of the real side and of each synthetic sequence, written to ``path`` (PNG).
+
+    Power times ``f^2`` (flat for a 1/f^2 spectrum), normalised at one cycle per vehicle length,
+    against cycles per median vehicle length: solid at the common vehicle size (what the statistics
+    see; the fitted band shaded), dashed at each side's own pixels.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5))
+    L_real, L_synth = lengths_px
+    for name, st, L, ls_colour in [("KIT AIS", real, L_real, "k")] + [
+            (lab, st, L, None) for lab, st, L in zip(labels, synthetic, L_synth)]:
+        for key_f, key_P, length, style in (("spectrum_f", "spectrum_P", target_px, "-"),
+                                            ("native_f", "native_P", L, "--")):
+            if key_f not in st:
+                continue
+            f, P = st[key_f], st[key_P]
+            ok = np.isfinite(f) & np.isfinite(P) & (P > 0)
+            fv = f[ok] * length
+            y = P[ok] * f[ok] ** 2
+            y = y / np.exp(np.interp(0.0, np.log(fv), np.log(y)))
+            line = ax.loglog(fv, y, style, color=ls_colour,
+                             label=f"{name}, {'common size' if style == '-' else 'own pixels'}")[0]
+            ls_colour = ls_colour or line.get_color()
+        ls_colour = None
+    lo, hi = SPECTRUM_BAND_CYCLES_PER_PX
+    ax.axvspan(lo * target_px, hi * target_px, alpha=0.08, label="slope fitted (common size)")
+    ax.set_xlabel("cycles per median vehicle length")
+    ax.set_ylabel("P(f) f^2, 1 at one cycle per vehicle")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sequences", nargs="*", default=["realistic"],
                     help="presets, scene YAML files or sequence folders (default: realistic)")
-    ap.add_argument("--frames", type=int, default=20, help="frames of each synthetic sequence (default 20)")
+    ap.add_argument("--frames", type=int, default=None,
+                    help="render each preset or YAML with this many frames instead of its own image.n_frames "
+                         "(another world: it is laid out over the flight's footprint)")
+    ap.add_argument("--spectrum", default=None, help="also plot the radially averaged power spectra here, PNG")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None,
+                    help="render each preset or YAML once per seed and pool them (default: its own seed)")
     ap.add_argument("--real", default=str(KIT_AIS), help="folder of KIT AIS sequences (default %(default)s)")
     ap.add_argument("--image", default="realism_side_by_side.png", help="the side-by-side crop, PNG")
     args = ap.parse_args(argv)
-    if args.frames < 2:
+    if args.frames is not None and args.frames < 2:
         ap.error(f"--frames: expected at least 2, got {args.frames}")
     real_root = Path(args.real)
     if not real_root.is_dir():
         ap.error(f"--real: {real_root}: no such folder")
     real = real_side(real_root)
-    synth = [synthetic_side(s, args.frames) for s in args.sequences]
+    synth = [synthetic_sides(s, args.frames, args.seeds) for s in args.sequences]
     # every sequence, synthetic and real, is scaled down to the smallest median vehicle among them (one
     # factor for the whole real side: its three sequences share a camera); sequences at other ground
     # sampling distances are so compared at the same vehicle size each, not at a pooled median
@@ -504,7 +660,11 @@ def main(argv: list[str] | None = None) -> int:
     target = min([v for v in L_each + [L_r] if np.isfinite(v)] or [1.0])
     s_each = [min(1.0, target / v) if np.isfinite(v) else 1.0 for v in L_each]
     s_real = min(1.0, target / L_r) if np.isfinite(L_r) else 1.0
-    stats_s, stats_r = side_statistics(synth, s_each), side_statistics(real, s_real)
+    stats_s = side_statistics(synth, s_each, native_spectrum=args.spectrum is not None)
+    stats_r = side_statistics(real, s_real, native_spectrum=args.spectrum is not None)
+    labels = [Path(a).stem if a.endswith((".yaml", ".yml")) else Path(a).name for a in args.sequences]
+    each = ([side_statistics([s], [f], native_spectrum=args.spectrum is not None) for s, f in zip(synth, s_each)]
+            if len(synth) > 1 else [stats_s])
     for s, v, f in zip(synth, L_each, s_each):
         print(f"synthetic: {s.name} ({len(s.frames)} frames), median vehicle {v:.1f} px, scaled by {f:.3f}")
     print(f"real: KIT AIS {', '.join(s.name for s in real)} ({sum(len(s.frames) for s in real)} frames), median "
@@ -530,6 +690,38 @@ def main(argv: list[str] | None = None) -> int:
         print(f"not comparable: {k}: {why}")
     print(f"synthetic moving vehicles' median speed over the ground: {stats_s['speed_mps']:.1f} m/s "
           f"({MOTOR_CLASSES} over {MOVING_SPEED_MPS} m/s)")
+    if len(synth) > 1:
+        print()
+        print("each synthetic sequence alone, against the same real frames at the same vehicle size "
+              "(synthetic / real):")
+        print()
+        print("| statistic | real | " + " | ".join(labels) + " |")
+        print("|---|---|" + "---|" * len(labels))
+        for k in UNITS:
+            b = stats_r[k]
+            cells = [f"{e[k] / b:.3f} {'n/c' if k in NOT_COMPARABLE else verdict(e[k] / b)}"
+                     if np.isfinite(e[k]) and np.isfinite(b) and b else "n/a" for e in each]
+            print(f"| {k} | {b:.3f} | " + " | ".join(cells) + " |")
+    print()
+    print("the real sequences' own moving fractions: " + ", ".join(
+        f"{s.name} {moving_fraction([s]):.3f}" for s in real) + " (the spread one street to the next)")
+    print()
+    print(f"power spectrum by octave of wavelength at the common size (px; a vehicle is {target:.1f} px), "
+          "geometric mean over frames, synthetic / real:")
+    print()
+    print("| wavelength px | vehicle lengths | real power | " + " | ".join(labels if len(synth) > 1 else ["synthetic"])
+          + (" | pooled |" if len(synth) > 1 else " |"))
+    print("|---|---|---|" + "---|" * (len(labels) + (len(synth) > 1) if len(synth) > 1 else 1))
+    for k in range(len(BANDS_PX) - 1):
+        lo, hi = BANDS_PX[k], BANDS_PX[k + 1]
+        pr = stats_r["band_power"][k]
+        cells = [f"{e['band_power'][k] / pr:.2f}" for e in each] + ([f"{stats_s['band_power'][k] / pr:.2f}"]
+                                                                     if len(synth) > 1 else [])
+        print(f"| {lo:g}-{hi:g} | {lo / target:.2f}-{hi / target:.2f} | {pr:.3g} | " + " | ".join(cells) + " |")
+    if args.spectrum:
+        plot_spectra(args.spectrum, stats_r, each, labels, target_px=target,
+                     lengths_px=(L_r, L_each))
+        print(f"spectra (power x f^2 against cycles per vehicle length): {args.spectrum}")
     pic = side_by_side(scaled(synth[0].frames[0], s_each[0]), scaled(real[0].frames[0], s_real),
                        centres=(synth[0].boxes[0].centres * s_each[0], real[0].boxes[0].centres * s_real))
     cv2.imwrite(args.image, cv2.cvtColor(pic, cv2.COLOR_RGB2BGR))

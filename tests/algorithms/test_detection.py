@@ -240,6 +240,40 @@ def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     assert (d2.x0_px, d2.y0_px, d2.x1_px, d2.y1_px) == pytest.approx(car, abs=2)
 
 
+def _paint_diagonal_car(img, cx, cy, length, width, *, roof=150.0, outline=30.0):
+    """A car seen from above driving at 45 degrees, centred at (cx, cy): a 2 px dark outline, a uniform roof."""
+    out = img.copy()
+    along, across = np.array([1.0, 1.0]) / math.sqrt(2), np.array([-1.0, 1.0]) / math.sqrt(2)
+    for ln, wd, grey in ((length, width, outline), (length - 4, width - 4, roof)):
+        corners = [np.array([cx, cy]) + a * ln / 2 * along + b * wd / 2 * across for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        cv2.fillConvexPoly(out, np.round(np.array(corners)).astype(np.int32), grey)
+    return out
+
+
+def test_a_diagonal_car_with_a_uniform_roof_gets_its_whole_box_and_a_diagonal_follower_stays_out():
+    # 40 x 16 px at 45 degrees, (2, 2) px a frame: its front and rear edges change, the roof between does not, and
+    # the axis-aligned box of the two parts holds the ground beside the car: the parts join over their convex hull
+    rng = np.random.default_rng(7)
+    g = _ground(rng)
+    frames = [_paint_diagonal_car(g, 70 + 2 * k - 2, 60 + 2 * k - 2, 40, 16) for k in range(3)]  # t-1, t, t+1
+    flow = _field(rng, [(36, 86, 46, 96, (2.0, 2.0))])
+    valid = np.ones((H, W), bool)
+    ys, xs = np.nonzero(np.abs(frames[1] - g) > 1)
+    car = (xs.min(), ys.min(), xs.max(), ys.max())
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], box_reach_px=0)
+    (d,) = detect_vehicles(flow, valid, **kw)
+    assert box_iou(d, car) >= 0.8, (d, car)
+    (one,) = detect_vehicles(flow, valid, box_join=0.0, **kw)   # the largest part alone: the front or the rear
+    assert box_iou(one, car) < 0.6, one
+    # a follower 15 px behind on the same diagonal: textured ground between them, so it stays out of the box
+    frames = [_paint_diagonal_car(_paint_diagonal_car(g, 70 + 2 * k - 2, 60 + 2 * k - 2, 40, 16),
+                                  70 + 2 * k - 2 - 32, 60 + 2 * k - 2 - 32, 20, 12) for k in range(3)]
+    flow = _field(rng, [(14, 86, 24, 96, (2.0, 2.0))])
+    dets = detect_vehicles(flow, valid, frames=(frames[1], frames[2]), prev_frame=frames[0], box_reach_px=0)
+    lead = max(dets, key=lambda q: box_iou(q, car))
+    assert box_iou(lead, car) >= 0.8, (dets, car)
+
+
 def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_and_no_follower():
     # 56 x 16 px bus with a uniform roof, 1 px a frame to the right: a window flow method reaches the threshold
     # at its front alone (a 20 px region), and the rear edge, 40 px behind that region, is the rest of it

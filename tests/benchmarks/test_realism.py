@@ -42,6 +42,29 @@ def test_spectrum_slope_rejects_a_small_or_colour_image():
         realism.spectrum_slope(np.zeros((64, 64, 3)))
 
 
+def test_white_noise_has_the_same_power_in_every_octave_and_a_blur_takes_it_from_the_fine_ones():
+    rng = np.random.default_rng(3)
+    white = rng.normal(128.0, 10.0, (512, 512))
+    bands = realism.band_powers(*realism.power_spectrum(white))
+    assert bands.shape == (len(realism.BANDS_PX) - 1,)
+    # power per frequency bin is the variance (the spectrum is normalised by the window's energy); the
+    # coarsest octave (4-8 bins of 512) is left out: the window's leakage from the mean reaches it
+    np.testing.assert_allclose(bands[:-1], 100.0, rtol=0.1)
+    # a Gaussian blur of sigma 1 px keeps exp(-4 pi^2 f^2) of the power: 0.7 % to 7 % at 2-4 px, over 90 %
+    # at 32-64 px
+    blurred = realism.band_powers(*realism.power_spectrum(cv2.GaussianBlur(white, (0, 0), 1.0)))
+    kept = blurred / bands
+    assert kept[0] < 0.02 and kept[4] > 0.9 and (np.diff(kept) > 0).all()
+
+
+def test_the_radial_average_of_an_empty_ring_is_nan_not_zero():
+    f, P = np.array([0.1, 0.12, 0.3]), np.array([1.0, 3.0, 5.0])
+    fm, pm = realism.radial_average(f, P, np.array([0.05, 0.2, 0.25, 0.4]))
+    np.testing.assert_allclose(fm[[0, 2]], [0.11, 0.3])
+    np.testing.assert_allclose(pm[[0, 2]], [2.0, 5.0])
+    assert np.isnan(fm[1]) and np.isnan(pm[1])
+
+
 def test_gradient_of_a_ramp_is_its_slope_everywhere():
     ramp = np.add.outer(0.75 * np.arange(50.0), 1.0 * np.arange(60.0))  # d/dy 0.75, d/dx 1
     med, p90 = realism.gradient_stats(ramp)
@@ -132,6 +155,37 @@ def test_side_by_side_puts_the_crops_next_to_each_other_around_the_vehicles():
     assert pic.shape == (64, 64 + 8 + 40, 3)
     assert (pic[:64, :64] == 200).any()  # the vehicle is in the left crop
     assert (pic[:, 64:72] == 255).all() and (pic[:40, 72:] == 50).all()
+
+
+def test_moving_fraction_pools_every_frame_and_skips_unknown_motion():
+    b0 = realism.SceneBoxes(np.zeros((3, 2)), np.ones((3, 2)), moving=np.array([True, False, True]),
+                            moving_known=np.array([True, True, False]))
+    b1 = realism.SceneBoxes(np.zeros((2, 2)), np.ones((2, 2)), moving=np.array([False, False]),
+                            moving_known=np.array([True, True]))
+    b2 = realism.SceneBoxes(np.zeros((1, 2)), np.ones((1, 2)))  # nothing known (a real frame without a next)
+    side = realism.Side("s", [np.zeros((8, 8, 3), np.uint8)] * 3, [b0, b1, b2])
+    assert realism.moving_fraction([side]) == pytest.approx(1 / 4)
+    assert np.isnan(realism.moving_fraction([realism.Side("t", [], [])]))
+
+
+def test_several_seeds_are_rendered_each_and_pooled_into_one_side(monkeypatch):
+    calls = []
+
+    def one(arg, frames=None, *, seed=None):
+        calls.append((arg, frames, seed))
+        n = seed or 1  # the seed's number of boxes, to tell the worlds apart
+        b = realism.SceneBoxes(np.zeros((n, 2)), np.ones((n, 2)))
+        return realism.Side(f"{arg}-{seed}", [np.full((4, 4, 3), n, np.uint8)], [b])
+
+    monkeypatch.setattr(realism, "synthetic_side", one)
+    side = realism.synthetic_sides("city", 20, [3, 5])
+    assert calls == [("city", 20, 3), ("city", 20, 5)]
+    assert [int(f[0, 0, 0]) for f in side.frames] == [3, 5] and [len(b.centres) for b in side.boxes] == [3, 5]
+    assert side.name == "city seeds 3, 5"
+    # without seeds: the spec's own world, once
+    calls.clear()
+    realism.synthetic_sides("city", None, None)
+    assert calls == [("city", None, None)]
 
 
 def _side(name: str, frame: np.ndarray, length_px: float, speeds_mps=()) -> "realism.Side":
