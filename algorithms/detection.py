@@ -541,7 +541,11 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             zone[max(0, y0 - reach_px) - ya:min(h - 1, y1 + reach_px) - ya + 1,
                  max(0, x0 - reach_px) - xa:min(w - 1, x1 + reach_px) - xa + 1] = 1
             far = cv2.morphologyEx(marked & zone, cv2.MORPH_CLOSE, _disk(2))
-            bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join)
+            # the full motion explains the change better than half of it: the vehicle's own edge, not a slower one
+            # ahead in a queue (whose change half the motion explains as well)
+            full = cv2.blur(np.abs(_shifted(b, 0.5 * u + gu, 0.5 * v + gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a),
+                            (3, 3)) > 0
+            bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join, full)
             count += extra
     if others is not None:
         for j in apart:
@@ -566,7 +570,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
 
 
 def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float, join: float,
-                  min_part_px: int = 9) -> tuple[int, int, int, int, int]:
+                  full: np.ndarray | None = None, min_part_px: int = 9) -> tuple[int, int, int, int, int]:
     """``box`` grown by the parts of ``moved`` that lie in its lane, nearest first (:func:`_moved_box`).
 
     A part joins when, across the motion (u, v), its extent and the box's overlap by at least half
@@ -574,8 +578,9 @@ def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float
     and the part that ``moved`` does not mark are ``static`` (texture that warping by the motion
     makes worse: ground between two vehicles that follow each other; a uniform roof is neither).
     Parts smaller than ``min_part_px`` (a 3 x 3 speck) and those the box already touches are left
-    alone. Returns the grown box ``(x0, y0, x1, y1)`` (patch pixels, inclusive) and the number of
-    pixels joined.
+    alone, and so are those of which ``full`` (where the motion explains the change better than half of
+    it does) marks under half: the edge of a slower vehicle ahead in a queue. Returns the grown box
+    ``(x0, y0, x1, y1)`` (patch pixels, inclusive) and the number of pixels joined.
     """
     bx0, by0, bx1, by1 = box
     n, labels, stats, centroids = cv2.connectedComponentsWithStats(moved, connectivity=8)
@@ -597,6 +602,8 @@ def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float
             continue  # touching the box: the box's own part or a neighbour the first pass judged
         ys, xs = np.nonzero(labels[top:bottom + 1, left:right + 1] == j)
         xs, ys = xs + left, ys + top
+        if full is not None and 2 * int(full[ys, xs].sum()) < len(xs):
+            continue
         a0, a1 = across([bx0, bx1, bx0, bx1], [by0, by0, by1, by1])
         p0, p1 = across(xs, ys)
         if min(a1, p1) - max(a0, p0) < 0.5 * min(a1 - a0, p1 - p0):

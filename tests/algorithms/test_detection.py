@@ -299,6 +299,27 @@ def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_
         assert lead.x0_px >= 74 and lead.y0_px >= 48, (x_rear, y_rear, lead)
 
 
+def test_a_part_ahead_in_the_lane_joins_only_where_the_whole_motion_explains_it_better_than_half():
+    # a bus's front part (the box) and, 20 px ahead in its lane over uniform road (nothing static between), a part
+    # that is a bus's rear edge when the whole motion explains its change better than half of it does, and a slower
+    # vehicle's edge ahead in a queue when half the motion explains it as well (city: a van's box took in the rear
+    # of the car creeping ahead of it)
+    from algorithms.detection import _join_in_lane
+
+    moved = np.zeros((40, 80), np.uint8)
+    moved[10:26, 10:20] = 1   # the box's own part
+    moved[10:26, 40:44] = 1   # the part ahead
+    static = np.zeros(moved.shape, bool)
+    box = (10, 10, 19, 25)
+    full = np.ones(moved.shape, bool)
+    assert _join_in_lane(moved, static, box, 1.0, 0.0, 0.2, full)[:4] == (10, 10, 43, 25)
+    full[:, 40:44] = False
+    assert _join_in_lane(moved, static, box, 1.0, 0.0, 0.2, full)[:4] == (10, 10, 19, 25)
+    # static texture between keeps them apart whatever the motion says
+    static[:, 25:35] = True
+    assert _join_in_lane(moved, static, box, 1.0, 0.0, 0.2, np.ones(moved.shape, bool))[:4] == (10, 10, 19, 25)
+
+
 def test_a_car_faster_than_its_length_whose_flow_broke_in_two_is_one_detection_at_its_motion():
     # 24 x 12 px car moving 30 px a frame; the flow found a third of that on its rear half and all of it on its
     # front half (a flow method that cannot follow such a motion)
