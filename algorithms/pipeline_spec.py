@@ -421,6 +421,7 @@ class MultiSpec(_Section):
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]
     fill_gaps: StrictBool = MULTI_DEFAULTS["fill_gaps"]
     fill_min_ncc: float = MULTI_DEFAULTS["fill_min_ncc"]
+    min_area_rel: float = MULTI_DEFAULTS["min_area_rel"]
     use_velocity: StrictBool = MULTI_DEFAULTS["use_velocity"]
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]
