@@ -497,7 +497,8 @@ class Pipeline:
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
                     gsd_m_per_px=gsd, detection_params=det_params, pair_flow=cur["flow_local"],
-                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"])
+                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"],
+                    parallax_max_ratio=long_cfg["parallax_max_ratio"])
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
             ms["detection"] = _ms(t0)
