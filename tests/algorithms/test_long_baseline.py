@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from algorithms.detection import Detection, detect_vehicles
+from algorithms.detection import Detection, detect_vehicles, explained_in_box, ground_fit_at
 from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baseline, compose_models,
                                       long_baseline_detections, merge_detections, register_into)
 from algorithms.pipeline import Pipeline, PipelineError
@@ -285,3 +285,23 @@ def test_a_car_creeping_along_the_flight_slower_than_a_building_is_given_up_and_
         # either is found without the test
         dets = long_baseline_detections(flow, valid, parallax_max_ratio=0.0, **pair)
         assert any(box_iou(d, cars[k]) >= 0.5 for d in dets), (car_px, dets)
+
+
+def test_explained_in_box_tells_the_true_motion_from_others_and_the_ground_fit_is_read_where_asked():
+    rng = np.random.default_rng(5)
+    a = _ground(rng)
+    # frame t's content at x is the other frame's at x + (2, 1): that motion explains the change, its opposite not
+    b = cv2.warpAffine(a, np.float32([[1, 0, 2.0], [0, 1, 1.0]]), (W, H), flags=cv2.INTER_LINEAR)
+    e = explained_in_box((a, b), (40, 30, 100, 80), [(2.0, 1.0), (-2.0, -1.0), (0.0, 0.0)])
+    assert e[0] > 0.9 and e[1] < 0.2 and e[2] == pytest.approx(0.0)
+    # the ground's motion taken out first: the rest of (2, 1) is (1, 0)
+    assert explained_in_box((a, b), (40, 30, 100, 80), [(1.0, 0.0)], ground_px=(1.0, 1.0))[0] > 0.9
+    with pytest.raises(ValueError, match=r"box: expected \(x0, y0, x1, y1\) overlapping the 160 x 120 frame"):
+        explained_in_box((a, b), (200, 10, 220, 20), [(0.0, 0.0)])
+    # an affine ground flow is read back at the points asked, an outlier region (a vehicle) left out of the fit
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    flow = np.dstack([0.5 + 0.01 * xs, -0.3 + 0.02 * ys])
+    flow[50:60, 70:90] = (6.0, 0.0)
+    pts = [(10.0, 20.0), (150.0, 100.0), (80.0, 55.0)]
+    fit = ground_fit_at(flow, np.ones((H, W), bool), pts)
+    np.testing.assert_allclose(fit, [(0.5 + 0.01 * x, -0.3 + 0.02 * y) for x, y in pts], atol=0.02)
