@@ -87,8 +87,14 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   some gamma up to this, is a static structure's parallax (gamma = h / (Z - h): 1 is a building half the flight
 #   height; the city stand-in's tower reaches 0.7), and is left out (0: off). It gives up a vehicle creeping along
 #   the camera's motion, in its sense, slower than this many times it: from two views it is the roof of a building.
+# mid_check: a long-baseline detection must also explain the change from frame t-m (m = k // 2, registered the same
+#   way) to frame t by m times its per-frame motion, at least detection.min_explained (long_baseline_detections'
+#   mid_frame): a slow mover crept there; the place a fast vehicle left before frame t, a region of the long pair
+#   that neither it nor the path it swept covers any more (KIT AIS at 2-3 fps: cars move 10-30 px a frame), is
+#   road at t-m and t alike, or holds the vehicle where its slow motion does not explain it (false: off).
 LONG_BASELINE_DEFAULTS = {"frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
-                          "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0}
+                          "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
+                          "mid_check": True}
 
 
 def check_long_baseline(params: Mapping) -> dict:
@@ -109,6 +115,8 @@ def check_long_baseline(params: Mapping) -> dict:
     b = p["min_box_px"]
     if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < 0:
         raise ValueError(f"min_box_px: expected an integer >= 0, got {b!r}")
+    if not isinstance(p["mid_check"], bool):
+        raise ValueError(f"mid_check: expected true/false, got {p['mid_check']!r}")
     for key in ("replace_rel", "parallax_max_ratio"):
         r = p[key]
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 0:
@@ -188,7 +196,7 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
                              pair_flow: np.ndarray | None = None, pair_valid: np.ndarray | None = None,
                              min_box_px: int = LONG_BASELINE_DEFAULTS["min_box_px"],
                              parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"],
-                             ) -> list[Detection]:
+                             mid_frame: tuple[np.ndarray, int] | None = None) -> list[Detection]:
     """The slow movers of frame t over the pair (frame t, frame t-k registered into it) (module docstring).
 
     Parameters
@@ -229,6 +237,13 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
         own motion does (half ``detection_params["min_explained"]``), for a ``gamma`` up to this, is a static
         structure's parallax and is left out (module docstring; 0: off).
 
+    mid_frame : (ndarray (H, W), int), optional
+        Frame t-m registered into frame t (:func:`register_into`) and ``m``, 0 < m < k: a detection must
+        also explain the change from it to frame t by ``m`` times its per-frame motion (at least
+        ``detection_params["min_explained"]``): a slow mover crept there, while the place a fast vehicle
+        left before frame t (its trail in the long pair, which neither it nor its swept path covers any
+        more) is ground in both frames, or holds the vehicle at a place its slow motion does not explain.
+
     Returns
     -------
     list of Detection
@@ -261,10 +276,16 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
             raise ValueError(f"pair_flow, pair_valid: expected {(h, w, 2)} and {(h, w)}, got {pf.shape} and {pv.shape}")
         grid = pf[4::8, 4::8][pv[4::8, 4::8]]
         ref = np.median(grid, axis=0) if len(grid) else np.zeros(2)
-    if parallax_max_ratio > 0 and found:
+    min_explained = params.get("min_explained", DETECTION_DEFAULTS["min_explained"])
+    if mid_frame is not None:
+        mid, m = mid_frame
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or not 0 < m < k:
+            raise ValueError(f"mid_frame: expected (frame, m) with 0 < m < {k}, got m = {m!r}")
+        if np.shape(mid) != (h, w):
+            raise ValueError(f"mid_frame: expected a gray frame of shape {(h, w)}, got {np.shape(mid)}")
+    if (parallax_max_ratio > 0 or mid_frame is not None) and found:
         ground = (ground_fit_at(f, valid, [(d.x_px, d.y_px) for d in found], model=ground_model)
                   if ground_model != "none" else np.zeros((len(found), 2)))
-        margin = params.get("min_explained", DETECTION_DEFAULTS["min_explained"]) / 2
     out = []
     for i, d in enumerate(found):
         u, v = -d.u_px / k, -d.v_px / k
@@ -280,8 +301,16 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
             box_m2 = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) * gsd_m_per_px ** 2
             if (lo is not None and box_m2 < lo) or (hi is not None and box_m2 > hi):
                 continue
-        if parallax_max_ratio > 0 and _parallax_explains(d, frames, g, ground[i], parallax_max_ratio, margin):
+        if parallax_max_ratio > 0 and _parallax_explains(d, frames, g, ground[i], parallax_max_ratio,
+                                                         min_explained / 2):
             continue
+        if mid_frame is not None and min_explained > 0:
+            # frame t-m: m of the k motions, about m / k of the ground's residual
+            r = m / k
+            e = explained_in_box((frames[0], mid), (d.x0_px, d.y0_px, d.x1_px, d.y1_px), [(r * d.u_px, r * d.v_px)],
+                                 ground_px=(r * ground[i][0], r * ground[i][1]))
+            if e[0] < min_explained:
+                continue
         out.append(d._replace(u_px=u, v_px=v))
     return out
 

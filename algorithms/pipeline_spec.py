@@ -278,6 +278,7 @@ class LongBaselineSpec(_Section):
     replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]
     min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
     parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
+    mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:
