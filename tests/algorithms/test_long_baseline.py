@@ -305,3 +305,33 @@ def test_explained_in_box_tells_the_true_motion_from_others_and_the_ground_fit_i
     pts = [(10.0, 20.0), (150.0, 100.0), (80.0, 55.0)]
     fit = ground_fit_at(flow, np.ones((H, W), bool), pts)
     np.testing.assert_allclose(fit, [(0.5 + 0.01 * x, -0.3 + 0.02 * y) for x, y in pts], atol=0.02)
+
+
+def test_the_mid_frame_must_show_the_creep_too():
+    # frames 0..3: the car creeps 0.8 px a frame; 3..6: it stands. Over frames 0 -> 6 it moved 2.4 px (0.4 px a
+    # frame), but from frame 3 to frame 6 its place did not change: what the long pair sees happened before
+    k, t, m = 6, 6, 3
+    rng = np.random.default_rng(0)
+    g = _ground(rng)
+    car, alpha = _car_layer(rng)
+
+    def at(x):
+        M = np.float32([[1, 0, x], [0, 1, Y0]])
+        a = cv2.warpAffine(alpha, M, (W, H), flags=cv2.INTER_LINEAR)
+        return (g * (1 - a) + cv2.warpAffine(car, M, (W, H), flags=cv2.INTER_LINEAR)).astype(np.float32)
+
+    stopped = [at(X0 + 0.8 * min(s, 3)) for s in range(k + 1)]
+    creeping = _sequence(k + 1)
+    for frames, kept in ((creeping, True), (stopped, False)):
+        C = compose_models([np.eye(3)] * k)
+        old, inside = register_into(frames[t - k], C)
+        mid, _ = register_into(frames[t - m], compose_models([np.eye(3)] * m))
+        wk, vk = dis(_u8(frames[t]), _u8(old))
+        kw = dict(baseline_frames=k, frames=(frames[t], old), composed=C)
+        assert len(long_baseline_detections(wk, vk & inside, **kw)) == 1  # the long pair alone finds either
+        found = long_baseline_detections(wk, vk & inside, mid_frame=(mid, m), **kw)
+        assert len(found) == int(kept), found
+    with pytest.raises(ValueError, match=r"mid_frame: expected \(frame, m\) with 0 < m < 6, got m = 6"):
+        long_baseline_detections(wk, vk & inside, mid_frame=(mid, 6), **kw)
+    with pytest.raises(PipelineError, match=r"detection.long_baseline.mid_check: expected"):
+        _pipeline(mid_check="yes")
