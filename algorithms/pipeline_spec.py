@@ -277,6 +277,8 @@ class LongBaselineSpec(_Section):
     ground_model: StrictStr = LONG_BASELINE_DEFAULTS["ground_model"]
     replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]
     min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
+    parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
+    mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:
