@@ -81,7 +81,7 @@ import numpy as np
 
 from algorithms.registry import register_stage
 
-__all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual"]
+__all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "explained_in_box"]
 
 
 class Detection(NamedTuple):
@@ -647,6 +647,47 @@ def _explained(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0)) -
     changed = (before >= np.percentile(before, 75)) & (before > 0)
     total = float(before[changed].sum())
     return 1.0 - float(after[changed].sum()) / total if total > 0 else 0.0
+
+
+def explained_in_box(frames, box, motions_px, *, ground_px=(0.0, 0.0)) -> np.ndarray:
+    """The fraction of the grey-value change in ``box`` that each motion removes (:func:`_explained` on the box).
+
+    Parameters
+    ----------
+    frames : (ndarray, ndarray)
+        Gray frame t and the other frame in frame t's pixels, (H, W).
+    box : (float, float, float, float)
+        ``(x0, y0, x1, y1)``, inclusive px; clipped to the frame.
+    motions_px : sequence of (float, float)
+        Motions over the ground, px (frame t's pixel x matches the other frame at ``x + ground_px + motion``).
+    ground_px : (float, float)
+        The motion the compensation left the ground with there, px.
+
+    Returns
+    -------
+    ndarray, (len(motions_px),) float64
+        ``1 - rest / change`` over the quarter of the box's pixels that changed most (at most 1; negative
+        where the motion makes the match worse; 0 for a box with no change).
+    """
+    h, w = np.shape(frames[0])
+    x0, y0, x1, y1 = (int(round(c)) for c in box)
+    x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w - 1, x1), min(h - 1, y1)
+    if x1 < x0 or y1 < y0:
+        raise ValueError(f"box: expected (x0, y0, x1, y1) overlapping the {w} x {h} frame, got {tuple(box)}")
+    ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+    region = _Region(ys.ravel(), xs.ravel(), np.zeros((ys.size, 2), np.float32))
+    return np.array([_explained(region, frames, float(u), float(v), ground_px) for u, v in motions_px])
+
+
+def ground_fit_at(flow: np.ndarray, valid: np.ndarray, points_px, *, model: str = "affine") -> np.ndarray:
+    """The robust ground fit of :func:`ground_residual` evaluated at ``points_px``, ``(N, 2)`` float64 px.
+
+    ``points_px``: ``(N, 2)`` pixel positions ``(x, y)``; zeros where the fit has too few grid pixels.
+    """
+    h, w = np.shape(flow)[:2]
+    coef = _ground_fit(flow, np.asarray(valid, bool), model=model)
+    return np.array([_fit_at(coef, float(x), float(y), h, w) for x, y in np.reshape(points_px, (-1, 2))],
+                    dtype=np.float64).reshape(-1, 2)
 
 
 def _difference_variance(a: np.ndarray, b: np.ndarray, *, step_px: int = 2, border_px: int = 8) -> float:

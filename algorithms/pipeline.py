@@ -491,13 +491,18 @@ class Pipeline:
                 C = compose_models([m for _, m in history])
                 g_old, inside = register_into(history[0][0], C, margin_px=det_params["border_px"])
                 g_t = cur["gray"][0]
+                # frame t-m, m = k // 2: the consistency of the creep (long_baseline_detections' mid_frame)
+                m_mid = len(history) // 2 if long_cfg["mid_check"] else 0
+                mid = ((register_into(history[-m_mid][0], compose_models([m for _, m in list(history)[-m_mid:]]))[0],
+                        m_mid) if m_mid >= 1 else None)
                 w_long, v_long = flow_fn(g_t, g_old, **flow_params)
                 slow = long_baseline_detections(
                     w_long, np.asarray(v_long, bool) & inside, baseline_frames=len(history), frames=(g_t, g_old),
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
                     gsd_m_per_px=gsd, detection_params=det_params, pair_flow=cur["flow_local"],
-                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"])
+                    pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"],
+                    parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
             ms["detection"] = _ms(t0)

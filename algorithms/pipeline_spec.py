@@ -277,6 +277,8 @@ class LongBaselineSpec(_Section):
     ground_model: StrictStr = LONG_BASELINE_DEFAULTS["ground_model"]
     replace_rel: float = LONG_BASELINE_DEFAULTS["replace_rel"]
     min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
+    parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
+    mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:
@@ -423,6 +425,7 @@ class MultiSpec(_Section):
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]
     fill_gaps: StrictBool = MULTI_DEFAULTS["fill_gaps"]
     fill_min_ncc: float = MULTI_DEFAULTS["fill_min_ncc"]
+    min_area_rel: float = MULTI_DEFAULTS["min_area_rel"]
     use_velocity: StrictBool = MULTI_DEFAULTS["use_velocity"]
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]

@@ -660,6 +660,10 @@ class _Track:
 #   within hold_search_px of the interpolated place, at this NCC; the box is put where it matches: a vehicle
 #   hidden under a crown or an overpass through the gap is not there to be scored (truth counts what is visible),
 #   and a camera whose sway the path does not follow exactly moves it off the line (0: no check, every row filled);
+# min_area_rel: a track whose median box area is under this fraction of the median over the sequence's tracks (5 or
+#   more) is left out of the output: a pedestrian or a cyclist among vehicles (a top view of a person is about
+#   0.3 m^2, a bicycle 1 m^2, a motorbike 1.5 m^2, a car 8 m^2), where no ground sampling distance gives the m^2
+#   limits of the detection; 0: off;
 # use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
 #   new track at the vehicle's speed;
 # hold_min_ncc: a confirmed track without a detection is placed where its template (the image inside its box
@@ -685,7 +689,7 @@ class _Track:
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 0, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
-                  "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
+                  "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15, "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -837,6 +841,9 @@ class MultiTargetTracker:
         v = p["partial_rel"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
             raise ValueError(f"partial_rel: expected a number in [0, 1] (1: off), got {v!r}")
+        v = p["min_area_rel"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < 1:
+            raise ValueError(f"min_area_rel: expected a number in [0, 1) (0: off), got {v!r}")
         for name, zero in (("hold_min_ncc", "no holding"), ("fill_min_ncc", "no check")):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
@@ -1114,5 +1121,18 @@ class MultiTargetTracker:
                        bbox_y0_px=float(fy - hh), bbox_x1_px=float(fx + hw), bbox_y1_px=float(fy + hh))
 
     def rows(self) -> list[dict]:
-        """Rows of confirmed tracks, in the order produced (frame-major)."""
-        return sorted(self._rows, key=lambda r: (r["frame"], r["track_id"]))
+        """Rows of confirmed tracks, in the order produced (frame-major), but those of tracks much smaller than the
+        sequence's vehicles (``min_area_rel``)."""
+        rows = self._rows
+        rel = self.params["min_area_rel"]
+        if rel > 0:
+            areas: dict[int, list[float]] = {}
+            for r in rows:
+                if not math.isnan(r["bbox_x0_px"]):
+                    areas.setdefault(r["track_id"], []).append(
+                        (r["bbox_x1_px"] - r["bbox_x0_px"] + 1) * (r["bbox_y1_px"] - r["bbox_y0_px"] + 1))
+            typical = {k: float(np.median(v)) for k, v in areas.items()}
+            if len(typical) >= 5:
+                floor = rel * float(np.median(list(typical.values())))
+                rows = [r for r in rows if typical.get(r["track_id"], math.inf) >= floor]
+        return sorted(rows, key=lambda r: (r["frame"], r["track_id"]))

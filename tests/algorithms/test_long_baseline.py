@@ -1,10 +1,12 @@
 """Slow movers over a longer time baseline (algorithms.long_baseline) and its pipeline keys."""
 
+import math
+
 import cv2
 import numpy as np
 import pytest
 
-from algorithms.detection import Detection, detect_vehicles
+from algorithms.detection import Detection, detect_vehicles, explained_in_box, ground_fit_at
 from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baseline, compose_models,
                                       long_baseline_detections, merge_detections, register_into)
 from algorithms.pipeline import Pipeline, PipelineError
@@ -159,6 +161,7 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
     ({"ground_model": "cubic"}, r"detection.long_baseline.ground_model: expected affine, quadratic or none"),
     ({"replace_rel": -0.5}, r"detection.long_baseline.replace_rel: expected a finite number >= 0"),
     ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
+    ({"parallax_max_ratio": -1.0}, r"detection.long_baseline.parallax_max_ratio: expected a finite number >= 0"),
     ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
 ])
 def test_bad_long_baseline_keys_are_rejected_naming_them(section, match):
@@ -209,3 +212,126 @@ def test_a_long_baseline_region_where_the_pair_flow_is_fast_is_no_slow_mover():
     assert long_baseline_detections(wk, vk & inside, pair_flow=fast, **kw) == []
     with pytest.raises(ValueError, match=r"pair_flow, pair_valid: expected"):
         long_baseline_detections(wk, vk & inside, pair_flow=still[:10], **kw)
+
+
+def _flight(n, *, camera_px=1.0, gamma=0.5, car_px=(0.4, 0.0), seam_deg=30.0, seed=3):
+    """``n`` gray frames (float32) of a camera flying ``camera_px`` a frame (the ground moves down the image) over
+    textured ground, a car driving ``car_px`` a frame over it, and a building's roof whose parallax is ``gamma``
+    times the ground's motion (``gamma = h / (Z - h)``: 0.5 is a building a third of the flight height), light
+    grey with dark seams every 6 px at ``seam_deg`` from the x axis (one-dimensional texture, as roofs have).
+    Returns the frames, the car's box at each frame ``(x0, y0, x1, y1)`` and the roof's."""
+    h, w = 160, 220
+    rng = np.random.default_rng(seed)
+    pad = 40 + int(math.ceil(n * camera_px * (1 + gamma)))
+    ground = cv2.GaussianBlur(rng.uniform(40, 220, (h + 2 * pad, w + 2 * pad)).astype(np.float32), (0, 0), 1.2)
+    yy, xx = np.mgrid[0:34, 0:44]
+    a = math.radians(seam_deg)
+    roof = np.where(np.mod(-math.sin(a) * xx + math.cos(a) * yy, 6.0) < 1.2, 90.0, 170.0).astype(np.float32)
+    roof[:2], roof[-2:], roof[:, :2], roof[:, -2:] = 60.0, 60.0, 60.0, 60.0
+    rng_car = np.random.default_rng(0)
+    _ground(rng_car)
+    car, alpha = _car_layer(rng_car)  # the car of _sequence
+    car, alpha = car[:CAR[1], :CAR[0]], alpha[:CAR[1], :CAR[0]]
+    frames, car_boxes, roof_boxes = [], [], []
+    for t in range(n):
+        dy = camera_px * t
+        img = cv2.warpAffine(ground, np.float32([[1, 0, -pad], [0, 1, -pad + dy]]), (w, h), flags=cv2.INTER_LINEAR)
+        for layer, mask, x, y, boxes in (
+                (roof, np.ones_like(roof), 150.0, 30.0 + (1 + gamma) * dy, roof_boxes),
+                (car, alpha, 30.0 + car_px[0] * t, 80.0 + dy + car_px[1] * t, car_boxes)):
+            M = np.float32([[1, 0, x], [0, 1, y]])
+            lay = cv2.warpAffine(layer, M, (w, h), flags=cv2.INTER_LINEAR)
+            al = cv2.warpAffine(mask, M, (w, h), flags=cv2.INTER_LINEAR)
+            img = img * (1 - al) + lay
+            boxes.append((x, y, x + layer.shape[1] - 1, y + layer.shape[0] - 1))
+        frames.append(img.astype(np.float32))
+    return frames, car_boxes, roof_boxes
+
+
+def _long_pair(frames, t, k, camera_px):
+    shift = np.eye(3)
+    shift[1, 2] = camera_px  # every pair's model: the ground moved camera_px down the image
+    C = compose_models([shift] * k)
+    old, inside = register_into(frames[t - k], C, margin_px=8)
+    wk, vk = dis(_u8(frames[t]), _u8(old))
+    return dict(flow=wk, valid=vk & inside, baseline_frames=k, frames=(frames[t], old), composed=C)
+
+
+@pytest.mark.parametrize("seam_deg", [0.0, 30.0, 90.0])
+def test_a_roofs_parallax_is_no_slow_mover_and_a_creeping_car_beside_it_is(seam_deg):
+    k = 6
+    frames, cars, roofs = _flight(k + 1, seam_deg=seam_deg)
+    pair = _long_pair(frames, k, k, 1.0)
+    flow, valid = pair.pop("flow"), pair.pop("valid")
+    # without the parallax test the roof, 0.5 px a frame along the flight, is a slow mover too (the detector's own
+    # parallax test stops at a quarter of the ground's motion)
+    off = long_baseline_detections(flow, valid, parallax_max_ratio=0.0, **pair)
+    assert any(box_iou(d, roofs[k]) >= 0.5 for d in off), off
+    (d,) = long_baseline_detections(flow, valid, **pair)
+    assert box_iou(d, cars[k]) >= 0.5, d
+    assert (d.u_px, d.v_px) == pytest.approx((0.4, 0.0), abs=0.12)
+
+
+def test_a_car_creeping_along_the_flight_slower_than_a_building_is_given_up_and_a_faster_one_kept():
+    # from frames t and t-k a car moving with the camera's motion, in its sense, at gamma times it is a roof's
+    # parallax: parallax_max_ratio says how tall a building the test covers, and what it gives up
+    k = 6
+    for car_px, found in (((0.0, 0.6), False), ((0.0, -0.6), True)):
+        frames, cars, _ = _flight(k + 1, car_px=car_px, gamma=0.0)
+        pair = _long_pair(frames, k, k, 1.0)
+        flow, valid = pair.pop("flow"), pair.pop("valid")
+        dets = long_baseline_detections(flow, valid, **pair)
+        assert any(box_iou(d, cars[k]) >= 0.5 for d in dets) == found, (car_px, dets)
+        # either is found without the test
+        dets = long_baseline_detections(flow, valid, parallax_max_ratio=0.0, **pair)
+        assert any(box_iou(d, cars[k]) >= 0.5 for d in dets), (car_px, dets)
+
+
+def test_explained_in_box_tells_the_true_motion_from_others_and_the_ground_fit_is_read_where_asked():
+    rng = np.random.default_rng(5)
+    a = _ground(rng)
+    # frame t's content at x is the other frame's at x + (2, 1): that motion explains the change, its opposite not
+    b = cv2.warpAffine(a, np.float32([[1, 0, 2.0], [0, 1, 1.0]]), (W, H), flags=cv2.INTER_LINEAR)
+    e = explained_in_box((a, b), (40, 30, 100, 80), [(2.0, 1.0), (-2.0, -1.0), (0.0, 0.0)])
+    assert e[0] > 0.9 and e[1] < 0.2 and e[2] == pytest.approx(0.0)
+    # the ground's motion taken out first: the rest of (2, 1) is (1, 0)
+    assert explained_in_box((a, b), (40, 30, 100, 80), [(1.0, 0.0)], ground_px=(1.0, 1.0))[0] > 0.9
+    with pytest.raises(ValueError, match=r"box: expected \(x0, y0, x1, y1\) overlapping the 160 x 120 frame"):
+        explained_in_box((a, b), (200, 10, 220, 20), [(0.0, 0.0)])
+    # an affine ground flow is read back at the points asked, an outlier region (a vehicle) left out of the fit
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    flow = np.dstack([0.5 + 0.01 * xs, -0.3 + 0.02 * ys])
+    flow[50:60, 70:90] = (6.0, 0.0)
+    pts = [(10.0, 20.0), (150.0, 100.0), (80.0, 55.0)]
+    fit = ground_fit_at(flow, np.ones((H, W), bool), pts)
+    np.testing.assert_allclose(fit, [(0.5 + 0.01 * x, -0.3 + 0.02 * y) for x, y in pts], atol=0.02)
+
+
+def test_the_mid_frame_must_show_the_creep_too():
+    # frames 0..3: the car creeps 0.8 px a frame; 3..6: it stands. Over frames 0 -> 6 it moved 2.4 px (0.4 px a
+    # frame), but from frame 3 to frame 6 its place did not change: what the long pair sees happened before
+    k, t, m = 6, 6, 3
+    rng = np.random.default_rng(0)
+    g = _ground(rng)
+    car, alpha = _car_layer(rng)
+
+    def at(x):
+        M = np.float32([[1, 0, x], [0, 1, Y0]])
+        a = cv2.warpAffine(alpha, M, (W, H), flags=cv2.INTER_LINEAR)
+        return (g * (1 - a) + cv2.warpAffine(car, M, (W, H), flags=cv2.INTER_LINEAR)).astype(np.float32)
+
+    stopped = [at(X0 + 0.8 * min(s, 3)) for s in range(k + 1)]
+    creeping = _sequence(k + 1)
+    for frames, kept in ((creeping, True), (stopped, False)):
+        C = compose_models([np.eye(3)] * k)
+        old, inside = register_into(frames[t - k], C)
+        mid, _ = register_into(frames[t - m], compose_models([np.eye(3)] * m))
+        wk, vk = dis(_u8(frames[t]), _u8(old))
+        kw = dict(baseline_frames=k, frames=(frames[t], old), composed=C)
+        assert len(long_baseline_detections(wk, vk & inside, **kw)) == 1  # the long pair alone finds either
+        found = long_baseline_detections(wk, vk & inside, mid_frame=(mid, m), **kw)
+        assert len(found) == int(kept), found
+    with pytest.raises(ValueError, match=r"mid_frame: expected \(frame, m\) with 0 < m < 6, got m = 6"):
+        long_baseline_detections(wk, vk & inside, mid_frame=(mid, 6), **kw)
+    with pytest.raises(PipelineError, match=r"detection.long_baseline.mid_check: expected"):
+        _pipeline(mid_check="yes")

@@ -526,3 +526,26 @@ def test_a_car_whose_region_split_in_one_frame_is_confirmed_once_it_has_driven_a
             if trk.rows() and len(first) == seed:
                 first.append(t)
     assert len(first) == 10 and max(first) <= 15, first   # with the scatter of frame 3 kept: 16-17
+
+
+def test_a_mover_far_smaller_than_the_sequence_s_vehicles_is_left_out_without_a_ground_sampling_distance():
+    # five cars (30 x 14 px) and a pedestrian (5 x 5 px) crossing, all steady; the pedestrian's box is 6 % of a car's
+    from algorithms.detection import Detection
+
+    def box(x, y, w, h, u):
+        return Detection(x, y, w * h, x - (w - 1) / 2, y - (h - 1) / 2, x + (w - 1) / 2, y + (h - 1) / 2, u, 0.0)
+
+    def run(n_cars, **kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(20):
+            dets = [box(40.0 + 3 * t, 30.0 + 40 * k, 30, 14, 3.0) for k in range(n_cars)]
+            trk.step(t, dets + [box(300.0 - 1.0 * t, 15.0, 5, 5, -1.0)])
+        return {r["track_id"]: r for r in trk.rows()}, trk
+
+    rows, trk = run(5)
+    sizes = {round(r["bbox_x1_px"] - r["bbox_x0_px"] + 1) for r in rows.values()}
+    assert len(rows) == 5 and sizes == {30}            # the cars, not the pedestrian
+    assert len(run(5, min_area_rel=0.0)[0]) == 6       # off: every track
+    assert len(run(3)[0]) == 4                         # under five tracks nothing tells what a vehicle's size is
+    with pytest.raises(ValueError, match=r"min_area_rel: expected a number in \[0, 1\) \(0: off\)"):
+        MultiTargetTracker(min_area_rel=1.0)
