@@ -152,8 +152,8 @@ class Detection(NamedTuple):
 # box_split_rel: a part of those pixels that lies at least half in the region, stays out of its box (static texture
 #   between) and holds at least this fraction of the pixels of the part the box started from is a second detection
 #   at the region's motion: two cars at about one velocity, close together, whose flow a smoothing method (Farneback's
-#   window) joined into one region (0: off, the default; the farneback pipeline sets 0.8: urban-parallax MOTA 0.503 ->
-#   0.692 there; DIS at 0.8 gains on urban-parallax, 0.667 -> 0.704, but loses KIT AIS detection precision,
+#   window) joined into one region (0: off, the default; the farneback pipeline sets 0.8: urban-parallax MOTA 0.541 ->
+#   0.730 there; DIS at 0.8 gains on urban-parallax, 0.667 -> 0.704, but loses KIT AIS detection precision,
 #   0.241 -> 0.240, and track precision, 0.328 -> 0.322: its regions seldom join two cars, and the parts it splits
 #   off there are queues of parked cars and road texture);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
@@ -173,7 +173,8 @@ class Detection(NamedTuple):
 #   are given up by the default minimum, which flow noise on the ground passes too often). With box_from_frames
 #   and the frames the maximum judges the detection's box (width x height), not the flow region: Farneback's
 #   window spread a car moving 8-14 px a frame over 160-230 m^2 on fast-vehicles (a 22 px car is 23 m^2 there),
-#   which the region test rejected (farneback MOTA 0.575 -> 0.687 there, the other pipelines unchanged).
+#   which the region test rejected (MOTA there: farneback 0.567 -> 0.668, pyramidal-lk 0.660 -> 0.694, the others
+#   unchanged; benchmarks/tracking_quality.py --frames 30).
 # max_area_halo_rel: with the box from the frames, a flow region larger than this many times max_area_px or
 #   max_area_m2 is rejected on the region's area before its box is sought (no halo is that large: roofs, a
 #   parallax field; the box of such a region is the costliest part of the stage); >= 1.
