@@ -38,8 +38,9 @@ place a fast vehicle left before frame t is a region of the long pair too, which
 swept path covers at t when the pair detector lost it (on KIT AIS's 2-3 fps the most common false one).
 
 The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
-section; ``frames: 0``, the default, turns the stage off, and no built-in pipeline turns it on:
-what it gains and loses on the synthetic scenes, the 1080p held-out stand-in and KIT AIS is measured there).
+section; ``frames: 0``, the default, turns the stage off; the built-in ``dis`` and ``pyramidal-hs`` turn it on
+with 6, the others leave it off: what it gains and loses on the synthetic scenes, the 1080p held-out stand-ins and
+KIT AIS is measured there and in those pipelines' files).
 The pipeline keeps the last ``k`` gray frames and pair models, and runs its own flow method once
 more a pair: dis with it costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
 640x480: 75.0 against 37.5 ms a pair).
@@ -63,7 +64,8 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # them with check_long_baseline):
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
-#   are, from 2. Off by default and in every built-in pipeline. With 6 (and the other defaults), off -> on at main
+#   are, from 2. Off by default; on (6) in the built-in dis and pyramidal-hs, whose files give the figures at the
+#   final code (1080p realistic stand-in dis 0.368 -> 0.458, the city one unchanged). With 6, off -> on at main
 #   539a6c8 + the parallax and mid-frame tests (docs/long_baseline.md has the commands and what the pictures show):
 #     1080p city stand-in (60 frames, aerobench eval-video): dis 0.246 -> 0.306 (FP 56 -> 61, FN 294 -> 261),
 #       pyramidal-hs 0.246 -> 0.265, tv-l1 0.244 -> 0.218 (FP 58 -> 90), pyramidal-lk 0.151 -> 0.134; IDF1 up for
@@ -76,7 +78,8 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #     KIT AIS detection precision: dis 0.241 -> 0.233, pyramidal-hs 0.254 -> 0.254, tv-l1 0.217 -> 0.216, recall
 #       unchanged (tree crowns, a lamp post's and a shelter's parallax in registered-looking frames, a fast car's
 #       trail the mid frame still holds part of);
-#   it does not help everywhere (tv-l1 and pyramidal-lk on the stand-in, dis's precision on KIT AIS), hence off;
+#   it does not help everywhere (tv-l1 and pyramidal-lk on the stand-in, dis's precision on KIT AIS), hence off by
+#   default;
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6;
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
