@@ -84,23 +84,24 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
 
 # ``world.detail``: what a material has at 1-3 m besides its grain and its patches metres wide (at
 # detail 1; the depths scale with it). KIT AIS's Munich blocks are busy at every metre, where the
-# materials above are nearly flat: worn and relaid paving, stains and the things standing in yards
-# (dark and light blotches a metre or two across, where the noise exceeds 1-1.3 standard
-# deviations, over 0.8 of one: sparse, distinct things with edges a pixel or two wide, not an even grain), shrubs and bare spots in grass. Their band ends at
-# 0.8 m, five texels at the nominal GSD, well above the pixel: bilinear warping reproduces it (the
-# warp check of the flow truth) and the sensor-noise estimate does not see it
+# materials above are nearly flat: worn and relaid paving, stains and the things standing in yards,
+# shrubs and bare spots in grass: dark and light blotches a metre or so across where a noise of
+# wavelengths 2.4-4 m exceeds 1-1.3 standard deviations, blended in over 1.2 of one. Sparse and
+# distinct, not an even grain: finer blotches (0.8 m) or harder edges added as much to the slope
+# but two to three times as much to realism.py's noise estimate, which then counts them in a
+# frame's flat half (docs/realism.md); bilinear warping reproduces them (the warp check of the truth)
 DETAIL_LAYERS: dict[str, tuple[Layer, ...]] = {
-    "grass": (Layer(0.5, 0.8, 3.0, 0.9, (46, 60, 38), 1.0, 0.8), Layer(0.5, 1.2, 3.0, 0.8, (150, 140, 104), 1.3, 0.8)),
-    "meadow": (Layer(0.5, 0.8, 3.0, 0.9, (58, 68, 42), 1.0, 0.8),),
-    "soil": (Layer(0.5, 0.8, 3.0, 0.9, (80, 66, 52), 1.0, 0.8),),
-    "gravel": (Layer(0.5, 0.8, 3.0, 0.8, (100, 98, 94), 1.3, 0.8),),
-    "yard": (Layer(0.5, 0.8, 3.0, 0.9, (62, 62, 64), 1.0, 0.8), Layer(0.5, 1.2, 4.0, 0.9, (200, 196, 186), 1.1, 0.8)),
+    "grass": (Layer(0.5, 2.4, 3.0, 0.77, (46, 60, 38), 1.0, 1.2), Layer(0.5, 3.0, 3.6, 0.68, (150, 140, 104), 1.3, 1.2)),
+    "meadow": (Layer(0.5, 2.4, 3.0, 0.77, (58, 68, 42), 1.0, 1.2),),
+    "soil": (Layer(0.5, 2.4, 3.0, 0.77, (80, 66, 52), 1.0, 1.2),),
+    "gravel": (Layer(0.5, 2.4, 3.0, 0.68, (100, 98, 94), 1.3, 1.2),),
+    "yard": (Layer(0.5, 2.4, 3.0, 0.77, (62, 62, 64), 1.0, 1.2), Layer(0.5, 3.6, 4.0, 0.77, (200, 196, 186), 1.1, 1.2)),
     "wood": (),
-    "lawn": (Layer(0.5, 0.8, 3.0, 0.9, (44, 62, 36), 1.0, 0.8),),
-    "verge": (Layer(0.5, 0.8, 3.0, 0.9, (56, 68, 42), 1.0, 0.8),),
-    "paving": (Layer(0.5, 0.8, 3.0, 0.9, (92, 90, 86), 1.2, 0.8),),
-    "asphalt": (Layer(0.5, 1.0, 3.0, 0.8, (70, 70, 74), 1.3, 0.8),),
-    "crop": (Layer(0.5, 0.8, 3.0, 0.8, (0.75, 0.75, 0.72), 1.3, 0.8),),
+    "lawn": (Layer(0.5, 2.4, 3.0, 0.77, (44, 62, 36), 1.0, 1.2),),
+    "verge": (Layer(0.5, 2.4, 3.0, 0.77, (56, 68, 42), 1.0, 1.2),),
+    "paving": (Layer(0.5, 2.4, 3.0, 0.77, (92, 90, 86), 1.2, 1.2),),
+    "asphalt": (Layer(0.5, 2.7, 3.3, 0.68, (70, 70, 74), 1.3, 1.2),),
+    "crop": (Layer(0.5, 2.4, 3.0, 0.68, (0.75, 0.75, 0.72), 1.3, 1.2),),
 }
 
 
