@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.4.0"
+GENERATOR_VERSION = "2.5.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -186,6 +186,12 @@ class WorldSpec(_Model):
                                        "manholes, gullies, patched cuts, sealed cracks, oil strips down the "
                                        "lanes, lamp posts, and bins, sheds, planters and garden walls in built "
                                        "blocks, with their shadows (0: none)")
+    detail: float = Field(0.0, ge=0, le=3,
+                          description="structure at 1-3 m, relative to a central European town (1): "
+                                      "lit and shaded patches in the ground's materials (worn and stained "
+                                      "paving, tufts, things in yards), light and soil at 2-4 m over the "
+                                      "ground, leaf clumps in tree crowns and panels, vents and patches on "
+                                      "roofs (0: none)")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
     trees: TreesSpec = Field(default_factory=TreesSpec)
 

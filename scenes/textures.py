@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TILE_PX", "Layer", "MATERIALS", "spectral_noise", "material_tile", "MaterialPattern"]
+__all__ = ["TILE_PX", "Layer", "MATERIALS", "DETAIL_LAYERS", "spectral_noise", "material_tile", "MaterialPattern"]
 
 TILE_PX = 512  # texels a side of every material tile (periodic)
 
@@ -82,6 +82,29 @@ MATERIALS: dict[str, tuple[tuple[float, float, float], tuple[Layer, ...]]] = {
 }
 
 
+# ``world.detail``: what a material has at 1-3 m besides its grain and its patches metres wide (at
+# detail 1; the depths scale with it). KIT AIS's Munich blocks are busy at every metre, where the
+# materials above are nearly flat: worn and relaid paving, stains and the things standing in yards,
+# shrubs and bare spots in grass: dark and light blotches a metre or so across where a noise of
+# wavelengths 2.4-4 m exceeds 1-1.3 standard deviations, blended in over 1.2 of one. Sparse and
+# distinct, not an even grain: finer blotches (0.8 m) or harder edges added as much to the slope
+# but two to three times as much to realism.py's noise estimate, which then counts them in a
+# frame's flat half (docs/realism.md); bilinear warping reproduces them (the warp check of the truth)
+DETAIL_LAYERS: dict[str, tuple[Layer, ...]] = {
+    "grass": (Layer(0.5, 2.4, 3.0, 0.77, (46, 60, 38), 1.0, 1.2), Layer(0.5, 3.0, 3.6, 0.68, (150, 140, 104), 1.3, 1.2)),
+    "meadow": (Layer(0.5, 2.4, 3.0, 0.77, (58, 68, 42), 1.0, 1.2),),
+    "soil": (Layer(0.5, 2.4, 3.0, 0.77, (80, 66, 52), 1.0, 1.2),),
+    "gravel": (Layer(0.5, 2.4, 3.0, 0.68, (100, 98, 94), 1.3, 1.2),),
+    "yard": (Layer(0.5, 2.4, 3.0, 0.77, (62, 62, 64), 1.0, 1.2), Layer(0.5, 3.6, 4.0, 0.77, (200, 196, 186), 1.1, 1.2)),
+    "wood": (),
+    "lawn": (Layer(0.5, 2.4, 3.0, 0.77, (44, 62, 36), 1.0, 1.2),),
+    "verge": (Layer(0.5, 2.4, 3.0, 0.77, (56, 68, 42), 1.0, 1.2),),
+    "paving": (Layer(0.5, 2.4, 3.0, 0.77, (92, 90, 86), 1.2, 1.2),),
+    "asphalt": (Layer(0.5, 2.7, 3.3, 0.68, (70, 70, 74), 1.3, 1.2),),
+    "crop": (Layer(0.5, 2.4, 3.0, 0.68, (0.75, 0.75, 0.72), 1.3, 1.2),),
+}
+
+
 def spectral_noise(white_f: np.ndarray, texel_m: float, *, beta: float, shortest_m: float,
                    longest_m: float) -> np.ndarray:
     """Periodic noise (n, n) float32, zero mean, unit standard deviation, shaped from a white spectrum.
@@ -114,21 +137,39 @@ def spectral_noise(white_f: np.ndarray, texel_m: float, *, beta: float, shortest
     return (out / sd if sd > 0 else out).astype(np.float32)
 
 
-def material_tile(name: str, rng: np.random.Generator, texel_m: float, *, n: int = TILE_PX) -> np.ndarray:
-    """The RGB tile (n, n, 3) float32 of material ``name`` (gray levels, not clipped), periodic in both axes."""
+def material_tile(name: str, rng: np.random.Generator, texel_m: float, *, n: int = TILE_PX,
+                  detail: float = 0.0) -> np.ndarray:
+    """The RGB tile (n, n, 3) float32 of material ``name`` (gray levels, not clipped), periodic in both axes.
+
+    ``detail`` (``world.detail``, >= 0) adds the material's :data:`DETAIL_LAYERS` at that strength
+    (their depths times ``detail``); the random draws are the same at every ``detail``.
+    """
     if name not in MATERIALS:
         raise KeyError(f"unknown ground material {name!r}; expected one of {sorted(MATERIALS)}")
+    if not detail >= 0.0:
+        raise ValueError(f"detail must be >= 0, got {detail!r}")
     base, layers = MATERIALS[name]
+    # the detail layers' noise is the shared one moved by a third and a fifth of the tile, and more for
+    # each next layer: a field of its own (the same white noise draws), not dark where the material is
+    # already light
+    shifts = [(0, 0)] * len(layers)
+    if detail > 0.0:
+        extra = DETAIL_LAYERS[name]
+        layers = layers + tuple(Layer(la.beta, la.shortest_m, la.longest_m, la.depth * detail, la.tint,
+                                      la.threshold, la.softness) for la in extra)
+        shifts += [(n * (k + 1) // 3, n * (k + 1) // 5) for k in range(len(extra))]
     white_f = np.fft.rfft2(rng.standard_normal((n, n), dtype=np.float32))
     tile = np.empty((n, n, 3), np.float32)
     tile[...] = np.asarray(base, np.float32)
-    for layer in layers:
+    for layer, shift in zip(layers, shifts, strict=True):
         noise = spectral_noise(white_f, texel_m, beta=layer.beta, shortest_m=layer.shortest_m,
                                longest_m=layer.longest_m)
+        if shift != (0, 0):
+            noise = np.roll(noise, shift, axis=(0, 1))
         if layer.tint is None:
             tile *= (1.0 + layer.depth * noise)[..., None]
         else:
-            w = np.clip((noise - layer.threshold) / layer.softness, 0.0, 1.0) * layer.depth
+            w = np.minimum(1.0, np.clip((noise - layer.threshold) / layer.softness, 0.0, 1.0) * layer.depth)
             tile += w[..., None] * (np.asarray(layer.tint, np.float32) - tile)
     return tile
 

@@ -253,6 +253,9 @@ def _offset_right(line: np.ndarray, offset_m: np.ndarray | float) -> np.ndarray:
 # (the materials of scenes/textures.py carry each surface's own detail; this shade adds light and soil
 # moisture over everything, weaker than it was at 40 m, and the smooth grain that flow needs)
 NOISE_OCTAVES_M = ((40.0, 0.05), (10.0, 0.04), (3.0, 0.04), (1.0, 0.1))
+# ``world.detail`` 1: light and soil at 2-4 m on top (cells of value noise, weights), where KIT AIS's
+# ground has two to three times the power of the octaves above (docs/realism.md)
+DETAIL_OCTAVES_M = ((2.0, 0.05),)
 GRAIN_AMP = 0.03  # KIT AIS's flattest half shows about 0.5 gray levels of pixel-scale variation
 STRIP_ROWS = 256  # the ground texture is painted, shaded and blurred this many rows at a time
 _BLUR_HALO_ROWS = 8  # > the blur kernel's radius (3 texels): a strip's blur sees its true neighbours
@@ -279,8 +282,10 @@ def _noise_upsampled(rng: np.random.Generator, shape: tuple[int, int], cell_px: 
     return cv2.resize(g, (int(round(gw * cell_px)), int(round(gh * cell_px))), interpolation=cv2.INTER_CUBIC)
 
 
-def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m: float) -> np.ndarray:
-    """Sum of octaves from 40 m down to one texel; fine octaves keep detail at the GSD.
+def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m: float, *,
+                      octaves_m=NOISE_OCTAVES_M, grain: bool = True) -> np.ndarray:
+    """Sum of octaves (``octaves_m``: cell metres, weight) from 40 m down to one texel (``grain``: and
+    a last one at about a pixel); fine octaves keep detail at the GSD.
 
     Each octave, value noise clipped to [-1, 1] and weighted, is added strip by strip
     in place, so only the sum and one octave are ever whole in memory.
@@ -289,8 +294,8 @@ def _multiscale_noise(rng: np.random.Generator, shape: tuple[int, int], texel_m:
     total = np.zeros(shape, np.float32)
     # grain at about one image pixel (TEXELS_PER_PIXEL texels): detail at the GSD, yet smooth
     # enough inside a pixel that resampling at another sub-pixel phase changes it little
-    octaves = [(cell_m / texel_m, amp) for cell_m, amp in NOISE_OCTAVES_M
-               if cell_m / texel_m >= 2] + [(TEXELS_PER_PIXEL, GRAIN_AMP)]
+    octaves = [(cell_m / texel_m, amp) for cell_m, amp in octaves_m
+               if cell_m / texel_m >= 2] + ([(TEXELS_PER_PIXEL, GRAIN_AMP)] if grain else [])
     for cell_px, amp in octaves:
         big = _noise_upsampled(rng, shape, cell_px)
         for r0 in range(0, h, STRIP_ROWS):
@@ -693,7 +698,7 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
                 and poly[:, 1].max() > box[1] and poly[:, 1].min() < box[3])
 
     # -- materials: one tile each, sampled by every block with its own offset and tint -----------
-    tiles = {name: material_tile(name, rng, texel) for name in GROUND_MATERIALS}
+    tiles = {name: material_tile(name, rng, texel, detail=ws.detail) for name in GROUND_MATERIALS}
 
     def material(name: str, gain=(1.0, 1.0, 1.0), under=None, *, draw: np.random.Generator = rng) -> MaterialPattern:
         off = tuple(int(v) for v in draw.integers(0, TILE_PX, 2))
@@ -806,12 +811,18 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     xs = x0 + (np.arange(wt, dtype=np.float32) + 0.5) * texel  # texel centres
     ys = y0 + (np.arange(ht, dtype=np.float32) + 0.5) * texel
     shade = _multiscale_noise(rng, (ht, wt), texel)
+    if ws.detail > 0:
+        # light and soil at 2-4 m (``world.detail``), from the seed's eighth stream: the rest of the
+        # world draws the same as without it
+        rng_detail = np.random.Generator(np.random.PCG64(np.random.SeedSequence(spec.seed).spawn(8)[7]))
+        shade += _multiscale_noise(rng_detail, (ht, wt), texel,
+                                   octaves_m=tuple((c, a * ws.detail) for c, a in DETAIL_OCTAVES_M), grain=False)
     shade += 1.0
     ground = _paint_ground(canvas.ops, shade, xs, ys)
     del shade
 
-    wall_textures, roof_textures = _building_textures(rng, texel)
-    crown_textures = [crown_texture(rng, (255, 255, 255))]  # leaves in gray: each crown's colour comes on top
+    wall_textures, roof_textures = _building_textures(rng, texel, detail=ws.detail)
+    crown_textures = [crown_texture(rng, (255, 255, 255), detail=ws.detail)]  # leaves in gray: each crown's colour comes on top
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
                  wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures,
@@ -1024,9 +1035,11 @@ def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree]
     canvas.union(float(light.ambient), polys_m=polys + list(extra_polys_m) + tree_polys, ellipses=ellipses, mode="mul")
 
 
-def _building_textures(rng: np.random.Generator, texel: float):
+def _building_textures(rng: np.random.Generator, texel: float, *, detail: float = 0.0):
     """A facade (floors 3 m apart with irregular windows) and a roof (membrane with stains), 128 x 128 texels
-    of 0.1 m, repeated."""
+    of 0.1 m, repeated. ``detail`` (``world.detail``): the roof also has panels, vents, gravel and
+    patched sheets 1-3 m wide, lighter and darker, ``8 detail`` to a tile (drawn from a child of
+    ``rng``: one draw more)."""
     n = 128
     g = 1.0 + 0.25 * _multiscale_noise(rng, (n, n), 0.1)
     tex = np.ones((n, n, 3), np.float32) * np.asarray((168, 160, 148), np.float32)
@@ -1044,6 +1057,17 @@ def _building_textures(rng: np.random.Generator, texel: float):
     seam[::16] = 0.72
     seam[1::16] = 1.12
     g *= seam[None, :]
+    if detail > 0:
+        sub = np.random.Generator(np.random.PCG64(int(rng.integers(0, 2 ** 63))))
+        panels = np.zeros((n, n), np.float32)  # log brightness
+        for _ in range(int(round(8 * detail))):
+            r, c = (int(v) for v in sub.integers(0, n, 2))
+            h, w = (int(v) for v in sub.integers(8, 30, 2))
+            gain = float(sub.choice([sub.uniform(0.6, 0.85), sub.uniform(1.12, 1.3)]))
+            rows, cols = np.arange(r, r + h) % n, np.arange(c, c + w) % n  # the tile repeats: wrap
+            panels[np.ix_(rows, cols)] += math.log(gain)
+        # edges 0.3 m soft (about a pixel at the nominal GSD): a hard one would read as noise on the flat roofs
+        g *= np.exp(cv2.GaussianBlur(np.pad(panels, 9, mode="wrap"), (0, 0), 3.0)[9:-9, 9:-9])
     # band-limited to about two texels (0.2 m): a seam is an overlap and its shadow, a few centimetres
     # wide; a one-texel line of 28 % depth aliased at the pixel and was counted as sensor noise
     # (realism.py's noise_sigma takes the flat half, where the roofs lie)

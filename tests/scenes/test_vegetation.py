@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -146,3 +147,13 @@ def test_baked_sun_shading_is_ambient_away_from_the_sun_and_one_on_flat_ground()
     s = sun_direction(50.0, 135.0)
     k = sun_shading(np.array([[0, 0, 1.0], -s, s]), s, 0.45)
     np.testing.assert_allclose(k, [1.0, 0.45, 1.15], atol=1e-6)
+
+
+def test_crown_detail_makes_leaf_clumps_larger_and_deeper_with_the_same_draws():
+    from scenes.vegetation import crown_texture
+
+    plain = crown_texture(np.random.default_rng(3), (255, 255, 255)).astype(np.float64).mean(axis=2)
+    busy = crown_texture(np.random.default_rng(3), (255, 255, 255), detail=1.0).astype(np.float64).mean(axis=2)
+    # clumps a fifth of a lobe wide: seen through a box of 12 texels (a tenth), the busy crown varies more
+    b0, b1 = (cv2.blur(g, (12, 12)) for g in (plain, busy))
+    assert b1.std() > 2.0 * b0.std(), (b1.std(), b0.std())

@@ -18,10 +18,12 @@ BUILT = {"seed": 2, "camera.altitude_m": 40.0, "world.built_fraction": 0.6, "wor
          "world.buildings.footprint_range_m": [6.0, 12.0], "world.trees.density_per_ha": 40.0}
 
 
-def test_warping_by_true_flow_reproduces_frames_with_trees_buildings_and_shadows():
+@pytest.mark.parametrize("detail", [0.0, 1.0])
+def test_warping_by_true_flow_reproduces_frames_with_trees_buildings_and_shadows(detail):
     # no vehicles (their shadows move over static ground, by convention): everything left is
     # static, and the depth-based truth of trees and buildings must explain the parallax
-    spec = load_scene_spec("tiny", overrides={**BUILT, "vehicles.count": 0})
+    # world.detail 1: leaf clumps, roof panels and ground structure at 1-3 m, held to the same bound
+    spec = load_scene_spec("tiny", overrides={**BUILT, "vehicles.count": 0, "world.detail": detail})
     gen = SceneGenerator(spec)
     assert gen.world.trees and gen.world.buildings
     prev = None
