@@ -544,8 +544,8 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             far = cv2.morphologyEx(marked & zone, cv2.MORPH_CLOSE, _disk(2))
             # the full motion explains the change better than half of it: the vehicle's own edge, not a slower one
             # ahead in a queue (whose change half the motion explains as well)
-            full = cv2.blur(np.abs(_shifted(b, 0.5 * u + gu, 0.5 * v + gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a),
-                            (3, 3)) > 0
+            half_off = np.abs(_shifted(b, 0.5 * u + gu, 0.5 * v + gv) - a)
+            full = cv2.blur(half_off - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3)) > 0
             bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join, full)
             count += extra
     if others is not None:
