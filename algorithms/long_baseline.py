@@ -38,8 +38,8 @@ place a fast vehicle left before frame t is a region of the long pair too, which
 swept path covers at t when the pair detector lost it (on KIT AIS's 2-3 fps the most common false one).
 
 The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection.long_baseline``
-section; ``frames: 0``, the default, turns the stage off; the built-in ``dis``, ``pyramidal-hs`` and
-``pyramidal-lk`` turn it on with 6, the others leave it off: what it gains and loses on the synthetic scenes, the 1080p held-out stand-ins and
+section; ``frames: 0``, the default, turns the stage off; every non-thesis built-in pipeline turns it on
+with 6, the thesis ones leave it off: what it gains and loses on the synthetic scenes, the 1080p held-out stand-ins and
 KIT AIS is measured there and in those pipelines' files).
 The pipeline keeps the last ``k`` gray frames and pair models, and runs its own flow method once
 more a pair: dis with it costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
@@ -64,7 +64,7 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 # them with check_long_baseline):
 # frames: the baseline k, frames (0, the default, turns the stage off; 6 is what was measured: a car at 0.25 px a
 #   frame moves 1.5 px, and at 10 fps the baseline is 0.6 s); the first pairs of a sequence use the frames there
-#   are, from 2. Off by default; on (6) in the built-in dis, pyramidal-hs and -lk, whose files give the figures at the
+#   are, from 2. Off by default; on (6) in every non-thesis built-in pipeline, whose files give the figures at the
 #   final code (1080p realistic stand-in dis 0.368 -> 0.458, the city one unchanged). With 6, off -> on at main
 #   539a6c8 + the parallax and mid-frame tests (docs/long_baseline.md has the commands and what the pictures show):
 #     1080p city stand-in (60 frames, aerobench eval-video): dis 0.246 -> 0.306 (FP 56 -> 61, FN 294 -> 261),
