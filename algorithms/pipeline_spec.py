@@ -62,6 +62,16 @@ def _fail(msg: str, **ctx: Any) -> PydanticCustomError:
     return PydanticCustomError("pipeline", msg.replace("{", "{{").replace("}", "}}"), ctx)
 
 
+def _checked_by(check: Callable[[], Any]) -> Any:
+    """``check()``'s result; its ``ValueError`` ("key: message", the stage's own check) as a pipeline error at that
+    key, so that each stage's keys and ranges have one home, the stage, and errors come at load, not mid-run."""
+    try:
+        return check()
+    except ValueError as e:
+        at, _, msg = str(e).partition(": ")
+        raise _fail(msg, at=at) from None
+
+
 def _got(v: Any) -> str:
     return f"{v!r} ({type(v).__name__})"
 
@@ -282,11 +292,7 @@ class LongBaselineSpec(_Section):
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:
-        try:
-            check_long_baseline(_dump(self))
-        except ValueError as e:
-            at, _, msg = str(e).partition(": ")
-            raise _fail(msg, at=at) from None
+        _checked_by(lambda: check_long_baseline(_dump(self)))
         return self
 
 
@@ -347,11 +353,8 @@ class DetectionSpec(_Section):
         if gsd is not None and (isinstance(gsd, bool) or not isinstance(gsd, (int, float))
                                 or not math.isfinite(gsd) or not gsd > 0):
             raise _fail(f"expected null or a finite number > 0, got {gsd!r}", at="gsd_m_per_px")
-        try:  # the detector's own checks, on a 1-pixel field, so errors come now and not mid-run
-            detect_vehicles(np.zeros((1, 1, 2), np.float32), np.zeros((1, 1), bool), **d)
-        except ValueError as e:
-            at, _, msg = str(e).partition(": ")
-            raise _fail(msg, at=at) from None
+        # the detector's own checks, on a 1-pixel field
+        _checked_by(lambda: detect_vehicles(np.zeros((1, 1, 2), np.float32), np.zeros((1, 1), bool), **d))
         return self
 
 
@@ -401,11 +404,7 @@ class PointSpec(_Section):
             raise _fail(f"expected filtered or local, got {self.field!r}", at="field")
         if self.correlation is not None:
             # the tracker fills CORRELATION_DEFAULTS and checks them: one home for its keys and their ranges
-            try:
-                self.correlation = PointTracker(0.0, 0.0, correlation=self.correlation).correlation
-            except ValueError as e:
-                at, _, msg = str(e).partition(": ")
-                raise _fail(msg, at=at) from None
+            self.correlation = _checked_by(lambda: PointTracker(0.0, 0.0, correlation=self.correlation).correlation)
         return self
 
 
@@ -440,11 +439,7 @@ class MultiSpec(_Section):
 
     @model_validator(mode="after")
     def _tracker_accepts(self) -> MultiSpec:
-        try:
-            MultiTargetTracker(**_dump(self))
-        except ValueError as e:
-            at, _, msg = str(e).partition(": ")
-            raise _fail(msg, at=at) from None
+        _checked_by(lambda: MultiTargetTracker(**_dump(self)))
         return self
 
 
