@@ -526,12 +526,9 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             c0, r0, c1, r1 = min(bx0, left[j]), min(by0, top[j]), max(bx1, right[j]), max(by1, bottom[j])
             # between: inside the convex hull of the parts, not marked (a box would add the ground beside a
             # vehicle that drives diagonally, and a diagonal car's front and rear would never join)
-            both = taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == j)
-            ys, xs = np.nonzero(both)
-            hull = np.zeros(both.shape, np.uint8)
-            cv2.fillConvexPoly(hull, cv2.convexHull(np.stack([xs, ys], axis=1).astype(np.int32)), 1)
-            between = (hull == 1) & (moved[r0:r1 + 1, c0:c1 + 1] == 0)
-            if not between.any() or static[r0:r1 + 1, c0:c1 + 1][between].mean() <= join:
+            ys, xs = np.nonzero(taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == j))
+            if _static_between(np.stack([xs, ys], axis=1), moved[r0:r1 + 1, c0:c1 + 1],
+                               static[r0:r1 + 1, c0:c1 + 1]) <= join:
                 bx0, by0, bx1, by1 = c0, r0, c1, r1
                 count += int(stats[j, cv2.CC_STAT_AREA])
                 taken |= labels == j
@@ -568,6 +565,20 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     if bx1 < bx0 or by1 < by0:
         return None
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
+
+
+def _static_between(points_px: np.ndarray, moved: np.ndarray, static: np.ndarray, skip=None) -> float:
+    """The fraction of ``static`` pixels among those inside the convex hull of ``points_px`` ((N, 2) x, y, in the
+    masks' pixels) that ``moved`` does not mark, ``skip`` (an inclusive box x0, y0, x1, y1) left out; 0 when there
+    are none. What lies between parts of a mover: a uniform roof is neither marked nor static, textured ground
+    between two vehicles is static (:func:`_moved_box`, :func:`_join_in_lane`)."""
+    hull = np.zeros(moved.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(np.asarray(points_px, dtype=np.int32)), 1)
+    between = (hull == 1) & (moved == 0)
+    if skip is not None:
+        x0, y0, x1, y1 = skip
+        between[y0:y1 + 1, x0:x1 + 1] = False
+    return float(static[between].mean()) if between.any() else 0.0
 
 
 def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float, join: float,
@@ -609,13 +620,8 @@ def _join_in_lane(moved: np.ndarray, static: np.ndarray, box, u: float, v: float
         p0, p1 = across(xs, ys)
         if min(a1, p1) - max(a0, p0) < 0.5 * min(a1 - a0, p1 - p0):
             continue
-        pts = np.concatenate([np.array([[bx0, by0], [bx1, by0], [bx0, by1], [bx1, by1]]),
-                              np.stack([xs, ys], axis=1)]).astype(np.int32)
-        hull = np.zeros(moved.shape, np.uint8)
-        cv2.fillConvexPoly(hull, cv2.convexHull(pts), 1)
-        between = (hull == 1) & (moved == 0)
-        between[by0:by1 + 1, bx0:bx1 + 1] = False
-        if between.any() and static[between].mean() > join:
+        pts = np.concatenate([np.array([[bx0, by0], [bx1, by0], [bx0, by1], [bx1, by1]]), np.stack([xs, ys], axis=1)])
+        if _static_between(pts, moved, static, skip=(bx0, by0, bx1, by1)) > join:
             continue
         bx0, by0, bx1, by1 = min(bx0, left), min(by0, top), max(bx1, right), max(by1, bottom)
         extra += int(stats[j, cv2.CC_STAT_AREA])
