@@ -1,4 +1,4 @@
-"""The render cache: one folder per (resolved spec, generator version, folder layout), reused when intact.
+"""The render cache: one folder per (resolved spec, generator version, scene code, folder layout), reused when intact.
 
 Real footage (:class:`scenes.footage.FootageSpec`) is decoded into the same cache, its
 entry keyed by :func:`scenes.footage.footage_hash` (the bytes of the files read and the
@@ -19,6 +19,7 @@ first, its entry is kept and ours is discarded.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
@@ -45,15 +46,39 @@ class CacheResult:
     key: str
 
 
+@functools.lru_cache(maxsize=1)
+def scene_code_hash() -> str:
+    """sha256 of the scene generator's source: every module of the ``scenes`` package but ``footage.py``.
+
+    In the render cache key beside :data:`GENERATOR_VERSION`: an edit to the generator that
+    changes what it renders, made without a new version, would otherwise be served the renders
+    of the code before it, silently (a branch iterating on the world's look was). The price is
+    a render again after any edit of the package, a comment's included; real footage has its own
+    key (:func:`scenes.footage.footage_key`), so ``footage.py`` is left out.
+    """
+    return _source_hash(Path(__file__).resolve().parent)
+
+
+def _source_hash(root: Path) -> str:
+    """sha256 of the names and bytes of the ``*.py`` files under ``root`` but ``footage.py``, in name order."""
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        if path.name != "footage.py":
+            h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def cache_key(spec: SceneSpec | FootageSpec) -> str:
-    """Content hash of the resolved spec, the generator version and the folder layout, 20 hex digits.
+    """Content hash of the resolved spec, the generator version, the generator's code and the folder layout,
+    20 hex digits.
 
     The layout (:data:`scenes.sequence.SEQUENCE_LAYOUT`) is in the key so that an entry
-    written in an older layout (``.flo`` flow) is never looked up, let alone misread.
+    written in an older layout (``.flo`` flow) is never looked up, let alone misread; the
+    code (:func:`scene_code_hash`) so that an edit of the generator is never served an old render.
     """
     if isinstance(spec, FootageSpec):
         return footage_key(spec)
-    text = f"{spec_hash(spec)}|{GENERATOR_VERSION}|layout-{SEQUENCE_LAYOUT}"
+    text = f"{spec_hash(spec)}|{GENERATOR_VERSION}|code-{scene_code_hash()}|layout-{SEQUENCE_LAYOUT}"
     label = re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.name).strip("._")[:40] or "scene"
     return f"{label}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
 

@@ -48,3 +48,20 @@ def test_the_partial_render_of_a_dead_process_is_removed(tmp_path):
     mine.mkdir()
     cached_sequence_result(_spec(), tmp_path)
     assert not orphan.exists() and mine.exists()
+
+
+def test_the_key_follows_the_generator_code_but_not_the_footage_reader(tmp_path, monkeypatch):
+    import shutil
+
+    from scenes import cache
+
+    pkg = tmp_path / "scenes"
+    shutil.copytree(os.path.dirname(cache.__file__), pkg, ignore=shutil.ignore_patterns("__pycache__", "presets"))
+    before = cache._source_hash(pkg)
+    (pkg / "footage.py").write_text((pkg / "footage.py").read_text() + "\n# a reader's edit\n")
+    assert cache._source_hash(pkg) == before  # real footage has its own key
+    (pkg / "world.py").write_text((pkg / "world.py").read_text() + "\n# an edit of the generator\n")
+    assert cache._source_hash(pkg) != before
+    key = cache_key(_spec())
+    monkeypatch.setattr(cache, "scene_code_hash", lambda: "0" * 64)
+    assert cache_key(_spec()) != key and cache_key(_spec()).startswith("tiny-")
