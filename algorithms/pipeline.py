@@ -129,7 +129,8 @@ class SequenceEstimate:
     correction_px / jitter_px (N, 2) as in :class:`~algorithms.jitter.JitterResult`
     (float64 px), tracks: DataFrame with ``TRACK_COLUMNS``, stage_ms: totals per stage,
     frame_shape_px: (H, W) of the frames, trackers: the ``source`` of each tracker that ran
-    ("point" with seeds, "multi"), whether or not it output a row.
+    ("point" with seeds, "multi"), whether or not it output a row, px_scale: the factor the px
+    sizes were scaled by (``detection.px_scale``, :func:`px_scale_factor`, :func:`vehicle_scale`).
     """
 
     shifts_px: np.ndarray
@@ -144,6 +145,7 @@ class SequenceEstimate:
     stage_ms: dict = field(default_factory=dict)
     frame_shape_px: tuple[int, int] | None = None
     trackers: tuple[str, ...] = ()
+    px_scale: float = 1.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -198,6 +200,21 @@ def _add_shift(w, su, sv, out) -> None:
         out[2 * k + 1] = w[2 * k + 1] + sv
 
 
+class _FirstFrames:
+    """The first ``k`` frames of a :class:`SharedWork`, gray (its cache serves both runs)."""
+
+    def __init__(self, shared: SharedWork, k: int):
+        self._shared, self._k = shared, int(k)
+
+    def __len__(self) -> int:
+        return self._k
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        if not 0 <= i < self._k:
+            raise IndexError(i)
+        return self._shared.gray(i)
+
+
 def _translation(s) -> np.ndarray:
     M = np.eye(3)
     M[0, 2], M[1, 2] = float(s[0]), float(s[1])
@@ -221,14 +238,41 @@ PX_SCALED_KEYS = {
 PX_REFERENCE_SIDE = 480
 
 
+# `px_scale: auto` on a frame larger than the reference: the median longer side of the detections on the first
+# SIZE_SAMPLE_PAIRS pairs (found with the frame's factor) over VEHICLE_REFERENCE_PX, the same statistic where the
+# px sizes were tuned (the presets' cars are 22-36 px long at factor 1; the 1080p city and realistic stand-ins at
+# 0.066-0.072 m a pixel give 79-80 px at 2.25, the city seen from twice as high 40 px).
+VEHICLE_REFERENCE_PX = 35.0
+SIZE_SAMPLE_PAIRS = 8
+SIZE_SAMPLE_MIN = 10
+
+
 def px_scale_factor(setting, frame_shape) -> float:
-    """The factor of :data:`PX_SCALED_KEYS` for a frame ``(H, W)``: ``"auto"``, the shorter side over
-    :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080), never below 1 (a smaller frame is more often
-    a crop than a wider view, and the flow's noise in px, which the sizes as given are set against, does not
-    shrink with it); a number, itself."""
-    if setting == "auto":
+    """The factor of :data:`PX_SCALED_KEYS` for a frame ``(H, W)`` as its size alone sets it: ``"auto"`` and
+    ``"frame"``, the shorter side over :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080), never below
+    1 (a smaller frame is more often a crop than a wider view, and the flow's noise in px, which the sizes as
+    given are set against, does not shrink with it); a number, itself. :meth:`Pipeline.run` lowers ``"auto"``
+    further where the sequence's vehicles are smaller than that assumes (:func:`vehicle_scale`)."""
+    if setting in ("auto", "frame"):
         return max(1.0, min(int(frame_shape[0]), int(frame_shape[1])) / PX_REFERENCE_SIDE)
     return float(setting)
+
+
+def vehicle_scale(long_sides_px, frame_factor: float) -> float:
+    """The factor ``px_scale: auto`` takes from the longer sides (px) of detections found at ``frame_factor``: their
+    median over :data:`VEHICLE_REFERENCE_PX`, between 1 and ``frame_factor``; ``frame_factor`` itself with fewer
+    than :data:`SIZE_SAMPLE_MIN` of them.
+
+    A frame of 1920x1080 is not always the view of 640x480 at a higher resolution: a real clip of a junction
+    from higher up holds more vehicles, each fewer pixels long (at 0.13 m a pixel a car is 35-40 px, half what
+    the frame's factor expects), and the factor's size limits then reject them (a car's box under the long
+    baseline's ``min_box_px``) while its reach joins neighbours. Never above the frame's factor: a detection of
+    a vehicle's part, or of two joined, must not raise the sizes beyond what the frame already allows.
+    """
+    sides = np.asarray(long_sides_px, dtype=np.float64)
+    if sides.size < SIZE_SAMPLE_MIN:
+        return float(frame_factor)
+    return float(min(frame_factor, max(1.0, np.median(sides) / VEHICLE_REFERENCE_PX)))
 
 
 def scale_px(params: Mapping, kinds: Mapping[str, str], factor: float) -> dict:
@@ -345,6 +389,21 @@ class Pipeline:
             shifts[~valid] = np.median(shifts[valid], axis=0) if valid.any() else 0.0
         return shifts, valid, times
 
+    # -- the px scale from the vehicles' size ---------------------------------------------------
+
+    def _vehicle_scale(self, shared: SharedWork, n: int, frame_factor: float, gsd_m_per_px) -> float:
+        """:func:`vehicle_scale` of the detections of this pipeline (at ``frame_factor``, without the long baseline
+        and the trackers) on the first :data:`SIZE_SAMPLE_PAIRS` pairs."""
+        d = self.to_dict()
+        d["detection"]["px_scale"] = float(frame_factor)
+        d["detection"]["long_baseline"]["frames"] = 0
+        d["tracking"] = {"point": False, "multi": None}
+        first = _FirstFrames(shared, min(n, SIZE_SAMPLE_PAIRS + 1))
+        sides = [max(det.x1_px - det.x0_px, det.y1_px - det.y0_px) + 1.0
+                 for est in Pipeline.from_dict(d).run(first, gsd_m_per_px=gsd_m_per_px)
+                 if isinstance(est, PairEstimate) for det in est.detections]
+        return vehicle_scale(sides, frame_factor)
+
     # -- run ---------------------------------------------------------------------------------
 
     def run(self, frames: Sequence, *, seeds: Sequence[tuple] | None = None, shared: SharedWork | None = None,
@@ -411,6 +470,8 @@ class Pipeline:
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
         px = px_scale_factor(det_cfg["px_scale"], shared.gray(0).shape)
+        if det_cfg["px_scale"] == "auto" and px > 1.0:
+            px = self._vehicle_scale(shared, n, px, gsd_m_per_px)
         det_params = scale_px({k: det_cfg[k] for k in DETECTION_DEFAULTS}, PX_SCALED_KEYS["detection"], px)
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
         long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
@@ -548,7 +609,8 @@ class Pipeline:
                                flight_line_px=line, correction_px=correction, jitter_px=jitter, tracks=tracks,
                                pipeline=self.name, pipeline_hash=self.hash, frame_shape_px=frame_shape,
                                stage_ms={"global_motion": float(gm_ms.sum()), **totals},
-                               trackers=(("point",) if points else ()) + (("multi",) if multi is not None else ()))
+                               trackers=(("point",) if points else ()) + (("multi",) if multi is not None else ()),
+                               px_scale=float(px))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -347,9 +347,9 @@ class DetectionSpec(_Section):
         if d.pop("field") not in ("local", "filtered"):
             raise _fail(f"expected local or filtered, got {self.field!r}", at="field")
         ps = d.pop("px_scale")
-        if ps != "auto" and (isinstance(ps, bool) or not isinstance(ps, (int, float)) or not math.isfinite(ps)
-                             or not ps > 0):
-            raise _fail(f"expected auto or a finite number > 0, got {ps!r}", at="px_scale")
+        if ps not in ("auto", "frame") and (isinstance(ps, bool) or not isinstance(ps, (int, float))
+                                            or not math.isfinite(ps) or not ps > 0):
+            raise _fail(f"expected auto, frame or a finite number > 0, got {ps!r}", at="px_scale")
         if gsd is not None and (isinstance(gsd, bool) or not isinstance(gsd, (int, float))
                                 or not math.isfinite(gsd) or not gsd > 0):
             raise _fail(f"expected null or a finite number > 0, got {gsd!r}", at="gsd_m_per_px")

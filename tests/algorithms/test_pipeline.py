@@ -409,3 +409,43 @@ def test_px_sizes_scale_with_the_frame_lengths_by_the_factor_and_areas_by_its_sq
     assert seen["min_magnitude_px"] == 2 * DETECTION_DEFAULTS["min_magnitude_px"]
     assert seen["split_px"] == DETECTION_DEFAULTS["split_px"]     # a noise threshold: not scaled
     assert made["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]
+
+
+def test_vehicle_scale_is_the_median_side_over_the_reference_between_one_and_the_frames_factor():
+    import algorithms.pipeline as P
+
+    ref, few = P.VEHICLE_REFERENCE_PX, P.SIZE_SAMPLE_MIN
+    assert P.vehicle_scale([1.5 * ref] * few, 2.25) == pytest.approx(1.5)
+    assert P.vehicle_scale([1.5 * ref] * (few - 1), 2.25) == 2.25  # too few to judge: the frame's factor
+    assert P.vehicle_scale([4 * ref] * few, 2.25) == 2.25  # never above the frame's factor
+    assert P.vehicle_scale([0.4 * ref] * few, 2.25) == 1.0  # nor below 1
+    sides = [ref] * few + [10 * ref] * (few - 1)  # a minority of joined or oversized boxes does not move it
+    assert P.vehicle_scale(sides, 2.25) == pytest.approx(1.0)
+
+
+def _small_movers(n: int, size: int = 960, car=(30, 14), seed: int = 4) -> list[np.ndarray]:
+    """A still camera over texture at ``size`` px; twelve textured 'cars' of ``car`` (w, h) px driving 3 px a frame."""
+    rng = np.random.default_rng(seed)
+    ground = _texture(rng, size, size) * 0.6
+    cars = [(_texture(rng, car[1], car[0]) * 0.4 + 150.0, 60 + 220 * (k % 4), 80 + 260 * (k // 4)) for k in range(12)]
+    frames = []
+    for t in range(n):
+        f = ground.copy()
+        for tex, x, y in cars:
+            f[y:y + car[1], x + 3 * t:x + 3 * t + car[0]] = tex
+        frames.append(np.clip(f, 0, 255).astype(np.uint8))
+    return frames
+
+
+def test_px_scale_auto_follows_the_size_of_the_vehicles_not_only_the_frame():
+    from algorithms.pipeline import px_scale_factor
+
+    frames = _small_movers(10)
+    d = get_pipeline("dis").to_dict()
+    d["tracking"] = {"point": False, "multi": None}
+    _, seq = _run(Pipeline.from_dict(d), frames)
+    assert px_scale_factor("auto", frames[0].shape) == 2.0  # 960 px: the frame alone says 2
+    assert seq.px_scale == pytest.approx(1.0, abs=0.2)  # 30 px cars: the sizes as tuned at 640x480
+    d["detection"]["px_scale"] = "frame"
+    _, seq = _run(Pipeline.from_dict(d), frames)
+    assert seq.px_scale == 2.0
