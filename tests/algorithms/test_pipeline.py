@@ -418,6 +418,7 @@ def test_vehicle_scale_is_the_median_side_over_the_reference_between_one_and_the
     assert P.vehicle_scale([1.5 * ref] * few, 2.25) == pytest.approx(1.5)
     assert P.vehicle_scale([1.5 * ref] * (few - 1), 2.25) == 2.25  # too few to judge: the frame's factor
     assert P.vehicle_scale([4 * ref] * few, 2.25) == 2.25  # never above the frame's factor
+    assert P.vehicle_scale([0.85 * 2.25 * ref] * few, 2.25) == 2.25  # nor a little below it: the boxes' scatter
     assert P.vehicle_scale([0.4 * ref] * few, 2.25) == 1.0  # nor below 1
     sides = [ref] * few + [10 * ref] * (few - 1)  # a minority of joined or oversized boxes does not move it
     assert P.vehicle_scale(sides, 2.25) == pytest.approx(1.0)
