@@ -17,7 +17,7 @@ import numpy as np
 from scenes import car_paint
 from scenes.traffic import PAINTED_CLASSES, vehicle_parts
 from scenes.vegetation import CROWN_BASES, sun_shading, trunk_size, unit_cone
-from scenes.world import MAX_TEXTURE_PX, ROOF_TINTS, Box, World, box_mesh, sun_direction
+from scenes.world import MAX_TEXTURE_PX, Box, World, box_mesh, sun_direction
 
 __all__ = ["RendererUnavailableError", "get_renderer", "gl_info", "SceneRenderer", "GL_SYSTEM_PACKAGES"]
 
@@ -305,8 +305,8 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
 
     Each draw costs about as much CPU as a small scene in pyrender, so parts are merged, not added."""
     walls, roofs = [], []
-    for b in world.buildings + world.overpasses:
-        tint = np.asarray(ROOF_TINTS[b.roof_variant])
+    for b, parapets in [(b, world.parapet_tints) for b in world.buildings] + [(b, None) for b in world.overpasses]:
+        tint = np.asarray(world.roof_tints[b.roof_variant])
         for p, part in enumerate(b.parts):
             m = _placed(box_mesh(part, uv_scale_m=12.8), b.yaw_rad, b.centre[:2])
             tri = m["indices"]
@@ -314,9 +314,12 @@ def _building_prims(pyrender, world: World, *, flat: bool) -> list:
                 walls.append({**m, "indices": tri[:8], "colours": _face_colours(m, (255, 255, 255), flat=flat)})
                 roofs.append({**m, "indices": tri[10:12], "colours": _face_colours(m, 255 * tint, flat=flat)})
             else:  # parapet (darker) and roof units (lighter; every third dark: skylights, solar panels)
-                k = 0.85 if p <= 4 else (0.5 if p % 3 == 0 else 1.25)
+                if p <= 4 and parapets is not None:  # a building's parapet (a footbridge's parts keep its tint)
+                    rgb = 255 * np.asarray(parapets[b.roof_variant])
+                else:
+                    rgb = 255 * (0.85 if p <= 4 else (0.5 if p % 3 == 0 else 1.25)) * tint
                 roofs.append({**m, "indices": np.concatenate([tri[:8], tri[10:12]]),
-                              "colours": _face_colours(m, np.minimum(255, 255 * k * tint), flat=flat)})
+                              "colours": _face_colours(m, np.minimum(255, rgb), flat=flat)})
     prims = []
     for parts, tex in ((walls, world.wall_textures[0]), (roofs, world.roof_textures[0])):
         m = _merge(parts)

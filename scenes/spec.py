@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.5.0"
+GENERATOR_VERSION = "2.6.0"
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
@@ -192,6 +192,12 @@ class WorldSpec(_Model):
                                       "paving, tufts, things in yards), light and soil at 2-4 m over the "
                                       "ground, leaf clumps in tree crowns and panels, vents and patches on "
                                       "roofs (0: none)")
+    edges: float = Field(0.0, ge=0, le=1,
+                         description="sharp edges of high contrast, relative to a central European city (1): "
+                                     "light kerbs with a dark gutter, a dashed centre line and parking-lane "
+                                     "lines on minor roads (the share of them marked), roofs from white gravel "
+                                     "to dark bitumen and red tiles, each with a parapet that stands out "
+                                     "(0: none)")
     buildings: BuildingsSpec = Field(default_factory=BuildingsSpec)
     trees: TreesSpec = Field(default_factory=TreesSpec)
 

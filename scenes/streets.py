@@ -35,6 +35,14 @@ ZEBRA_STRIPE_M = 0.5  # stripes this wide, as far apart, across the road
 ZEBRA_LENGTH_M = 3.0  # along the road
 STOP_LINE_M = 0.4
 MARK_OPACITY = (0.8, 0.95)  # lane lines, crossings and stop lines: KIT AIS's markings stand out crisp and white
+# ``world.edges`` 1: light granite kerbs with a gutter of dark setts on the road's side, and minor roads marked
+# (:func:`_paint_minor_marks`): thin lines of high contrast, as KIT AIS's streets are full of. (Lighter sidewalk
+# paving, 2-3 m bands, was tried: it added as many strong gradients but steepened the spectrum, as large areas
+# of contrast do; thin lines flatten it, docs/realism.md)
+GUTTER_RGB = (64, 64, 66)
+KERB_EDGES_RGB = (218, 216, 208)  # granite kerb stones, the lightest line of a street from above
+GUTTER_M = 0.3
+MINOR_LINE_M = 0.12  # a minor road's dashed centre line and parking-lane lines: narrower than a main road's
 
 
 def _marked(road, lanes_per_direction: int) -> bool:
@@ -106,13 +114,17 @@ def junction_marks(roads, node: int, node_m: np.ndarray, radius_m: float, *, zeb
 
 
 def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, widths_m: tuple[float, float],
-                  material, crosswalk_fraction: float, rng: np.random.Generator, kerb_parking: bool = False) -> None:
+                  material, crosswalk_fraction: float, rng: np.random.Generator, kerb_parking: bool = False,
+                  contrast: float = 0.0, rng_contrast: np.random.Generator | None = None) -> None:
     """Paint verges, sidewalks, roads, kerbs, markings and junctions onto ``canvas`` (a ``scenes.world._Canvas``).
 
     ``material(name, gain)`` gives a ground material's paint value (:mod:`scenes.textures`);
     ``cells`` and ``kinds`` the blocks and their land use; ``edges`` the road graph's edges
     ``(a, b, centre line, is road, major)``; ``kerb_parking``: traffic parks along the kerbs (a parking
-    lane, marked, on roads wide enough for one).
+    lane, marked, on roads wide enough for one). ``contrast`` (``world.edges``, 0-1): kerbs lighter (toward
+    KERB_EDGES_RGB), a dark gutter beside them (``contrast`` opaque), and that share of the unmarked roads
+    with a dashed centre line and, where traffic parks, the parking lanes' lines (chosen by ``rng_contrast``,
+    so ``rng`` draws the same as without).
     """
     w_major, w_minor = widths_m
     deg = np.bincount(np.array([r.nodes for r in roads]).ravel(), minlength=len(nodes_m)) if roads else np.zeros(0)
@@ -121,7 +133,7 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
     end_m = JUNCTION_RADIUS_FACTOR * w_major + 1.0  # kerbs stop short of the junction
 
     # -- verges and sidewalks, block side by block side ---------------------------------------
-    kerbs = []
+    kerbs, kerb_sides = [], []
     for key, kind in kinds.items():
         _, ks = cells[key]
         built = kind in ("yard", "parking")
@@ -137,6 +149,7 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
                                material("paving", rng.uniform(0.92, 1.06) * np.ones(3)))
                 if polyline_arc_lengths(line)[-1] > 2 * end_m + 2:
                     kerbs.append(_offset_right(_trim(line, start_m=end_m, end_m=end_m), inward * (w / 2 + 0.12)))
+                    kerb_sides.append((kerbs[-1], inward))
             else:
                 vw = float(rng.uniform(1.2, 3.5))
                 canvas.polygon([_strip(line, inward * (w / 2 - 0.2), inward * (w / 2 + vw))],
@@ -152,7 +165,11 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
             canvas.ellipses(at, rng.uniform(0.6, 2.2, (n, 2)), rng.uniform(0, 180, n),
                             material("asphalt", rng.uniform(0.8, 1.15) * np.ones(3)), opacity=0.8)
     if kerbs:
-        canvas.lines(kerbs, 0.3, KERB_RGB, opacity=0.95)
+        kerb_rgb = tuple((1.0 - contrast) * a + contrast * b for a, b in zip(KERB_RGB, KERB_EDGES_RGB))
+        canvas.lines(kerbs, 0.3, kerb_rgb, opacity=0.95)
+        if contrast > 0:  # the gutter: a row of dark setts on the road's side of the kerb
+            canvas.lines([_offset_right(k, -np.sign(o) * (0.15 + GUTTER_M / 2)) for k, o in kerb_sides],
+                         GUTTER_M, GUTTER_RGB, opacity=float(contrast))
 
     # -- lane markings on main roads and on minor roads of two lanes a direction (:func:`_marked`): edge
     # lines, the centre line, and where traffic has them (:func:`scenes.traffic.lane_layout`) dashed lines
@@ -164,7 +181,9 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
     plain_width = {**corners, **widest}  # nodes paved plain, and the widest road into each
     for r in roads:
         n_lanes, lane_w, park_w = lane_layout(r.width_m, kerb_parking=kerb_parking)
-        if not _marked(r, n_lanes):
+        marked = _marked(r, n_lanes)
+        minor = not marked and contrast > 0 and rng_contrast is not None and rng_contrast.uniform() < contrast
+        if not (marked or minor):
             continue
         # the lines start at the junction's mouth (its plain asphalt and the stop line), not inside the
         # crossing road's carriageway
@@ -172,6 +191,9 @@ def paint_streets(canvas, *, roads, nodes_m: np.ndarray, cells, kinds, edges, wi
         if polyline_arc_lengths(r.centre_m)[-1] - sum(ends) < 3.0:
             continue
         centre = _trim(r.centre_m, start_m=ends[0], end_m=ends[1])
+        if minor:
+            _paint_minor_marks(canvas, centre, r.width_m, park_w, rng_contrast)
+            continue
         edge = r.width_m / 2 - 0.35
         solid = [_offset_right(centre, edge), _offset_right(centre, -edge)]
         if park_w > 0:
@@ -217,6 +239,22 @@ CLUTTER_PALETTE = ((52, 56, 58), (70, 74, 70), (196, 194, 186), (214, 212, 206),
 MANHOLE_RGB = (74, 74, 76)  # cast iron, dark and a little rough
 GULLY_RGB = (44, 44, 46)
 CRACK_RGB = (54, 54, 56)  # bitumen sealant
+
+
+def _paint_minor_marks(canvas, centre: np.ndarray, width_m: float, park_w: float, rng: np.random.Generator) -> None:
+    """A minor road's markings (``world.edges``): a dashed centre line (3 m dashes, 6 m gaps, as a town's
+    guide line) and, where traffic parks along the kerbs, a solid line between the parking lane and the
+    lane, MINOR_LINE_M wide. ``centre`` is the road's centre line trimmed to the junctions' mouths."""
+    s = polyline_arc_lengths(centre)
+    dashes = []
+    for a in np.arange(rng.uniform(0, 9), s[-1] - 3.0, 9.0):
+        t = np.linspace(a, a + 3.0, 4)
+        dashes.append(np.stack([np.interp(t, s, centre[:, 0]), np.interp(t, s, centre[:, 1])], axis=1))
+    solid = [_offset_right(centre, e * (width_m / 2 - park_w)) for e in (1, -1)] if park_w > 0 else []
+    if dashes:
+        canvas.lines(dashes, MINOR_LINE_M, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))
+    if solid:
+        canvas.lines(solid, MINOR_LINE_M, MARK_RGB, opacity=float(rng.uniform(*MARK_OPACITY)))
 
 
 def _points_along(line: np.ndarray, s_m: np.ndarray, offset_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

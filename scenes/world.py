@@ -61,6 +61,15 @@ KERB_RGB = (184, 182, 174)
 # every building shares one facade and one roof texture (one draw each); roofs differ by a tint
 ROOF_TINTS = ((1.0, 1.0, 1.0), (0.74, 0.72, 0.7), (1.1, 1.05, 0.95), (0.85, 0.88, 0.92),
               (1.06, 0.8, 0.7))  # the last: clay tiles, as on Munich's older blocks
+# ``world.edges`` 1: roofs from white gravel to dark bitumen and red clay (KIT AIS's Munich roofs span 80-220
+# gray levels), as tints of a roof texture ROOF_EDGES_GAIN times lighter (a vertex colour cannot exceed 1, so
+# a white roof needs the lighter texture); variant 1 (the footbridges' concrete) keeps its brightness
+ROOF_EDGES_GAIN = 1.4
+ROOF_TINTS_EDGES = ((0.71, 0.71, 0.71), (0.53, 0.51, 0.5), (1.0, 0.98, 0.94), (0.4, 0.4, 0.43),
+                    (0.96, 0.58, 0.47))
+# and the parapet round a roof: metal flashing or concrete coping, dark round a light roof and light round a
+# dark one (a roof's outline is sharp from above); without ``world.edges`` 0.85 of the roof's tint
+PARAPET_DARK, PARAPET_LIGHT = (0.36, 0.36, 0.38), (0.97, 0.96, 0.93)
 N_CROWN_VARIANTS = len(CROWN_BASES)  # crown colours (the last ones conifers'), all in one draw
 ROAD_SAMPLE_M = 2.0  # road polylines are sampled this finely (the test of clearances resamples them finer)
 ROAD_CLEARANCE_M = 1.5  # buildings keep this far from a road's edge, trees a little less
@@ -148,6 +157,8 @@ class World:
     canopies: list[dict] = field(default_factory=list)  # woods: height-field meshes (scenes.vegetation)
     canopy_texture: np.ndarray | None = None
     overpasses: list[Building] = field(default_factory=list)  # footbridges over roads (scenes.traffic)
+    roof_tints: tuple = ROOF_TINTS  # RGB gain of the roof texture per ``Building.roof_variant``
+    parapet_tints: tuple | None = None  # RGB gain of the parapets per variant; None: 0.85 of ``roof_tints``
 
     @property
     def top_m(self) -> float:
@@ -778,7 +789,9 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
 
     paint_streets(canvas, roads=roads, nodes_m=nodes, cells=cells, kinds=kinds, edges=edges,
                   widths_m=(w_major, w_minor), material=material, crosswalk_fraction=ws.crosswalk_fraction,
-                  rng=rng, kerb_parking=spec.traffic.kerb_parking_per_km > 0)
+                  rng=rng, kerb_parking=spec.traffic.kerb_parking_per_km > 0, contrast=ws.edges,
+                  # ``world.edges`` draws from the seed's ninth stream: the rest of the world is the same without it
+                  rng_contrast=np.random.Generator(np.random.PCG64(np.random.SeedSequence(spec.seed).spawn(9)[8])))
 
     # -- small things on streets and in yards (scenes.streets.paint_clutter), their own stream (the seed's
     # seventh child): the rest of the world does not change with ``world.clutter`` ------------------
@@ -821,13 +834,32 @@ def build_world(spec, path: CameraPath, rng: np.random.Generator) -> World:
     ground = _paint_ground(canvas.ops, shade, xs, ys)
     del shade
 
-    wall_textures, roof_textures = _building_textures(rng, texel, detail=ws.detail)
+    wall_textures, roof_textures = _building_textures(rng, texel, detail=ws.detail, edges=ws.edges)
     crown_textures = [crown_texture(rng, (255, 255, 255), detail=ws.detail)]  # leaves in gray: each crown's colour comes on top
     return World(extent_m=extent, texel_m=texel, ground_texture=ground, roads=roads, nodes_m=nodes,
                  road_width_m=w_major, buildings=buildings, trees=trees, stalls=stalls,
                  wall_textures=wall_textures, roof_textures=roof_textures, crown_textures=crown_textures,
                  canopies=canopies, canopy_texture=canopy_texture(rng) if canopies else None,
-                 overpasses=overpasses)
+                 overpasses=overpasses, roof_tints=roof_tints(ws.edges),
+                 parapet_tints=parapet_tints(ws.edges) if ws.edges > 0 else None)
+
+
+def parapet_tints(edges: float) -> tuple[tuple[float, float, float], ...]:
+    """The parapets' tints per roof variant at ``world.edges``: from 0.85 of the roof's tint (0) to PARAPET_DARK
+    round a roof lighter than 0.6 and PARAPET_LIGHT round a darker one (1)."""
+    out = []
+    for t in roof_tints(edges):
+        target = PARAPET_DARK if float(np.mean(t)) > 0.6 else PARAPET_LIGHT
+        out.append(tuple(float((1.0 - edges) * 0.85 * a + edges * b) for a, b in zip(t, target)))
+    return tuple(out)
+
+
+def roof_tints(edges: float) -> tuple[tuple[float, float, float], ...]:
+    """The roof tints per variant at ``world.edges`` (0: ROOF_TINTS, 1: ROOF_TINTS_EDGES), relative to the roof
+    texture of :func:`_building_textures` at the same ``edges`` (lighter by ``1 + (ROOF_EDGES_GAIN - 1) edges``)."""
+    gain = 1.0 + (ROOF_EDGES_GAIN - 1.0) * edges
+    return tuple(tuple(float((1.0 - edges) * a / gain + edges * b) for a, b in zip(t0, t1))
+                 for t0, t1 in zip(ROOF_TINTS, ROOF_TINTS_EDGES, strict=True))
 
 
 def _blob(poly: np.ndarray, rng: np.random.Generator, r_lo_m: float, r_hi_m: float) -> np.ndarray:
@@ -1035,11 +1067,12 @@ def _paint_shadows(canvas: _Canvas, buildings: list[Building], trees: list[Tree]
     canvas.union(float(light.ambient), polys_m=polys + list(extra_polys_m) + tree_polys, ellipses=ellipses, mode="mul")
 
 
-def _building_textures(rng: np.random.Generator, texel: float, *, detail: float = 0.0):
+def _building_textures(rng: np.random.Generator, texel: float, *, detail: float = 0.0, edges: float = 0.0):
     """A facade (floors 3 m apart with irregular windows) and a roof (membrane with stains), 128 x 128 texels
     of 0.1 m, repeated. ``detail`` (``world.detail``): the roof also has panels, vents, gravel and
     patched sheets 1-3 m wide, lighter and darker, ``8 detail`` to a tile (drawn from a child of
-    ``rng``: one draw more)."""
+    ``rng``: one draw more). ``edges`` (``world.edges``): the roof is ``1 + (ROOF_EDGES_GAIN - 1) edges``
+    times lighter (its tints, :func:`roof_tints`, bring each roof back to its own shade)."""
     n = 128
     g = 1.0 + 0.25 * _multiscale_noise(rng, (n, n), 0.1)
     tex = np.ones((n, n, 3), np.float32) * np.asarray((168, 160, 148), np.float32)
@@ -1072,7 +1105,8 @@ def _building_textures(rng: np.random.Generator, texel: float, *, detail: float 
     # wide; a one-texel line of 28 % depth aliased at the pixel and was counted as sensor noise
     # (realism.py's noise_sigma takes the flat half, where the roofs lie)
     g = cv2.GaussianBlur(np.pad(g, 4, mode="wrap"), (0, 0), 0.8)[4:-4, 4:-4]  # periodic, as the tile repeats
-    roof = np.clip(np.rint(np.asarray((150, 148, 144), np.float32) * g[..., None]), 0, 255).astype(np.uint8)
+    base = np.asarray((150, 148, 144), np.float32) * (1.0 + (ROOF_EDGES_GAIN - 1.0) * edges)
+    roof = np.clip(np.rint(base * g[..., None]), 0, 255).astype(np.uint8)
     return [wall], [roof]
 
 

@@ -15,16 +15,17 @@ NO_JITTER = {f"camera.jitter.{k}": 0.0 for k in
              ("roll_std_deg", "pitch_std_deg", "yaw_std_deg", "x_std_m", "y_std_m", "z_std_m")}
 
 
-@pytest.mark.parametrize("detail", [0.0, 1.0])
-def test_warping_next_frame_by_true_flow_reproduces_frame(tmp_path, detail):
+@pytest.mark.parametrize(("detail", "edges"), [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)])
+def test_warping_next_frame_by_true_flow_reproduces_frame(tmp_path, detail, edges):
     # flat shading and no noise: brightness constancy holds, so I1(x + u) ~ I0(x) on valid pixels.
     # At 30 m the tiny camera has the nominal GSD (0.22 m/px); what remains is the bilinear
     # interpolation of textured content by warp_backward, well under 2 gray levels. Vehicle
     # shadows are off: a shadow moving over static ground breaks brightness constancy by design
     # (truth is the motion field; tests/scenes/test_world_truth.py covers the shadowed world).
-    # world.detail 1 (realistic's structure at 1-3 m) is held to the same bound
+    # world.detail 1 (realistic's structure at 1-3 m) is held to the same bound, and so is world.edges 1
+    # (realistic's light kerbs and dark gutters, centre lines on minor roads, roofs of every shade)
     spec = load_scene_spec("tiny", overrides={"camera.altitude_m": 30.0, "light.shadows": False,
-                                              "world.detail": detail})
+                                              "world.detail": detail, "world.edges": edges})
     seq = open_sequence(render_sequence(spec, tmp_path / "seq"))
     for i in range(len(seq) - 1):
         truth = seq.pair_truth(i)

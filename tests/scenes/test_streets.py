@@ -212,3 +212,95 @@ def test_tramlines_run_along_a_fields_rows_in_pairs_inside_a_headland():
     assert np.all((gaps[1::2] > 18.0 - 1.8 - 0.2) & (gaps[1::2] < 24.0 - 1.8 + 0.2)), centres
     # the tracks are darker than the crop, not painted over it
     assert 0.8 < g.min() < 0.9
+
+
+EDGED = {**BARE, "seed": 5, "world.built_fraction": 0.8, "world.buildings.count": 4,
+         "world.buildings.footprint_range_m": [6.0, 10.0], "world.road_width_m": 16.0,
+         "traffic.kerb_parking_per_km": 100.0, "camera.altitude_m": 25.0}  # 0.12 m texels: a line is a texel wide
+
+
+def _samples(world, roads, offset_m: float, trim_m: float = 14.0) -> np.ndarray:
+    """Gray levels of the ground texture along the roads' centre lines moved ``offset_m`` to the right (both
+    sides for a nonzero offset), away from the junctions and their crossings."""
+    from scenes.world import _trim
+    from tests.scenes.test_world_layout import _resampled
+
+    g = world.ground_texture.astype(float).mean(axis=2)
+    x0, y0, x1, y1 = world.extent_m
+    out = []
+    for r in roads:
+        line = _resampled(_trim(r.centre_m, start_m=trim_m, end_m=trim_m), 0.5)
+        for side in ((1.0, -1.0) if offset_m else (1.0,)):
+            for x, y in _offset_right(line, side * offset_m):
+                if x0 < x < x1 and y0 < y < y1:
+                    out.append(g[int((y - y0) / world.texel_m), int((x - x0) / world.texel_m)])
+    return np.asarray(out)
+
+
+def test_edges_paint_the_ground_and_tint_roofs_only_and_leave_the_rest_of_the_world_as_it_was():
+    # world.edges draws from its own stream: roads, buildings and trees (what the truth is made of) stay the same
+    _, _, plain, _ = _world("tiny", **EDGED)
+    _, _, edged, _ = _world("tiny", **EDGED, **{"world.edges": 1.0})
+    assert len(plain.roads) == len(edged.roads) and len(plain.buildings) == len(edged.buildings) > 0
+    for a, b in zip(plain.roads, edged.roads):
+        assert np.array_equal(a.centre_m, b.centre_m)
+    assert plain.buildings == edged.buildings
+    assert [(t.x_m, t.y_m) for t in plain.trees] == [(t.x_m, t.y_m) for t in edged.trees]
+    d = np.abs(plain.ground_texture.astype(int) - edged.ground_texture.astype(int)).max(axis=2)
+    # kerbs, gutters and lines: a little of the ground changes, the blocks' insides and the fields do not
+    assert 0.003 < (d > 8).mean() < 0.1, (d > 8).mean()
+
+
+def test_edges_mark_minor_roads_and_lay_a_light_kerb_and_a_dark_gutter():
+    from scenes.streets import _marked
+    from scenes.traffic import lane_layout
+
+    spec, _, plain, _ = _world("tiny", **EDGED)
+    _, _, edged, _ = _world("tiny", **EDGED, **{"world.edges": 1.0})
+    minor = [r for r in plain.roads if not _marked(r, lane_layout(r.width_m, kerb_parking=True)[0])]
+    assert minor  # 12 m minor roads: one lane a direction and a parking lane, unmarked without edges
+    # a dashed centre line: 3 m of paint in every 9 m
+    line0, line1 = _samples(plain, minor, 0.0), _samples(edged, minor, 0.0)
+    assert len(line1) > 30
+    assert (line1 > 150).mean() > (line0 > 150).mean() + 0.2, ((line0 > 150).mean(), (line1 > 150).mean())
+    # the parking lanes' solid lines, 2.4 m in from each kerb
+    _, _, park_w = lane_layout(minor[0].width_m, kerb_parking=True)
+    park0, park1 = (_samples(world, minor, minor[0].width_m / 2 - park_w) for world in (plain, edged))
+    assert (park1 > 150).mean() > 0.7 and (park0 > 150).mean() < 0.3, ((park0 > 150).mean(), (park1 > 150).mean())
+    # by the built blocks: the kerb lighter, the gutter on the road's side of it darker than the asphalt
+    w = minor[0].width_m
+    # (the kerb, 0.3 m, spans w / 2 - 0.03 .. w / 2 + 0.27; half the road sides are verges, with no kerb)
+    kerb0 = np.percentile(_samples(plain, minor, w / 2 + 0.2), 75)
+    for world, edges in ((plain, False), (edged, True)):
+        kerb, gutter, asphalt = (_samples(world, minor, o) for o in (w / 2 + 0.2, w / 2 - 0.18, w / 2 - 1.2))
+        assert (np.percentile(kerb, 75) > kerb0 + 12) == edges, (np.percentile(kerb, 75), kerb0)
+        assert (np.median(gutter) < np.median(asphalt) - 20) == edges, (np.median(gutter), np.median(asphalt))
+
+
+def test_edges_widen_the_roofs_from_white_gravel_to_dark_bitumen_and_keep_the_footbridges_concrete():
+    from scenes import world as world_mod
+
+    assert world_mod.roof_tints(0.0) == world_mod.ROOF_TINTS
+    shades = {}
+    for e in (0.0, 1.0):
+        _, roofs = world_mod._building_textures(np.random.default_rng(1), 0.1, edges=e)
+        mean = roofs[0].astype(np.float64).reshape(-1, 3).mean(axis=0)
+        shades[e] = np.array([(mean * np.minimum(1.0, t)) @ (0.299, 0.587, 0.114) for t in world_mod.roof_tints(e)])
+    # vertex colours cannot exceed 1: a lighter roof is a lighter texture, every tint at most 1
+    assert max(max(t) for t in world_mod.roof_tints(1.0)) <= 1.0
+    assert shades[1.0].max() > 195 and shades[1.0].min() < 95  # white gravel to bitumen (KIT AIS: 80-220)
+    assert np.ptp(shades[1.0]) > 2 * np.ptp(shades[0.0])
+    assert abs(shades[1.0][1] - shades[0.0][1]) < 0.02 * shades[0.0][1]  # variant 1: the footbridges' concrete
+
+
+def test_edges_outline_every_roof_with_a_parapet_that_stands_out():
+    from scenes import world as world_mod
+
+    gray = np.array([0.299, 0.587, 0.114])
+    for e in (0.5, 1.0):
+        for roof, parapet in zip(world_mod.roof_tints(e), world_mod.parapet_tints(e), strict=True):
+            # dark flashing round a light roof, light coping round a dark one: a third of the range apart at 1
+            assert abs(np.asarray(roof) @ gray - np.asarray(parapet) @ gray) > 0.25 * e, (e, roof, parapet)
+    # without edges: 0.85 of the roof's tint, as the renderer draws it when World.parapet_tints is None
+    for roof, parapet in zip(world_mod.roof_tints(0.0), world_mod.parapet_tints(0.0)):
+        assert np.allclose(parapet, 0.85 * np.asarray(roof))

@@ -18,12 +18,15 @@ BUILT = {"seed": 2, "camera.altitude_m": 40.0, "world.built_fraction": 0.6, "wor
          "world.buildings.footprint_range_m": [6.0, 12.0], "world.trees.density_per_ha": 40.0}
 
 
-@pytest.mark.parametrize("detail", [0.0, 1.0])
-def test_warping_by_true_flow_reproduces_frames_with_trees_buildings_and_shadows(detail):
+@pytest.mark.parametrize(("detail", "edges", "ambient"), [(0.0, 0.0, 0.45), (1.0, 0.0, 0.45), (1.0, 1.0, 0.22)])
+def test_warping_by_true_flow_reproduces_frames_with_trees_buildings_and_shadows(detail, edges, ambient):
     # no vehicles (their shadows move over static ground, by convention): everything left is
     # static, and the depth-based truth of trees and buildings must explain the parallax
-    # world.detail 1: leaf clumps, roof panels and ground structure at 1-3 m, held to the same bound
-    spec = load_scene_spec("tiny", overrides={**BUILT, "vehicles.count": 0, "world.detail": detail})
+    # world.detail 1: leaf clumps, roof panels and ground structure at 1-3 m, held to the same bound; and
+    # realistic's world.edges 1 (roofs of every shade with sharp parapets, gutters, markings) under its
+    # darker shadows (ambient 0.22)
+    spec = load_scene_spec("tiny", overrides={**BUILT, "vehicles.count": 0, "world.detail": detail,
+                                              "world.edges": edges, "light.ambient": ambient})
     gen = SceneGenerator(spec)
     assert gen.world.trees and gen.world.buildings
     prev = None
