@@ -1,6 +1,7 @@
 """Slow movers over a longer time baseline (algorithms.long_baseline) and its pipeline keys."""
 
 import math
+import sys
 
 import cv2
 import numpy as np
@@ -153,7 +154,36 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
     assert all(len(ds) <= 1 for ds in on)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
+    """flow_params: DIS from full resolution on the long pair alone; a 26 x 14 px car at 0.8 px a frame is found in
+    every pair from the first long one (pair 2) on, which the medium preset's half-resolution flow misses."""
+    monkeypatch.setattr(sys.modules[__name__], "CAR", (26, 14))
+    frames = _sequence(12, speed_px=0.8, seed=seed)
+    calls = []
+    import algorithms.registry as registry
+
+    real = registry.STAGES["flow"]["dis"]
+
+    def recording(f0, f1, **kw):
+        calls.append(kw)
+        return real(f0, f1, **kw)
+
+    def found(pipeline):
+        on = [e.detections for e in pipeline.run(frames) if hasattr(e, "detections")]
+        return {t for t, ds in enumerate(on) if any(box_iou(d, _car_box(t, 0.8)) >= 0.5 for d in ds)}
+
+    full = _pipeline(frames=6, flow_params={"finest_scale": 0})
+    monkeypatch.setitem(registry.STAGES["flow"], "dis", recording)
+    assert set(range(1, 11)) <= found(full)
+    assert {"finest_scale": 0} in calls and {} in calls  # the long pair's and the pair's own
+    assert 2 not in found(_pipeline(frames=6))
+
+
 @pytest.mark.parametrize("section, match", [
+    ({"flow_params": {"finest_scal": 0}},
+     r"detection.long_baseline.flow_params.finest_scal: unknown parameter of dis; valid: preset, finest_scale"),
+    ({"flow_params": 3}, r"detection.long_baseline.flow_params: expected a mapping"),
     ({"frames": 1}, r"detection.long_baseline.frames: expected 0 \(off\) or an integer >= 2, got 1"),
     ({"frames": 2.5}, r"detection.long_baseline.frames: expected an integer"),
     ({"max_speed_px": 0}, r"detection.long_baseline.max_speed_px: expected a finite number > 0"),
