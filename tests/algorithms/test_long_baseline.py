@@ -365,3 +365,32 @@ def test_the_mid_frame_must_show_the_creep_too():
         long_baseline_detections(wk, vk & inside, mid_frame=(mid, 6), **kw)
     with pytest.raises(PipelineError, match=r"detection.long_baseline.mid_check: expected"):
         _pipeline(mid_check="yes")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_dis_pipelines_long_pair_follows_a_small_cars_six_frame_motion(seed):
+    """The built-in dis runs its long pair with DIS from full resolution: a 24 x 12 px car's motion over six frames at
+    0.8 px a frame, (4.8, 1.2) px, within 0.3 px; its pair flow's parameters (half resolution) give under 65 % of it."""
+    from algorithms.pipeline import PIPELINES
+    from tests.algorithms.test_reference import _small_car_pair
+
+    cfg = PIPELINES["dis"]
+    assert cfg["flow"]["method"] == "dis"
+    f0, f1, inner = _small_car_pair(seed, (4.8, 1.2))
+    long_params = {**cfg["flow"]["params"], **cfg["detection"]["long_baseline"]["flow_params"]}
+    np.testing.assert_allclose(np.median(dis(f0, f1, **long_params)[0][inner].reshape(-1, 2), axis=0), [4.8, 1.2],
+                               atol=0.3)
+    assert np.median(dis(f0, f1, **cfg["flow"]["params"])[0][inner][..., 0]) < 0.65 * 4.8
+
+
+def test_the_dis_pipeline_takes_the_long_box_over_a_slow_pair_box_of_part_of_the_car():
+    """dis's pair flow (half resolution) boxes a small slow car in part: a pair box of 15 of the car's 24 px (0.63 of
+    the long pair's box) gives way to the long one under dis's replace_rel (0.8), not under the default 0.5."""
+    from algorithms.pipeline import PIPELINES
+
+    rr = PIPELINES["dis"]["detection"]["long_baseline"]["replace_rel"]
+    long_car = _det(100, 50, 123, 62, 0.9, 0.2)
+    part = _det(109, 50, 123, 62, 1.0, 0.2)
+    assert merge_detections([part], [long_car], baseline_frames=6, replace_rel=rr) == [long_car]
+    assert merge_detections([part], [long_car], baseline_frames=6,
+                            replace_rel=LONG_BASELINE_DEFAULTS["replace_rel"]) == [part]
