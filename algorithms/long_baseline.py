@@ -102,9 +102,14 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   mid_frame): a slow mover crept there; the place a fast vehicle left before frame t, a region of the long pair
 #   that neither it nor the path it swept covers any more (KIT AIS at 2-3 fps: cars move 10-30 px a frame), is
 #   road at t-m and t alike, or holds the vehicle where its slow motion does not explain it (false: off).
+# flow_params: the flow method's parameters for the long pair, over the pipeline's flow.params ({}: the same flow):
+#   the long pair runs once a pair beside the pair's flow, and a setting too noisy or too costly for every pair can
+#   serve it (DIS's flow from full resolution, finest_scale 0: the medium preset's half-resolution patches average a
+#   small car with the ground around it; the long pair's parallax test judges the frames, and rejects the roofs and
+#   crowns the finer flow resolves, which the one-pair detector passes: dis.yaml has the figures).
 LONG_BASELINE_DEFAULTS = {"frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
                           "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
-                          "mid_check": True}
+                          "mid_check": True, "flow_params": {}}
 
 
 def check_long_baseline(params: Mapping) -> dict:
@@ -127,6 +132,9 @@ def check_long_baseline(params: Mapping) -> dict:
         raise ValueError(f"min_box_px: expected an integer >= 0, got {b!r}")
     if not isinstance(p["mid_check"], bool):
         raise ValueError(f"mid_check: expected true/false, got {p['mid_check']!r}")
+    fp = p["flow_params"]
+    if not isinstance(fp, Mapping) or not all(isinstance(key, str) for key in fp):
+        raise ValueError(f"flow_params: expected a mapping of the flow method's parameters, got {fp!r}")
     for key in ("replace_rel", "parallax_max_ratio"):
         r = p[key]
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r < 0:

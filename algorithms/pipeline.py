@@ -561,7 +561,7 @@ class Pipeline:
                 m_mid = len(history) // 2 if long_cfg["mid_check"] else 0
                 mid = ((register_into(history[-m_mid][0], compose_models([m for _, m in list(history)[-m_mid:]]))[0],
                         m_mid) if m_mid >= 1 else None)
-                w_long, v_long = flow_fn(g_t, g_old, **flow_params)
+                w_long, v_long = flow_fn(g_t, g_old, **{**flow_params, **long_cfg["flow_params"]})
                 slow = long_baseline_detections(
                     w_long, np.asarray(v_long, bool) & inside, baseline_frames=len(history), frames=(g_t, g_old),
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],

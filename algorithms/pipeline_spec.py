@@ -289,6 +289,7 @@ class LongBaselineSpec(_Section):
     min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
     parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
     mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
+    flow_params: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _checked(self) -> LongBaselineSpec:
@@ -478,6 +479,18 @@ class PipelineSpec(_Section):
         if not v:
             raise _fail(f"expected a non-empty string, got {v!r}")
         return v
+
+    @model_validator(mode="after")
+    def _long_flow_params_fit(self) -> PipelineSpec:
+        # the long pair's flow parameters are the flow method's: checked against it, at their own key
+        extra = self.detection.long_baseline.flow_params
+        if extra:
+            try:
+                self.detection.long_baseline.flow_params = check_params(STAGES["flow"][self.flow.method], extra)
+            except PydanticCustomError as e:
+                raise _fail(e.message(), at="detection.long_baseline.flow_" + str(e.context.get("at", "params"))) \
+                    from None
+        return self
 
 
 def _dump(model: BaseModel) -> dict:

@@ -16,6 +16,9 @@ vehicle's box at IoU >= 0.5, as the harness scores; ``mota_pt``, ``idf1_pt``: th
 centre rule alone, a track point within ``--gate`` px of the vehicle's centre) against
 the vehicles that move (``parked == 0``; what a motion detector can find, the figure
 the targets are about), and against every visible vehicle (``mota_all``). Also the detections per frame and the tracker's output per frame.
+With ``--breakdown``, where the misses and false positives come from (:func:`error_breakdown`): per vehicle its
+missed frames by cause (under half its box in the image, no detection, a detection box under IoU 0.5, the tracker),
+per track its false-positive frames and the vehicle it lay on.
 
 KIT AIS (``--kit-ais``, ``../shared/external/kit_ais`` beside the clone, or ``--kit-dir``): three
 Munich street sequences, YOLO boxes of every vehicle, parked or moving, without
@@ -80,6 +83,87 @@ def run_multi(pipeline: Pipeline, frames, *, gsd_m_per_px=None):
     return tracks, dets, est, time.perf_counter() - t0
 
 
+def _det_boxes(dets) -> np.ndarray:
+    """(N, 4) continuous boxes of detections (their inclusive pixel boxes, half a pixel out on every side)."""
+    return np.array([[d.x0_px - 0.5, d.y0_px - 0.5, d.x1_px + 0.5, d.y1_px + 0.5] for d in dets]).reshape(-1, 4)
+
+
+def error_breakdown(tracks: pd.DataFrame, dets: list, truth: pd.DataFrame, *, frame_shape, gate_px: float = 20.0,
+                    everything: pd.DataFrame | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Where the misses and false positives of :func:`harness.metrics.mot_counts` come from, row by row.
+
+    ``(misses, false_positives)``. A miss is a counted vehicle of a frame that no track corresponds
+    to (the CLEAR-MOT frame matching itself); its ``cause``: ``out of frame`` when under half its
+    box lies in the ``frame_shape`` (H, W) image (no box inside the image reaches IoU 0.5 with it),
+    else ``no detection`` (no detection of that frame overlaps it by IoU 0.1), ``detection box``
+    (one overlaps it, none by 0.5), ``tracker`` (a detection fits it, no track does). A false
+    positive is a track row no vehicle took (after the metric's distractor removal), with the
+    row of ``everything`` (all of tracks.csv, parked vehicles too; default ``truth``) its box overlaps
+    most and that IoU. ``dets``: the detections of each frame (pair t's lie in frame t).
+    """
+    from harness.metrics.matching import box_iou, boxes_of
+    from harness.metrics.trajectories import _mot_frames  # the metric's own frame matching
+
+    h, w = frame_shape
+    tb_all = boxes_of(truth)
+    every = truth if everything is None else everything
+    eb_all = boxes_of(every)
+    fn, fp = [], []
+    est = tracks.dropna(subset=["x_filt_px"])
+    for f, vids, tids, _D, match, _sw, _ok in _mot_frames(tracks, truth, gate_px=gate_px):
+        rows_f = truth["frame"].to_numpy() == f
+        d_f = dets[f] if 0 <= f < len(dets) else []
+        db = _det_boxes(d_f)
+        e_f = est[est["frame"] == f]
+        for a, vid in enumerate(vids):
+            if a in match:
+                continue
+            sel = rows_f & (truth["vehicle_id"].to_numpy() == vid)
+            b = tb_all[sel][0]
+            area = (b[2] - b[0]) * (b[3] - b[1])
+            inside = (max(0.0, min(b[2], w) - max(b[0], 0.0)) * max(0.0, min(b[3], h) - max(b[1], 0.0)) / area
+                      if area > 0 else 1.0)
+            det_iou = float(np.nanmax(box_iou(b, db))) if len(db) else 0.0
+            trk = boxes_of(e_f[e_f["track_id"].isin(tids)])
+            trk_iou = float(np.nanmax(box_iou(b, trk))) if len(trk) else 0.0
+            cause = ("out of frame" if inside < 0.5 else "no detection" if det_iou < 0.1 else
+                     "detection box" if det_iou < 0.5 else "tracker")
+            fn.append({"frame": int(f), "vehicle_id": int(vid), "class": truth.loc[sel, "class"].iloc[0]
+                       if "class" in truth.columns else "car", "w_px": b[2] - b[0], "h_px": b[3] - b[1],
+                       "in_image": inside, "det_iou": det_iou, "track_iou": trk_iou, "cause": cause})
+        matched = set(match.values())
+        for bi, tid in enumerate(tids):
+            if bi in matched:
+                continue
+            eb = boxes_of(e_f[e_f["track_id"] == tid])[:1]
+            in_f = every["frame"].to_numpy() == f
+            ious = box_iou(eb, eb_all[in_f])[0] if in_f.any() else np.zeros(0)
+            j = int(np.nanargmax(ious)) if len(ious) and np.isfinite(ious).any() and np.nanmax(ious) > 0 else -1
+            near = every[in_f].iloc[j] if j >= 0 else None
+            fp.append({"frame": int(f), "track_id": int(tid), "w_px": eb[0, 2] - eb[0, 0],
+                       "h_px": eb[0, 3] - eb[0, 1], "best_iou": float(ious[j]) if j >= 0 else 0.0,
+                       "vehicle_id": int(near["vehicle_id"]) if near is not None else -1,
+                       "parked": int(near["parked"]) if near is not None and "parked" in every.columns else -1})
+    return (pd.DataFrame(fn, columns=["frame", "vehicle_id", "class", "w_px", "h_px", "in_image", "det_iou",
+                                      "track_iou", "cause"]),
+            pd.DataFrame(fp, columns=["frame", "track_id", "w_px", "h_px", "best_iou", "vehicle_id", "parked"]))
+
+
+def _print_breakdown(fn: pd.DataFrame, fp: pd.DataFrame) -> None:
+    """Per vehicle: its missed frames by cause; per track: its false-positive frames and the vehicle it lay on."""
+    if len(fn):
+        by = fn.groupby(["vehicle_id", "class", "cause"]).agg(frames=("frame", "size"), first=("frame", "min"),
+                                                             last=("frame", "max"), w_px=("w_px", "mean"),
+                                                             h_px=("h_px", "mean"), det_iou=("det_iou", "mean"))
+        print("    misses:\n" + "\n".join("      " + line for line in by.round(2).to_string().splitlines()))
+    if len(fp):
+        by = fp.groupby("track_id").agg(frames=("frame", "size"), first=("frame", "min"), last=("frame", "max"),
+                                        w_px=("w_px", "mean"), h_px=("h_px", "mean"), best_iou=("best_iou", "mean"),
+                                        on_vehicle=("vehicle_id", lambda s: int(s.mode().iat[0])),
+                                        parked=("parked", "max"))
+        print("    false positives:\n" + "\n".join("      " + line for line in by.round(2).to_string().splitlines()))
+
+
 def synthetic(args) -> int:
     from scenes import load_scene_spec, open_sequence
     from scenes.cache import cached_sequence
@@ -113,6 +197,9 @@ def synthetic(args) -> int:
             rows.append(row)
             print("  " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()),
                   flush=True)
+            if args.breakdown:
+                _print_breakdown(*error_breakdown(tracks, dets, moving, frame_shape=frames[0].shape[:2],
+                                                  gate_px=args.gate, everything=truth))
     df = pd.DataFrame(rows)
     print()
     print(df.round(3).to_string(index=False))
@@ -301,6 +388,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gate", type=float, default=20.0, help="MOT correspondence gate, px")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="pipeline override, e.g. detection.close_px=3 or tracking.multi.gate_px=15")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="synthetic: print each pipeline's misses per vehicle and cause, and false positives per "
+                         "track")
     ap.add_argument("--kit-ais", action="store_true", help="score on the KIT AIS frames instead")
     ap.add_argument("--kit-dir", default=str(KIT_DIR))
     ap.add_argument("--kit-link-px", type=float, default=60.0, help="box chaining radius, px (ground-fixed)")

@@ -1,6 +1,7 @@
 """Slow movers over a longer time baseline (algorithms.long_baseline) and its pipeline keys."""
 
 import math
+import sys
 
 import cv2
 import numpy as np
@@ -153,7 +154,36 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
     assert all(len(ds) <= 1 for ds in on)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
+    """flow_params: DIS from full resolution on the long pair alone; a 26 x 14 px car at 0.8 px a frame is found in
+    every pair from the first long one (pair 2) on, which the medium preset's half-resolution flow misses."""
+    monkeypatch.setattr(sys.modules[__name__], "CAR", (26, 14))
+    frames = _sequence(12, speed_px=0.8, seed=seed)
+    calls = []
+    import algorithms.registry as registry
+
+    real = registry.STAGES["flow"]["dis"]
+
+    def recording(f0, f1, **kw):
+        calls.append(kw)
+        return real(f0, f1, **kw)
+
+    def found(pipeline):
+        on = [e.detections for e in pipeline.run(frames) if hasattr(e, "detections")]
+        return {t for t, ds in enumerate(on) if any(box_iou(d, _car_box(t, 0.8)) >= 0.5 for d in ds)}
+
+    full = _pipeline(frames=6, flow_params={"finest_scale": 0})
+    monkeypatch.setitem(registry.STAGES["flow"], "dis", recording)
+    assert set(range(1, 11)) <= found(full)
+    assert {"finest_scale": 0} in calls and {} in calls  # the long pair's and the pair's own
+    assert 2 not in found(_pipeline(frames=6))
+
+
 @pytest.mark.parametrize("section, match", [
+    ({"flow_params": {"finest_scal": 0}},
+     r"detection.long_baseline.flow_params.finest_scal: unknown parameter of dis; valid: preset, finest_scale"),
+    ({"flow_params": 3}, r"detection.long_baseline.flow_params: expected a mapping"),
     ({"frames": 1}, r"detection.long_baseline.frames: expected 0 \(off\) or an integer >= 2, got 1"),
     ({"frames": 2.5}, r"detection.long_baseline.frames: expected an integer"),
     ({"max_speed_px": 0}, r"detection.long_baseline.max_speed_px: expected a finite number > 0"),
@@ -335,3 +365,32 @@ def test_the_mid_frame_must_show_the_creep_too():
         long_baseline_detections(wk, vk & inside, mid_frame=(mid, 6), **kw)
     with pytest.raises(PipelineError, match=r"detection.long_baseline.mid_check: expected"):
         _pipeline(mid_check="yes")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_dis_pipelines_long_pair_follows_a_small_cars_six_frame_motion(seed):
+    """The built-in dis runs its long pair with DIS from full resolution: a 24 x 12 px car's motion over six frames at
+    0.8 px a frame, (4.8, 1.2) px, within 0.3 px; its pair flow's parameters (half resolution) give under 65 % of it."""
+    from algorithms.pipeline import PIPELINES
+    from tests.algorithms.test_reference import _small_car_pair
+
+    cfg = PIPELINES["dis"]
+    assert cfg["flow"]["method"] == "dis"
+    f0, f1, inner = _small_car_pair(seed, (4.8, 1.2))
+    long_params = {**cfg["flow"]["params"], **cfg["detection"]["long_baseline"]["flow_params"]}
+    np.testing.assert_allclose(np.median(dis(f0, f1, **long_params)[0][inner].reshape(-1, 2), axis=0), [4.8, 1.2],
+                               atol=0.3)
+    assert np.median(dis(f0, f1, **cfg["flow"]["params"])[0][inner][..., 0]) < 0.65 * 4.8
+
+
+def test_the_dis_pipeline_takes_the_long_box_over_a_slow_pair_box_of_part_of_the_car():
+    """dis's pair flow (half resolution) boxes a small slow car in part: a pair box of 15 of the car's 24 px (0.63 of
+    the long pair's box) gives way to the long one under dis's replace_rel (0.8), not under the default 0.5."""
+    from algorithms.pipeline import PIPELINES
+
+    rr = PIPELINES["dis"]["detection"]["long_baseline"]["replace_rel"]
+    long_car = _det(100, 50, 123, 62, 0.9, 0.2)
+    part = _det(109, 50, 123, 62, 1.0, 0.2)
+    assert merge_detections([part], [long_car], baseline_frames=6, replace_rel=rr) == [long_car]
+    assert merge_detections([part], [long_car], baseline_frames=6,
+                            replace_rel=LONG_BASELINE_DEFAULTS["replace_rel"]) == [part]

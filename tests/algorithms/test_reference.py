@@ -49,3 +49,38 @@ def test_flat_frames_invalid(method):
 def test_shape_mismatch(method):
     with pytest.raises(ValueError, match="differ in size"):
         method(np.zeros((20, 20)), np.zeros((20, 22)))
+
+
+def _small_car_pair(seed: int, motion_px=(1.2, 0.3)):
+    """A 24 x 12 px car of its own texture moving ``motion_px`` over static ground (uint8 frames, its inner rows)."""
+    import cv2
+    from tests.algorithms.synthetic import wave_texture
+
+    rng = np.random.default_rng(seed)
+    ground, _ = wave_texture(rng, (96, 128))
+    car0, car1 = wave_texture(rng, (96, 128), motion=translation(*motion_px), max_cycles_per_px=0.2)
+    car0, car1 = 0.4 * car0 + 10, 0.4 * car1 + 10  # a dark car
+    m0 = np.zeros((96, 128), np.float32)
+    m0[42:54, 52:76] = 1
+    m1 = cv2.warpAffine(m0, np.float32([[1, 0, motion_px[0]], [0, 1, motion_px[1]]]), (128, 96), flags=cv2.INTER_LINEAR)
+    f0 = np.round(ground * (1 - m0) + car0 * m0).astype(np.uint8)
+    f1 = np.round(ground * (1 - m1) + car1 * m1).astype(np.uint8)
+    return f0, f1, (slice(44, 52), slice(55, 73))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dis_at_full_resolution_follows_a_car_smaller_than_its_patch(seed):
+    """finest_scale 0: a 24 x 12 px car moving (1.2, 0.3) px is followed within 0.2 px; the medium preset's flow from
+    half resolution (8 px patches over 16 image px, more ground than car) gives it under 60 % of its motion."""
+    f0, f1, inner = _small_car_pair(seed)
+    full, _ = dis(f0, f1, finest_scale=0)
+    np.testing.assert_allclose(np.median(full[inner].reshape(-1, 2), axis=0), [1.2, 0.3], atol=0.2)
+    half, _ = dis(f0, f1)
+    assert np.median(half[inner][..., 0]) < 0.6 * 1.2
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "0"])
+def test_dis_rejects_a_bad_finest_scale(bad):
+    f0, f1, _ = _small_car_pair(0)
+    with pytest.raises(ValueError, match="finest_scale: expected None or an integer >= 0"):
+        dis(f0, f1, finest_scale=bad)
