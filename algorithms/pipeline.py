@@ -48,7 +48,7 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
-from algorithms.detection import DETECTION_DEFAULTS
+from algorithms.detection import DETECTION_DEFAULTS, ground_fit_at
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, motion_mask
 
@@ -65,6 +65,22 @@ GLOBAL_MOTION_METHODS = STAGES["global_motion"]
 _STAGE = {"jitter": "remove_jitter", "threshold": "threshold_flow", "spatial": "spatial_filter",
           "temporal": "temporal_filter", "detection": "detect_vehicles"}
 
+
+
+def _in_path_frame(dets: list, field: np.ndarray, valid: np.ndarray, ground_model: str) -> list:
+    """The detections with their motion in the multi-target tracker's coordinates (image minus the camera path).
+
+    A detection's ``(u_px, v_px)`` is its motion over the ground: the local flow less the ground fit
+    (:func:`algorithms.detection.ground_residual`). The frames were compensated by the pair's global model, which
+    leaves the ground a residual where the model does not follow it (perspective, rotation, a shift that tall roofs
+    pulled), and the tracker's coordinates move with that model: there a vehicle moves by its motion over the
+    ground plus the ground's residual at its place. Unchanged with ``ground_model`` none (no fit: the flow is
+    the motion in those coordinates already).
+    """
+    if ground_model == "none" or not dets:
+        return dets
+    g = ground_fit_at(field, valid, [(d.x_px, d.y_px) for d in dets], model=ground_model)
+    return [d._replace(u_px=d.u_px + gx, v_px=d.v_px + gy) if len(d) >= 9 else d for d, (gx, gy) in zip(dets, g)]
 
 def _stage(kind: str):
     return get_stage(kind, _STAGE[kind])
@@ -511,7 +527,8 @@ class Pipeline:
                 p.step(shifts[t], filtered if point_field == "filtered" else cur["flow_local"], cur["valid"],
                        frames=cur["gray"])
             if multi is not None:
-                multi.step(t, dets, offset_px=cumulative[t], image=cur["gray"][0])
+                multi.step(t, _in_path_frame(dets, det_field, cur["valid"], det_cfg["ground_model"]),
+                           offset_px=cumulative[t], image=cur["gray"][0])
             ms["tracking"] = _ms(t0)
             for k, v in ms.items():
                 totals[k] = totals.get(k, 0.0) + v
