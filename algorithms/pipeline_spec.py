@@ -337,6 +337,7 @@ class DetectionSpec(_Section):
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
     box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
     max_area_halo_rel: float = DETECTION_DEFAULTS["max_area_halo_rel"]
+    min_box_m2: Any = DETECTION_DEFAULTS["min_box_m2"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
 

@@ -557,3 +557,46 @@ def test_a_region_beyond_max_area_halo_rel_is_rejected_before_its_box():
     assert detect_vehicles(flow, valid, max_area_halo_rel=1.2, **kw) == []
     with pytest.raises(ValueError, match="max_area_halo_rel"):
         detect_vehicles(flow, valid, max_area_halo_rel=0.5)
+
+
+def test_a_cyclist_whose_flow_halo_passes_the_region_minimum_is_rejected_on_its_box_and_a_car_is_not():
+    # at 0.2 m/px: a cyclist of 10 x 5 px (2 x 1 m, 2 m^2 boxed) 4 px a frame to the right, whose motion a smoothing
+    # flow spread over a 26 x 20 px halo (about 20 m^2, over min_area_m2), and a 20 x 12 px car (9.6 m^2) beside it
+    rng = np.random.default_rng(21)
+    g = _ground(rng)
+    frames = []
+    for k in range(3):  # t-1, t, t+1
+        f = _paint_car(g, 40 + 4 * k - 4, 40, 10, 5, roof=90.0)
+        frames.append(_paint_car(f, 90 + 4 * k - 4, 80, 20, 12))
+    flow = _field(rng, [(32, 52, 32, 58, (4.0, 0.0)), (74, 98, 84, 114, (4.0, 0.0))], blur=1.0)
+    valid = np.ones((H, W), bool)
+    cyclist, car = (40, 40, 49, 44), (90, 80, 109, 91)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], gsd_m_per_px=0.2, parallax_min_fraction=0.0)
+    (d,) = detect_vehicles(flow, valid, **kw)  # the default min_box_m2, 4 m^2
+    assert box_iou(d, car) >= 0.7, d
+    both = detect_vehicles(flow, valid, min_box_m2=None, **kw)
+    assert len(both) == 2 and max(box_iou(x, cyclist) for x in both) >= 0.5, both
+    # the car is rejected by a limit over its box alone; without the ground sampling distance there is no limit
+    assert detect_vehicles(flow, valid, min_box_m2=10.0, **kw) == []
+    assert len(detect_vehicles(flow, valid, **{**kw, "gsd_m_per_px": None})) == 2
+    with pytest.raises(ValueError, match="min_box_m2"):
+        detect_vehicles(flow, valid, min_box_m2=-1.0)
+
+
+def test_a_small_box_at_the_image_border_is_a_cut_vehicle_and_not_judged_by_min_box_m2():
+    # the cyclist-sized mover of the test above, 6 px from the top edge (within border_px): a car the frame cuts
+    # looks the same
+    rng = np.random.default_rng(22)
+    g = _ground(rng)
+    frames = [_paint_car(g, 40 + 4 * k - 4, 6, 10, 5, roof=90.0) for k in range(3)]
+    flow = _field(rng, [(3, 19, 32, 58, (4.0, 0.0))], blur=1.0)
+    valid = np.ones((H, W), bool)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], gsd_m_per_px=0.2, parallax_min_fraction=0.0)
+    (d,) = detect_vehicles(flow, valid, **kw)
+    assert box_iou(d, (40, 6, 49, 10)) >= 0.5, d
+    # 9 px further into the frame it is judged, and rejected
+    frames = [_paint_car(g, 40 + 4 * k - 4, 15, 10, 5, roof=90.0) for k in range(3)]
+    flow = _field(rng, [(8, 28, 32, 58, (4.0, 0.0))], blur=1.0)
+    kw = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    assert detect_vehicles(flow, valid, **kw) == []
+    assert len(detect_vehicles(flow, valid, min_box_m2=None, **kw)) == 1
