@@ -17,7 +17,7 @@ from reports.model import build_model
 PIPES = ["dis", "farneback", "pyramidal-lk"]
 # the synthetic reading knows its ground sampling distance and applies the detection's limits in m^2; footage
 # has none: without those limits both readings give the pipelines the same inputs, so the same counts
-_NO_M2 = {"detection": {"min_area_m2": None, "max_area_m2": None}}
+_NO_M2 = {"detection": {"min_area_m2": None, "max_area_m2": None, "min_box_m2": None}}
 
 
 @pytest.fixture(scope="module")

@@ -85,13 +85,20 @@ CLUTTERED = {**BARE, "seed": 3, "world.built_fraction": 0.8, "world.buildings.co
              "world.buildings.footprint_range_m": [6.0, 10.0], "world.road_width_m": 12.0}
 
 
+def _worlds_with(overrides: dict, key: str):
+    """The ``tiny`` world of ``overrides`` without and with ``key`` at 1, checked to have the same roads and as many
+    buildings (the truth is made of them)."""
+    _, _, plain, _ = _world("tiny", **overrides)
+    _, _, other, _ = _world("tiny", **overrides, **{key: 1.0})
+    assert len(plain.roads) == len(other.roads) and len(plain.buildings) == len(other.buildings) > 0
+    for a, b in zip(plain.roads, other.roads):
+        assert np.array_equal(a.centre_m, b.centre_m)
+    return plain, other
+
+
 def test_clutter_paints_the_ground_only_and_leaves_the_rest_of_the_world_as_it_was():
     # its own random stream: roads, buildings and trees (what the truth is made of) stay the same
-    _, _, plain, _ = _world("tiny", **CLUTTERED)
-    _, _, busy, _ = _world("tiny", **CLUTTERED, **{"world.clutter": 1.0})
-    assert len(plain.roads) == len(busy.roads) and len(plain.buildings) == len(busy.buildings) > 0
-    for a, b in zip(plain.roads, busy.roads):
-        assert np.array_equal(a.centre_m, b.centre_m)
+    plain, busy = _worlds_with(CLUTTERED, "world.clutter")
     # the same blocks (only dormer rows on some roofs): footprints, heights and the first parts as they were
     assert [(b.centre, b.size, b.parts[:5]) for b in plain.buildings] == [(b.centre, b.size, b.parts[:5])
                                                                           for b in busy.buildings]
@@ -239,11 +246,7 @@ def _samples(world, roads, offset_m: float, trim_m: float = 14.0) -> np.ndarray:
 
 def test_edges_paint_the_ground_and_tint_roofs_only_and_leave_the_rest_of_the_world_as_it_was():
     # world.edges draws from its own stream: roads, buildings and trees (what the truth is made of) stay the same
-    _, _, plain, _ = _world("tiny", **EDGED)
-    _, _, edged, _ = _world("tiny", **EDGED, **{"world.edges": 1.0})
-    assert len(plain.roads) == len(edged.roads) and len(plain.buildings) == len(edged.buildings) > 0
-    for a, b in zip(plain.roads, edged.roads):
-        assert np.array_equal(a.centre_m, b.centre_m)
+    plain, edged = _worlds_with(EDGED, "world.edges")
     assert plain.buildings == edged.buildings
     assert [(t.x_m, t.y_m) for t in plain.trees] == [(t.x_m, t.y_m) for t in edged.trees]
     d = np.abs(plain.ground_texture.astype(int) - edged.ground_texture.astype(int)).max(axis=2)
