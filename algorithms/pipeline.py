@@ -418,7 +418,7 @@ class Pipeline:
         long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
         # frames t-k .. t-1 (gray, the pair's model), oldest first: the long baseline's frame t-k and models
         history: deque = deque(maxlen=max(1, long_cfg["frames"]))
-        # (box area px^2, speed px/frame) of the sequence's detections so far: the typical mover (detection.sequence_size)
+        # (box area px^2, speed px/frame) of the detections so far: the typical mover (detection.sequence_size)
         size_cfg = det_cfg["sequence_size"]
         sizes: deque = deque(maxlen=size_cfg["history"])
         points = []

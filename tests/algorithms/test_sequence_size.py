@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from algorithms.detection import Detection
-from algorithms.pipeline import Pipeline, PipelineError
+from algorithms.pipeline import Pipeline, PipelineError, get_pipeline
 from algorithms.sequence_size import (SEQUENCE_SIZE_DEFAULTS, check_sequence_size, relative_size_keep,
                                       typical_mover)
 
@@ -97,6 +97,16 @@ def test_the_pipeline_leaves_out_the_pedestrian_once_the_history_knows_the_cars(
     assert all(len(walker(ds)) == 1 and len(ds) == 4 for ds in off)  # the detector finds all four movers
     assert len(walker(on[0])) == 1  # 4 detections in the history: nothing judged yet
     assert all(walker(ds) == [] and len(ds) == 3 for ds in on[1:])  # then the cars stay, the pedestrian goes
+
+
+@pytest.mark.parametrize("name", ["dis", "pyramidal-hs"])
+def test_the_built_in_pipelines_leave_out_the_pedestrian_without_a_ground_sampling_distance(name):
+    # on in dis and pyramidal-hs (small_rel 0.25): the 20 detections of pairs 0-4 are the history, from pair 4 on
+    # the pedestrian (0.18 times a car's box, 1.5 px a frame against 4) is left out, the cars stay
+    out = [e.detections for e in get_pipeline(name).run(_street(12)) if hasattr(e, "detections")]
+    walkers = [len([d for d in ds if 120 <= d.y_px <= 136]) for ds in out]
+    assert walkers[:4] == [1, 1, 1, 1] and walkers[4:] == [0] * (len(out) - 4), walkers
+    assert all(len(ds) == 3 for ds in out[4:])
 
 
 def _pipeline(**section):
