@@ -29,6 +29,7 @@ local flow ``w`` (``I1'(x + w) ~ I0(x)``) give ``total = s + w``. With a matrix
 from __future__ import annotations
 
 import copy
+import math
 import time
 from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
@@ -50,6 +51,7 @@ from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
 from algorithms.detection import DETECTION_DEFAULTS, ground_fit_at
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
+from algorithms.sequence_size import relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, motion_mask
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
@@ -510,6 +512,9 @@ class Pipeline:
         long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
         # frames t-k .. t-1 (gray, the pair's model), oldest first: the long baseline's frame t-k and models
         history: deque = deque(maxlen=max(1, long_cfg["frames"]))
+        # (box area px^2, speed px/frame) of the detections so far: the typical mover (detection.sequence_size)
+        size_cfg = det_cfg["sequence_size"]
+        sizes: deque = deque(maxlen=size_cfg["history"])
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
@@ -599,6 +604,15 @@ class Pipeline:
                     parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
+            if size_cfg["small_rel"] > 0 or size_cfg["large_rel"] > 0:
+                # pedestrians, posts, roofs: far from the size of the sequence's vehicles (algorithms.sequence_size)
+                sizes.extend(((d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1), math.hypot(d.u_px, d.v_px))
+                             for d in dets)
+                if len(sizes) >= size_cfg["min_history"]:
+                    area, speed = typical_mover([a for a, _ in sizes], [v for _, v in sizes])
+                    keep = relative_size_keep(dets, area, speed, small_rel=size_cfg["small_rel"],
+                                              slow_rel=size_cfg["slow_rel"], large_rel=size_cfg["large_rel"])
+                    dets = [d for d, k in zip(dets, keep) if k]
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:

@@ -40,6 +40,7 @@ from algorithms.jitter import JITTER_MODELS
 from algorithms.registry import STAGES
 from algorithms.detection import DETECTION_DEFAULTS, detect_vehicles
 from algorithms.long_baseline import LONG_BASELINE_DEFAULTS, check_long_baseline
+from algorithms.sequence_size import SEQUENCE_SIZE_DEFAULTS, check_sequence_size
 from algorithms.tracking import MULTI_DEFAULTS, MultiTargetTracker, PointTracker
 
 __all__ = ["PipelineError", "PipelineSpec", "COMPENSATION_MODELS", "resolve_pipeline", "pipeline_hash",
@@ -297,6 +298,21 @@ class LongBaselineSpec(_Section):
         return self
 
 
+class SequenceSizeSpec(_Section):
+    """The keys of :data:`algorithms.sequence_size.SEQUENCE_SIZE_DEFAULTS` (defaults and meaning there)."""
+
+    small_rel: float = SEQUENCE_SIZE_DEFAULTS["small_rel"]
+    slow_rel: float = SEQUENCE_SIZE_DEFAULTS["slow_rel"]
+    large_rel: float = SEQUENCE_SIZE_DEFAULTS["large_rel"]
+    min_history: StrictInt = SEQUENCE_SIZE_DEFAULTS["min_history"]
+    history: StrictInt = SEQUENCE_SIZE_DEFAULTS["history"]
+
+    @model_validator(mode="after")
+    def _checked(self) -> SequenceSizeSpec:
+        _checked_by(lambda: check_sequence_size(_dump(self)))
+        return self
+
+
 class DetectionSpec(_Section):
     """The keys of :data:`algorithms.detection.DETECTION_DEFAULTS` (defaults and meaning there), checked by it."""
 
@@ -340,11 +356,13 @@ class DetectionSpec(_Section):
     min_box_m2: Any = DETECTION_DEFAULTS["min_box_m2"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
+    sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)
 
     @model_validator(mode="after")
     def _detector_accepts(self) -> DetectionSpec:
         d = _dump(self)
         d.pop("long_baseline")
+        d.pop("sequence_size")
         gsd = d.pop("gsd_m_per_px")
         if d.pop("field") not in ("local", "filtered"):
             raise _fail(f"expected local or filtered, got {self.field!r}", at="field")
