@@ -32,8 +32,8 @@ history holds ``min_history`` detections nothing is judged. What the history hol
 the detector gave it, before this test: the reference does not feed on its own verdicts.
 
 The keys are those of :data:`SEQUENCE_SIZE_DEFAULTS` (the pipeline's ``detection.sequence_size``
-section; ``small_rel`` 0 and ``large_rel`` 0 turn either half off, the defaults). dis and pyramidal-hs
-turn it on with ``small_rel`` 0.25 and ``large_rel`` 20; their files give the figures, off -> on
+section; ``small_rel`` 0 and ``large_rel`` 0 turn either half off, the defaults). dis, pyramidal-hs,
+pyramidal-lk (its twin) and tv-l1 turn it on with ``small_rel`` 0.25 and ``large_rel`` 20; their files give the figures, off -> on
 (``benchmarks/tracking_quality.py --kit-ais``): KIT AIS detection precision 0.223 -> 0.253 (dis) and
 0.254 -> 0.277 (pyramidal-hs), recall 0.376 -> 0.371 and 0.484 -> 0.481 (two and one of 372 moving
 boxes: a tenth of a car, IoU 0.06-0.14 with its box, at 4-6 px a frame against the typical mover's
