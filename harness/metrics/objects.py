@@ -37,7 +37,10 @@ annotated row counts), so a figure scored here differs from a MOTChallenge one w
 truth's visibility falls below 0.5 (``min_visible_fraction=0`` scores as it does). The
 ``visible_fraction`` column is synthetic truth's share of the vehicle's projected area that
 the image shows (``scenes.generate``), real footage's visibility (``gt.txt`` column 9; 1 when
-not given); without the column no row is low.
+not given); without the column no row is low. As the boxes are the image's, an estimate
+beyond the image border (a point tracker that follows a vehicle out of view, a track box
+coasting past the edge) lies in no box: a point there is a false positive, as a track of a
+vehicle wholly out of view always was, and a box reaching far past the edge may miss IoU 0.5.
 
 Parked vehicles are neither: a track on a parked car is a false positive (a real clip's
 "moving vehicles" truth counts it so).
