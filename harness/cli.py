@@ -482,13 +482,11 @@ def cmd_export(args: argparse.Namespace) -> int:
                          f"got {args.video!r}")
     export_frames(seq, out / "img1")
     if seq.tracks is not None:
-        from harness.metrics.objects import counted_objects, distractor_objects, row_distractors
+        from harness.metrics.objects import counted_objects, distractor_objects
 
-        # the objects the synthetic path counts and its distractors, as gt.txt rows (flag 0 where ignored; flag 1
-        # where the reader tells the distractor from its row: its class, or its visibility below the threshold)
-        t = seq.tracks
-        export_mot_gt(t, out / "gt" / "gt.txt", counted=counted_objects(t), distractors=distractor_objects(t),
-                      flagged=row_distractors(t))
+        # the objects the synthetic path counts and its distractors, as gt.txt rows (flag 0 where ignored)
+        export_mot_gt(seq.tracks, out / "gt" / "gt.txt", counted=counted_objects(seq.tracks),
+                      distractors=distractor_objects(seq.tracks))
     if args.video is not None:
         export_video(seq, out / Path(args.video).name, fps=float(seq.meta.get("fps") or 25.0))
     print(f"wrote {out} ({len(seq)} frames in img1/" + (", gt/gt.txt" if seq.tracks is not None else "")

@@ -652,18 +652,17 @@ _MOT_CLASS_IDS = {"car": 3, "van": 3, "truck": 3, "bus": 3, "motorbike": 5, "cyc
 
 
 def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.ndarray | None = None,
-                  distractors: np.ndarray | None = None, flagged: np.ndarray | None = None) -> Path:
+                  distractors: np.ndarray | None = None) -> Path:
     """Write a sequence's tracks.csv as a MOTChallenge ``gt.txt`` (9 columns, MOT16/17 layout).
 
     Which rows, and with which flag: without ``counted`` and ``distractors``, every visible row
     of a road user that is not parked, flag 1. With them (``(N,)`` bool over the rows of
     ``tracks``: what the synthetic path counts and treats as distractors,
     ``harness.metrics.objects``; the CLI's ``export`` passes them), the rows that are counted
-    objects or distractors: a counted row and a distractor that the reader recognises as one from
-    its row alone with flag 1 (``flagged``, ``(N,)`` bool; default: a pedestrian's or cyclist's
-    row, a distractor by its class; the CLI's ``export`` adds the rows of low visibility, a
-    distractor by the visibility written), any other distractor (a vehicle the synthetic path
-    does not count and does not hold against a tracker) with flag 0, ignored; rows that are
+    objects or distractors: a counted row and a pedestrian's or cyclist's row (read back as a
+    distractor by its class) with flag 1, any other distractor (a vehicle that stands still all
+    clip, a row of a vehicle under half visible: what the synthetic path does not count and does
+    not hold against a tracker) with flag 0, ignored; rows that are
     neither (a parked car: a track on it is a false positive) are left out. So the real path
     scores the export as the synthetic path scores the sequence, whatever those rules say.
 
@@ -689,13 +688,8 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.
         if len(counted) != len(tracks) or len(distractors) != len(tracks):
             raise ValueError(f"counted, distractors: expected {len(tracks)} flags each (one per row), got "
                              f"{len(counted)} and {len(distractors)}")
-        if flagged is None:
-            flagged = cls_all.isin(["pedestrian", "cyclist"]).to_numpy()
-        flagged = np.asarray(flagged, bool).reshape(-1)
-        if len(flagged) != len(tracks):
-            raise ValueError(f"flagged: expected {len(tracks)} flags (one per row), got {len(flagged)}")
         keep = counted | distractors
-        flag = (counted | (distractors & flagged)).astype(int)
+        flag = (counted | (distractors & cls_all.isin(["pedestrian", "cyclist"]).to_numpy())).astype(int)
     t = tracks.assign(_flag=flag, _cls=cls_all)[keep].sort_values(["frame", "vehicle_id"], kind="stable")
     vis = t["visible_fraction"] if "visible_fraction" in t.columns else pd.Series(1.0, index=t.index)
     lines = []

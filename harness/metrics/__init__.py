@@ -115,7 +115,7 @@ from harness.metrics.stabilisation import (  # noqa: F401
 from harness.metrics.matching import _linear_sum_assignment  # noqa: F401
 from harness.metrics.objects import (  # noqa: F401
     DISTRACTOR_CLASSES, MIN_VISIBLE_FRACTION, STATIC_SPEED_MPS, VEHICLE_CLASSES, counted_objects, distractor_objects,
-    distractor_table, keep_estimates, low_visibility, row_distractors, static_vehicles,
+    distractor_table, keep_estimates, low_visibility, static_vehicles,
     truth_classes,
 )
 from harness.metrics.trajectories import (  # noqa: F401
@@ -145,7 +145,7 @@ __all__ = [
     "encode_alpha_totals", "decode_alpha_totals",
     "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
     "VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "truth_classes", "counted_objects",
-    "distractor_objects", "static_vehicles", "MIN_VISIBLE_FRACTION", "low_visibility", "row_distractors",
+    "distractor_objects", "static_vehicles", "MIN_VISIBLE_FRACTION", "low_visibility",
     "distractor_table", "keep_estimates",
     "detection_rows", "detection_counts", "moving_vehicles",
     "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",

@@ -190,7 +190,7 @@ def test_a_track_on_a_pedestrian_is_neither_a_false_positive_nor_the_pedestrian_
 def test_a_row_of_low_visibility_is_neither_a_miss_nor_a_track_on_it_a_false_positive():
     # car 1 in full view; car 2 shows 30 % of itself in frame 0 (most of it beyond the border, its box the part in the
     # image) and all of itself in frame 1; one boxed track on each car in both frames
-    truth = _boxed([(f, v, x, 20.0, 6.0, {"parked": 0, "class": "car", "visible_fraction": vf})
+    truth = _boxed([(f, v, x, 20.0, 6.0, {"parked": 0, "class": "car", "visible_fraction": vf, "speed_mps": 5.0})
                     for f, v, x, vf in ((0, 1, 20.0, 1.0), (0, 2, 80.0, 0.3), (1, 1, 23.0, 1.0), (1, 2, 83.0, 1.0))])
     est = _points([(f, t, x, 20.0) for f, t, x in ((0, 10, 20.0), (0, 11, 80.0), (1, 10, 23.0), (1, 11, 83.0))])
     est = est.assign(bbox_x0_px=est["x_filt_px"] - 6.0, bbox_y0_px=14.0, bbox_x1_px=est["x_filt_px"] + 6.0,
@@ -213,8 +213,12 @@ def test_a_row_of_low_visibility_is_neither_a_miss_nor_a_track_on_it_a_false_pos
     parked = truth.assign(parked=np.where(truth["vehicle_id"] == 2, 1, 0))
     assert not M.distractor_objects(parked).any()
     assert M.mot_counts(est, parked, gate_px=5.0).false_positives == 2
-    # without the column (older folders, a gt.txt without visibility) no row is low
+    # without the column (older folders, a gt.txt without visibility) no row is low; real annotation (no speed_mps:
+    # a gt.txt) is scored by its flags alone, its visibility not cut on (TrackEval's and the MOT devkit's minvis 0)
     assert not M.low_visibility(truth.drop(columns=["visible_fraction"])).any()
+    real = truth.drop(columns=["speed_mps"])
+    assert not M.low_visibility(real).any() and M.counted_objects(real).all()
+    assert M.mot_counts(est, real, gate_px=5.0).objects == 4
     with pytest.raises(ValueError, match="min_visible_fraction: expected 0..1, got 1.5"):
         M.counted_objects(truth, min_visible_fraction=1.5)
 

@@ -139,12 +139,12 @@ def test_round_trip_rendered_sequence_as_footage_scores_the_same(tmp_path, rende
     pytest.importorskip("av")
     spec = load_scene_spec("tiny", overrides={"seed": 1})
     seq = open_sequence(cached_sequence(spec, render_cache))
-    from harness.metrics.objects import counted_objects, distractor_objects, row_distractors
+    from harness.metrics.objects import counted_objects, distractor_objects
 
     video = export_video(seq, tmp_path / "tiny.mkv", fps=seq.meta["fps"])
     # as `aerobench export` writes it: the synthetic path's counted objects and distractors
     gt = export_mot_gt(seq.tracks, tmp_path / "gt" / "gt.txt", counted=counted_objects(seq.tracks),
-                       distractors=distractor_objects(seq.tracks), flagged=row_distractors(seq.tracks))
+                       distractors=distractor_objects(seq.tracks))
 
     synthetic = run_suite(parse_suite({"name": "rt", "scenes": [{"preset": "tiny"}], "seeds": [1],
                                        "pipelines": ["dis"]}),

@@ -397,12 +397,9 @@ def test_export_mot_gt_leaves_parked_vehicles_out_and_keeps_the_classes(tmp_path
     assert gt["id"].tolist() == [1, 2, 3] and not gt["ignore"].any()
     with pytest.raises(ValueError, match=r"counted, distractors: expected 4 flags each"):
         export_mot_gt(tracks, tmp_path / "gt4.txt", counted=counted[:2], distractors=distractors[:2])
-    # a distractor the reader tells from its row (here the bus, as if mostly outside the image: its visibility
-    # goes with it) is written with flag 1, to be read back as a distractor by the same rule
+    # a distractor of low visibility (here the bus, as if mostly outside the image) is written with flag 0 and its
+    # visibility: a real gt.txt's flags say what counts (MOTChallenge), its visibility is not cut on
     low = tracks.assign(visible_fraction=[0.3, 1.0, 1.0, 0.0])
-    gt = read_mot_gt(export_mot_gt(low, tmp_path / "gt5.txt", counted=counted, distractors=distractors,
-                                   flagged=np.array([1, 0, 1, 0], bool)))
-    assert gt["id"].tolist() == [1, 3] and not gt["ignore"].any()
+    gt = read_mot_gt(export_mot_gt(low, tmp_path / "gt5.txt", counted=counted, distractors=distractors))
+    assert gt["id"].tolist() == [1, 3] and gt["ignore"].tolist() == [True, False]
     assert gt["visible_fraction"].tolist() == [0.3, 1.0]
-    with pytest.raises(ValueError, match=r"flagged: expected 4 flags \(one per row\), got 3"):
-        export_mot_gt(low, tmp_path / "gt6.txt", counted=counted, distractors=distractors, flagged=counted[:3])
