@@ -193,12 +193,15 @@ def score(tracks: pd.DataFrame, moving: pd.DataFrame, *, gate_px: float) -> dict
     """Box and point figures of one tracker's rows against the moving vehicles (today's metrics)."""
     from harness.metrics import mot_counts
 
+    points = tracks.drop(columns=BOXES, errors="ignore")
     cb = mot_counts(tracks, moving, gate_px=gate_px)
-    cp = mot_counts(tracks.drop(columns=BOXES, errors="ignore"), moving, gate_px=gate_px)
+    cp = mot_counts(points, moving, gate_px=gate_px)
+    cc = mot_counts(points, moving.drop(columns=BOXES, errors="ignore"), gate_px=gate_px)
     n = max(cp.objects, 1)
     return {"mota_pt": cp.mota, "idf1_pt": cp.idf1, "fp_pt/obj": cp.false_positives / n,
             "idsw_pt/obj": cp.switches / n, "mota_box": cb.mota, "idf1_box": cb.idf1,
-            "fp_box/obj": cb.false_positives / n, "idsw_box/obj": cb.switches / n, "objects": cp.objects}
+            "fp_box/obj": cb.false_positives / n, "idsw_box/obj": cb.switches / n,
+            "mota_c": cc.mota, "idf1_c": cc.idf1, "objects": cp.objects}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -227,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(ROOT))
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     from algorithms.pipeline import PIPELINES as TODAY, Pipeline, SequenceEstimate
+    from harness.metrics import counted_objects
     from scenes import load_scene_spec, open_sequence
     from scenes.cache import cached_sequence
 
@@ -243,9 +247,11 @@ def main(argv: list[str] | None = None) -> int:
         truth = seq.tracks[seq.tracks["frame"] < n]
         moving = truth[truth["parked"].astype(int) == 0] if "parked" in truth.columns else truth
         label = seq_dir.name if scene == str(seq_dir) else scene
-        n_veh = moving[moving["visible"].astype(bool)].groupby("frame").size().reindex(range(n), fill_value=0)
+        n_vis = moving[moving["visible"].astype(bool)].groupby("frame").size().reindex(range(n), fill_value=0)
+        n_veh = truth[counted_objects(truth)].groupby("frame").size().reindex(range(n), fill_value=0)
         print(f"scene {label}: {n} frames {seq.frame(0).shape[1]}x{seq.frame(0).shape[0]}, "
-              f"{n_veh.mean():.1f} moving vehicles visible a frame ({seq_dir})", flush=True)
+              f"{n_vis.mean():.1f} moving vehicles visible a frame, {n_veh.mean():.1f} counted "
+              f"(not standing still all {n} frames) ({seq_dir})", flush=True)
         with tempfile.TemporaryDirectory(prefix="calib-") as tmp:
             if args.old_pipeline:
                 run_earlier(args.earlier, seq_dir, n, args.old_pipeline, Path(tmp))
