@@ -84,3 +84,7 @@ def test_a_box_on_the_vehicle_matches_by_iou_and_a_blob_twice_its_size_does_not(
     s = calib.score(blob, truth, gate_px=20.0)
     assert s["mota_box"] == -1.0 and s["fp_box/obj"] == 1.0
     assert s["mota_pt"] == 1.0 and s["objects"] == 1
+    assert s["mota_c"] == 1.0  # the centre rule: 1 px from the centre, within the 20 px gate
+    far = track.assign(x_filt_px=75.0)  # 25 px off: outside the box and beyond the gate
+    assert calib.score(far, truth, gate_px=20.0)["mota_c"] == -1.0
+    assert calib.score(far, truth, gate_px=30.0)["mota_c"] == 1.0
