@@ -42,7 +42,19 @@ compare: the real clip's 455-1,678 FP and 14-54 IDSW over 100 frames x ~26 vehic
 and 0.005-0.021 IDSW per object, and 15-41 regions for ~26 vehicles are 0.58-1.58 regions per
 vehicle (``regions/veh``: the detections of all pairs over the counted vehicle-frames).
 
-Results: see docs/realism.md ("Difficulty against the real clip"), where the table is kept.
+Results (branch calib at 41bbbad on main 6f727df; the whole table, per pipeline, in docs/realism.md,
+"Difficulty against the real clip"), MOTA by the centre rule of 590415f's dis, farneback, pyramidal-hs,
+tv-l1 (pyramidal-lk is below 0 on every scene):
+
+- ``--scene <cache>/city-599817471d5b395887b2 --frames 100`` (the city-wide stand-in's render, the review
+  clip's density, 62 counted vehicles a frame): 0.21-0.33, dis best; the real clip 0.13-0.39, dis best.
+  As hard as the clip, though with fewer false positives (0.03-0.21 per object; the clip 0.18-0.65) and
+  more misses. Today's five there: 0.37-0.42 (IoU rule 0.18-0.22).
+- ``--scene realistic city`` (preset seeds 8, 22) and ``--seed 2``, ``--seed 3``: the best of the four
+  0.71-0.82 on two of three ``realistic`` worlds and 0.65-0.71 on two of three ``city`` worlds: easier
+  than the clip, as issue 22 found. ``city`` seed 2 (16.7 counted vehicles a frame) is in the clip's
+  range (-0.02-0.23), ``realistic`` seed 3 too, on 4 counted vehicles a frame (noise).
+- ``--scene nominal``: dis 0.55, the others below 0 (issue 21's figures for 590415f, in kind).
 """
 
 from __future__ import annotations
