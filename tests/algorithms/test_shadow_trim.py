@@ -34,9 +34,12 @@ def _scene(rng, *, shadow=None, body_grey=(190.0, 150.0)):
     return g.astype(np.float32), boxes
 
 
-def _dets(boxes):
-    return [Detection((x0 + x1) / 2, (y0 + y1) / 2, 100, float(x0), float(y0), float(x1), float(y1), 1.0, 0.0)
-            for x0, y0, x1, y1 in boxes]
+MOTIONS = [(1.5, 0.2), (-2.0, 0.0), (0.1, 1.0), (0.0, -1.2), (-1.0, 0.3)]  # px/frame: traffic both ways, both axes
+
+
+def _dets(boxes, motions=MOTIONS):
+    return [Detection((x0 + x1) / 2, (y0 + y1) / 2, 100, float(x0), float(y0), float(x1), float(y1), u, v)
+            for (x0, y0, x1, y1), (u, v) in zip(boxes, motions)]
 
 
 @pytest.mark.parametrize("shadow", [(-SHADOW_PX, 2), (SHADOW_PX, -1), (1, SHADOW_PX), (-2, -SHADOW_PX)])
@@ -56,7 +59,21 @@ def test_the_box_ends_at_the_body_whichever_way_the_sun_casts(shadow):
         opp = (side + 2) % 4
         assert got[opp] == box[opp]
         assert (d.x_px, d.y_px) == ((got[0] + got[2]) / 2, (got[1] + got[3]) / 2)
-        assert (d.area_px, d.u_px) == (100, 1.0)
+        assert d.area_px == 100 and (d.u_px, d.v_px) in MOTIONS
+
+
+def test_a_box_grown_ahead_of_dark_cars_that_all_drive_one_way_is_not_trimmed():
+    # a box that holds the ground a fast vehicle covers next: the body at its rear end, dark, on the same side for
+    # every car driving that way; no shadow, so nothing may be cut
+    rng = np.random.default_rng(7)
+    g, boxes = _scene(rng, body_grey=(48.0, 60.0))
+    grown = [(x0, y0, x1 + 12, y1) for x0, y0, x1, y1 in boxes]
+    dets = _dets(grown, [(14.0, 0.5)] * len(grown))
+    assert trim_cast_shadows(g, dets) == dets
+    # traffic both ways gives each end a dark body in turn: no side is darker for movers either way
+    both = [(x0, y0, x1 + 12, y1) if i % 2 == 0 else (x0 - 12, y0, x1, y1) for i, (x0, y0, x1, y1) in enumerate(boxes)]
+    dets = _dets(both, [(14.0, 0.5) if i % 2 == 0 else (-14.0, 0.5) for i in range(len(both))])
+    assert trim_cast_shadows(g, dets) == dets
 
 
 def test_no_shadow_no_change_and_dark_cars_keep_their_bodies():
