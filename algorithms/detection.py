@@ -3,7 +3,7 @@
 Beyond the thesis (its 4.1 follows seeded pixels; it detects nothing). After the
 global model is compensated, the local flow ``w`` of a pair is the motion the
 camera does not explain: vehicles, and the parallax of whatever stands above the
-ground. :func:`detect_vehicles` turns it into :class:`Detection` s in seven steps,
+ground. :func:`detect_vehicles` turns it into :class:`Detection` s in seven steps (an eighth optional),
 each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section):
 
 1. **mask**: valid pixels with ``|w| >= min_magnitude_px``, opened (``open_px``:
@@ -52,6 +52,8 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    spread of the frame difference, which static ground dominates), or
    ``change_enough`` (half decorrelated: a flat patch's noise test asks more than a
    replaced content gives). NCC leaves a change of brightness or contrast out.
+8. **cast shadow** (``shadow_trim_rel``, off by default): a shadow moves with its vehicle, so the box of
+   step 6 holds it; :func:`trim_cast_shadows` takes it off on the side the pair's detections vote dark.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
