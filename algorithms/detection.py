@@ -982,8 +982,10 @@ def shadow_bands(gray: np.ndarray, box, *, max_rel: float = 0.35, ratio_lo: floa
     if x1 < x0 or y1 < y0 or x0 < ground_px + 1 or y0 < ground_px + 1 or x1 + ground_px + 2 > w \
             or y1 + ground_px + 2 > h:
         return widths, outer
-    ring = np.concatenate([g[y0:y1 + 1, x0 - 1 - ground_px:x0 - 1].ravel(), g[y0:y1 + 1, x1 + 2:x1 + 2 + ground_px].ravel(),
-                           g[y0 - 1 - ground_px:y0 - 1, x0:x1 + 1].ravel(), g[y1 + 2:y1 + 2 + ground_px, x0:x1 + 1].ravel()])
+    ring = np.concatenate([g[y0:y1 + 1, x0 - 1 - ground_px:x0 - 1].ravel(),
+                           g[y0:y1 + 1, x1 + 2:x1 + 2 + ground_px].ravel(),
+                           g[y0 - 1 - ground_px:y0 - 1, x0:x1 + 1].ravel(),
+                           g[y1 + 2:y1 + 2 + ground_px, x0:x1 + 1].ravel()])
     ground = float(np.median(ring))
     if not ground > 0:
         return widths, outer
@@ -1017,9 +1019,9 @@ def trim_cast_shadows(gray: np.ndarray, detections: list[Detection], *, max_rel:
     next to the opposite side by ``vote`` (:func:`shadow_bands`, ``outer``): a dark body is as dark on both
     sides, a shadow on one; and so it does among the detections moving each way along that axis (those moving
     across it count for both): a box grown along the motion (KIT AIS, 2-3 frames a second) holds a dark body
-    at one end, the same end for every vehicle driving one way. On a shadow side each box loses its own band, at most 1.5 times the median band
-    of the detections that have one there (a dark car on the shadow's side would lose more than its
-    shadow). The centre ``x_px, y_px`` becomes the new box's; the other fields stay.
+    at one end, the same end for every vehicle driving one way. On a shadow side each box loses its own
+    band, at most 1.5 times the median band of the detections that have one there (a dark car on the
+    shadow's side would lose more than its shadow). The centre ``x_px, y_px`` becomes the new box's; the other fields stay.
 
     Parameters
     ----------
