@@ -204,8 +204,9 @@ class Detection(NamedTuple):
 #   0.35 against off (dis / pyramidal-hs): nominal 0.866 / 0.872 -> 0.901 / 0.884, realistic 0.663 / 0.768 -> 0.641 /
 #   0.746, urban-parallax and city dis unchanged, fast-vehicles pyramidal-hs 0.724 -> 0.713, city pyramidal-hs
 #   0.408 -> 0.396; the city-wide 1080p stand-in 0.208 / 0.144 -> 0.215 / 0.184; KIT AIS (no cast shadows) dis
-#   detection precision / recall 0.248 / 0.371 -> 0.244 / 0.363, pyramidal-hs unchanged. Off until a sequence-level
-#   vote (one sun over a clip) makes it hold on every set.
+#   detection precision / recall 0.248 / 0.371 -> 0.244 / 0.363, pyramidal-hs unchanged, box-aware pseudo-MOT MOTA
+#   -0.597 / -0.903 -> -0.564 / -0.890. Off until a sequence-level vote (one sun over a clip) makes it hold on every
+#   set.
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
