@@ -124,3 +124,38 @@ def test_trim_rejects_a_colour_frame_and_a_bad_vote():
         trim_cast_shadows(np.zeros((4, 4, 3)), [])
     with pytest.raises(ValueError, match=r"vote: expected a fraction in \[0, 1\], got -1"):
         trim_cast_shadows(np.zeros((4, 4)), [], vote=-1)
+
+
+def _moving_scene(rng, t: int, motions, shadow):
+    """Frame t of cars driving at ``motions`` (px/frame, integers) over a static textured ground, each with its
+    cast shadow (the body shifted by ``shadow``, the ground darkened to half); the same ground in every frame."""
+    ground = 100.0 + np.random.default_rng(11).normal(0.0, 6.0, size=(H, W))
+    g = ground.copy()
+    dx, dy = shadow
+    bodies = [(x0 + u * t, y0 + v * t, x1 + u * t, y1 + v * t) for (x0, y0, x1, y1), (u, v) in zip(BODIES, motions)]
+    for x0, y0, x1, y1 in bodies:
+        g[y0 + dy:y1 + dy + 1, x0 + dx:x1 + dx + 1] *= 0.5
+    for i, (x0, y0, x1, y1) in enumerate(bodies):
+        car = np.random.default_rng(20 + i).normal(170.0, 25.0, size=(y1 - y0 + 1, x1 - x0 + 1))  # paint, moves along
+        g[y0:y1 + 1, x0:x1 + 1] = car
+    return g.astype(np.float32), bodies
+
+
+def test_detect_vehicles_with_shadow_trim_boxes_the_body_not_its_shadow():
+    motions = [(2, 0), (-2, 0), (0, 2), (0, -2), (2, 0)]
+    shadow = (-SHADOW_PX, 1)
+    rng = np.random.default_rng(12)
+    (g0, bodies), (g1, _) = _moving_scene(rng, 0, motions, shadow), _moving_scene(rng, 1, motions, shadow)
+    flow = np.zeros((H, W, 2), np.float32)
+    for (x0, y0, x1, y1), (u, v) in zip(bodies, motions):  # body and shadow move together: the flow holds both
+        flow[y0 - 1:y1 + 3, x0 - SHADOW_PX - 1:x1 + 2] = (u, v)
+    kw = dict(frames=(g0, g1), min_area_m2=None, max_area_m2=None, min_box_m2=None)
+    off = detect_vehicles(flow, np.ones((H, W), bool), **kw)
+    on = detect_vehicles(flow, np.ones((H, W), bool), shadow_trim_rel=0.35, **kw)
+    assert len(off) == len(on) == len(BODIES)
+    for body in bodies:
+        (a,) = [d for d in off if abs(d.y_px - (body[1] + body[3]) / 2) < 4 and abs(d.x1_px - body[2]) <= 3]
+        (b,) = [d for d in on if abs(d.y_px - (body[1] + body[3]) / 2) < 4 and abs(d.x1_px - body[2]) <= 3]
+        assert a.x0_px <= body[0] - SHADOW_PX + 2            # without the trim the box holds the shadow
+        assert abs(b.x0_px - body[0]) <= 1.5, (b, body)      # with it, it ends at the body
+        assert b.x1_px == a.x1_px
