@@ -354,6 +354,11 @@ class DetectionSpec(_Section):
     box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
     max_area_halo_rel: float = DETECTION_DEFAULTS["max_area_halo_rel"]
     min_box_m2: Any = DETECTION_DEFAULTS["min_box_m2"]
+    shadow_trim_rel: float = DETECTION_DEFAULTS["shadow_trim_rel"]
+    shadow_ratio_lo: float = DETECTION_DEFAULTS["shadow_ratio_lo"]
+    shadow_ratio_hi: float = DETECTION_DEFAULTS["shadow_ratio_hi"]
+    shadow_vote: float = DETECTION_DEFAULTS["shadow_vote"]
+    shadow_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_min_votes"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)
