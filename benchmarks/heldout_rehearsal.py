@@ -68,9 +68,9 @@ from benchmarks._overrides import parse_value as _value  # noqa: E402
 SCENES = {
     "city": ("city", {}),
     "realistic": ("realistic", {}),
-    # the city from twice as high: at 1080p the preset's own 0.13 m a pixel (its vehicles the same
-    # size in px as at 960x540) over four times the ground, so about 4x the movers in a frame
-    "city-wide": ("city", {"camera.altitude_m": 220.0}),
+    # the city from twice as high (its own preset now): at 1080p the city's 0.13 m a pixel (its vehicles the
+    # same size in px as at 960x540) over four times the ground, so about 4x the movers in a frame
+    "city-wide": ("city-wide", {}),
 }
 TRACK_METRICS = ("mota", "idf1", "hota", "mot_false_positives", "mot_misses", "motp")
 
