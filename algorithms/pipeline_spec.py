@@ -354,6 +354,10 @@ class DetectionSpec(_Section):
     box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
     max_area_halo_rel: float = DETECTION_DEFAULTS["max_area_halo_rel"]
     min_box_m2: Any = DETECTION_DEFAULTS["min_box_m2"]
+    gap_split_width_px: StrictInt = DETECTION_DEFAULTS["gap_split_width_px"]
+    gap_split_length_px: StrictInt = DETECTION_DEFAULTS["gap_split_length_px"]
+    gap_split_road_k: float = DETECTION_DEFAULTS["gap_split_road_k"]
+    gap_split_valley: float = DETECTION_DEFAULTS["gap_split_valley"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)
