@@ -708,20 +708,19 @@ def _box_motion(frames, box, u: float, v: float, ground=(0.0, 0.0), prev=None, *
     return gain[y0 - ya:y1 - ya + 1, x0 - xa:x1 - xa + 1] > gain_grey
 
 
-def _line_fractions(coord: np.ndarray, vehicle: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per 1 px line of ``coord`` over the pixels ``sel``: the fraction that is ``vehicle``, each pixel's line, the
-    first line's coordinate."""
+def _line_fractions(coord: np.ndarray, vehicle: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per 1 px line of ``coord`` over the pixels ``sel``: the fraction that is ``vehicle``, and each pixel's line."""
     lo = math.floor(float(coord[sel].min()))
     line = np.floor(coord - lo).astype(np.int64)
     n = int(line[sel].max()) + 1
     total = np.bincount(line[sel], minlength=n)
     hit = np.bincount(line[sel], weights=vehicle[sel].astype(np.float64), minlength=n)
-    return hit / np.maximum(total, 1), line, lo
+    return hit / np.maximum(total, 1), line
 
 
 def _over_valley(coord: np.ndarray, vehicle: np.ndarray, sel: np.ndarray, valley: float) -> np.ndarray:
     """The pixels of ``sel`` between the first and last line of ``coord`` of which over ``valley`` is vehicle."""
-    frac, line, _ = _line_fractions(coord, vehicle, sel)
+    frac, line = _line_fractions(coord, vehicle, sel)
     over = np.flatnonzero(frac > valley)
     if len(over) == 0:
         return np.zeros_like(sel)
@@ -731,7 +730,7 @@ def _over_valley(coord: np.ndarray, vehicle: np.ndarray, sel: np.ndarray, valley
 def _cut_at_gaps(coord: np.ndarray, vehicle: np.ndarray, sel: np.ndarray, min_px: int, valley: float,
                  peak: float) -> list[np.ndarray]:
     """``sel`` cut at the runs of lines of ``coord`` that are road (:func:`_gap_split`), first to last."""
-    frac, line, _ = _line_fractions(coord, vehicle, sel)
+    frac, line = _line_fractions(coord, vehicle, sel)
     n = len(frac)
     gap = frac <= valley
 
