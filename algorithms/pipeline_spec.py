@@ -358,6 +358,11 @@ class DetectionSpec(_Section):
     gap_split_length_px: StrictInt = DETECTION_DEFAULTS["gap_split_length_px"]
     gap_split_road_k: float = DETECTION_DEFAULTS["gap_split_road_k"]
     gap_split_valley: float = DETECTION_DEFAULTS["gap_split_valley"]
+    shadow_trim_rel: float = DETECTION_DEFAULTS["shadow_trim_rel"]
+    shadow_ratio_lo: float = DETECTION_DEFAULTS["shadow_ratio_lo"]
+    shadow_ratio_hi: float = DETECTION_DEFAULTS["shadow_ratio_hi"]
+    shadow_vote: float = DETECTION_DEFAULTS["shadow_vote"]
+    shadow_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_min_votes"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)
