@@ -600,3 +600,108 @@ def test_a_small_box_at_the_image_border_is_a_cut_vehicle_and_not_judged_by_min_
     kw = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
     assert detect_vehicles(flow, valid, **kw) == []
     assert len(detect_vehicles(flow, valid, min_box_m2=None, **kw)) == 1
+
+
+def _road(rng, h=H, w=W, grey=120.0):
+    """Asphalt: a grey level with a few levels of fine grain."""
+    return (grey + cv2.GaussianBlur(rng.normal(0, 4, (h, w)), (0, 0), 1.0)).astype(np.float32)
+
+
+def _moving(rng, cars, uv, *, road=None):
+    """Frames t-1, t, t+1 of ``cars`` ``(x0, y0, length, width, roof)`` all moving ``uv`` (integer px) a frame."""
+    g = _road(rng) if road is None else road
+    out = []
+    for k in range(3):
+        f = g
+        for x0, y0, length, width, roof in cars:
+            f = _paint_car(f, x0 + (k - 1) * uv[0], y0 + (k - 1) * uv[1], length, width, roof=roof)
+        out.append(f)
+    return dict(frames=(out[1], out[2]), prev_frame=out[0])
+
+
+def test_two_cars_nose_to_tail_at_one_speed_are_two_boxes_and_a_bus_of_their_length_is_one():
+    # a queue moving off: two 30 x 14 px cars 6 px apart in one lane, both 2 px a frame to the right; the flow gave
+    # them one region (its window bridged the gap). A bus of the same length (66 px, one uniform roof) beside them
+    rng = np.random.default_rng(21)
+    flow = _field(rng, [(38, 56, 18, 90, (2.0, 0.0))], blur=1.5)
+    valid = np.ones((H, W), bool)
+    rear, front = (20, 40, 49, 53), (56, 40, 85, 53)
+    kw = dict(parallax_min_fraction=0.0, **_moving(rng, [(20, 40, 30, 14, 190.0), (56, 40, 30, 14, 60.0)], (2, 0)))
+    (one,) = detect_vehicles(flow, valid, **kw)  # the default: no cut, one box around both
+    assert box_iou(one, (20, 40, 85, 53)) >= 0.8, one
+    two = detect_vehicles(flow, valid, gap_split_length_px=16, **kw)
+    assert len(two) == 2, two
+    for car in (rear, front):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
+        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+        assert (d.u_px, d.v_px) == pytest.approx((2.0, 0.0), abs=0.5)
+    # the bus: no band of road inside it, one box whatever the keys allow
+    bus = _moving(rng, [(20, 40, 66, 14, 190.0)], (2, 0))
+    (b,) = detect_vehicles(flow, valid, gap_split_length_px=16, gap_split_width_px=6, parallax_min_fraction=0.0, **bus)
+    assert box_iou(b, (20, 40, 85, 53)) >= 0.8, b
+    # a bus whose roof is the road's grey: its dark outline and ends still cross no band of road from side to side
+    bus = _moving(rng, [(20, 40, 66, 14, 120.0)], (2, 0))
+    (b,) = detect_vehicles(flow, valid, gap_split_length_px=16, parallax_min_fraction=0.0, **bus)
+    assert box_iou(b, (20, 40, 85, 53)) >= 0.8, b
+    # parts shorter than the key asks stay one: 40 px each is no car behind another at 16 px a car
+    (one,) = detect_vehicles(flow, valid, gap_split_length_px=40, **kw)
+    assert box_iou(one, (20, 40, 85, 53)) >= 0.8, one
+
+
+def test_two_cars_side_by_side_at_one_speed_are_two_boxes():
+    # cars leaving a parking row together: two 30 x 14 px cars 4 px apart across their motion, 1 px a frame down
+    # the image (the cars lie along it), one flow region
+    rng = np.random.default_rng(22)
+    flow = _field(rng, [(30, 72, 48, 86, (0.0, 1.0))], blur=1.5)
+    valid = np.ones((H, W), bool)
+    g = _road(rng)
+    frames = []
+    for k in range(3):
+        f = g
+        for x0 in (50, 68):
+            f = f.copy()
+            f[32 + k - 1:62 + k - 1, x0:x0 + 14] = 30.0
+            f[34 + k - 1:60 + k - 1, x0 + 2:x0 + 12] = 200.0
+        frames.append(f)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], parallax_min_fraction=0.0)
+    (one,) = detect_vehicles(flow, valid, **kw)
+    assert box_iou(one, (50, 32, 81, 61)) >= 0.7, one
+    two = detect_vehicles(flow, valid, gap_split_width_px=8, **kw)
+    assert len(two) == 2, two
+    for car in ((50, 32, 63, 61), (68, 32, 81, 61)):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
+        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+    # a box two narrow cars wide is not cut into parts narrower than the key
+    assert len(detect_vehicles(flow, valid, gap_split_width_px=16, **kw)) == 1
+
+
+def test_gap_split_cuts_only_where_a_band_of_road_crosses_the_box():
+    from algorithms.detection import _gap_split
+
+    rng = np.random.default_rng(23)
+    g = _road(rng)
+    # two cars nose to tail along the motion are cut; the cut boxes hold each car
+    f = _paint_car(_paint_car(g, 20, 40, 30, 14, roof=200.0), 58, 40, 30, 14, roof=60.0)
+    cut = _gap_split(f, (20, 40, 87, 53), 2.0, 0.0, width_px=0, length_px=16)
+    assert [q[:4] for q in cut] == [(20, 40, 49, 53), (58, 40, 87, 53)]
+    # the same box across the motion (the two cars abreast for a vertical motion) is cut by the width key alone
+    assert _gap_split(f, (20, 40, 87, 53), 0.0, 2.0, width_px=0, length_px=16) == []
+    assert sorted(q[:4] for q in _gap_split(f, (20, 40, 87, 53), 0.0, 2.0, width_px=16, length_px=0)) == \
+        [(20, 40, 49, 53), (58, 40, 87, 53)]
+    # a uniform vehicle of the whole length is not cut
+    bus = _paint_car(g, 20, 40, 68, 14, roof=200.0)
+    assert _gap_split(bus, (20, 40, 87, 53), 2.0, 0.0, width_px=8, length_px=16) == []
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"gap_split_width_px": -1}, r"gap_split_width_px: expected a finite number >= 0, got -1"),
+    ({"gap_split_length_px": 2.5}, r"gap_split_length_px: expected an integer >= 0, got 2.5"),
+    ({"gap_split_valley": 1.5}, r"gap_split_valley: expected a fraction in \[0, 1\], got 1.5"),
+    ({"gap_split_road_k": math.inf}, r"gap_split_road_k: expected a finite number >= 0, got inf"),
+])
+def test_bad_gap_split_keys_are_rejected_naming_them(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), **kwargs)
+    (key,) = kwargs
+    with pytest.raises(PipelineError, match=rf"detection\.{key}"):
+        Pipeline.from_dict({**BASE, "detection": kwargs})

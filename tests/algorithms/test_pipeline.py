@@ -408,6 +408,8 @@ def test_px_sizes_scale_with_the_frame_lengths_by_the_factor_and_areas_by_its_sq
     assert seen["min_area_px"] == 4 * DETECTION_DEFAULTS["min_area_px"]
     assert seen["min_magnitude_px"] == 2 * DETECTION_DEFAULTS["min_magnitude_px"]
     assert seen["split_px"] == DETECTION_DEFAULTS["split_px"]     # a noise threshold: not scaled
+    # a width in px (the narrowest car a band of road leaves after a cut) is scaled as a length
+    assert seen["gap_split_width_px"] == 2 * PIPELINES["dis"]["detection"]["gap_split_width_px"] > 0
     assert made["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]
 
 
