@@ -52,7 +52,7 @@ from algorithms.shared_work import SharedWork
 from algorithms.detection import DETECTION_DEFAULTS, ground_fit_at
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.sequence_size import relative_size_keep, typical_mover
-from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, motion_mask
+from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
            "GLOBAL_MOTION_METHODS", "COMPENSATION_MODELS", "get_pipeline", "pipeline_hash"]
@@ -653,6 +653,8 @@ class Pipeline:
 
         rows = [r for p in points for r in p.rows()] + (multi.rows() if multi is not None else [])
         tracks = pd.DataFrame(rows, columns=list(TRACK_COLUMNS))
+        box_cols = ["bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"]
+        tracks[box_cols] = boxes_in_image(tracks[box_cols].to_numpy(np.float64), frame_shape)
         yield SequenceEstimate(shifts_px=shifts, shifts_valid=shifts_valid, cumulative_px=cumulative,
                                flight_line_px=line, correction_px=correction, jitter_px=jitter, tracks=tracks,
                                pipeline=self.name, pipeline_hash=self.hash, frame_shape_px=frame_shape,

@@ -70,7 +70,7 @@ from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, BoxKalman, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
 
-__all__ = ["Detection", "MULTI_DEFAULTS", "motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine",
+__all__ = ["Detection", "MULTI_DEFAULTS", "boxes_in_image", "motion_mask", "detect_moving_objects", "recentre_on_region", "point_template", "ncc_refine",
            "CorrelationMatch", "CORRELATION_DEFAULTS", "PointTracker", "MultiTargetTracker", "TRACK_COLUMNS"]
 
 # Column order of the rows trackers produce (the tracks table of docs/architecture.md).
@@ -693,6 +693,27 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
+
+
+def boxes_in_image(boxes_px: np.ndarray, shape_px: tuple[int, int]) -> np.ndarray:
+    """``(N, 4)`` float64: ``boxes_px`` (``x0, y0, x1, y1`` rows, px) clipped to the image, as an annotator draws them.
+
+    The multi-target tracker keeps a vehicle's whole size while part of it is past the border
+    (``partial_rel``: a top view does not shrink), so its box may reach past the edge; the truth
+    boxes what the frame shows (``scenes`` clips its boxes to ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``,
+    as MOTChallenge annotation does), and a box that holds the unseen part misses IoU 0.5 with the
+    part seen. Each box is clipped to those bounds; one wholly outside the image becomes NaN (the
+    vehicle is out of view: nothing to box); NaN rows stay NaN. ``shape_px``: (H, W) of the frames.
+    """
+    b = np.array(boxes_px, dtype=np.float64, copy=True).reshape(-1, 4)
+    h, w = (float(v) for v in shape_px)
+    with np.errstate(invalid="ignore"):
+        b[:, 0] = np.maximum(b[:, 0], -0.5)
+        b[:, 1] = np.maximum(b[:, 1], -0.5)
+        b[:, 2] = np.minimum(b[:, 2], w - 0.5)
+        b[:, 3] = np.minimum(b[:, 3], h - 0.5)
+        b[~((b[:, 2] > b[:, 0]) & (b[:, 3] > b[:, 1]))] = np.nan
+    return b
 
 
 def _box_of(d) -> tuple[np.ndarray, np.ndarray]:

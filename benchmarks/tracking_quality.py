@@ -17,7 +17,7 @@ centre rule alone, a track point within ``--gate`` px of the vehicle's centre) a
 the vehicles that move (``parked == 0``; what a motion detector can find, the figure
 the targets are about), and against every visible vehicle (``mota_all``). Also the detections per frame and the tracker's output per frame.
 With ``--breakdown``, where the misses and false positives come from (:func:`error_breakdown`): per vehicle its
-missed frames by cause (under half its box in the image, no detection, a detection box under IoU 0.5, the tracker),
+missed frames by cause (under half its box in the image: older renders only, no detection, a detection box under IoU 0.5, the tracker),
 per track its false-positive frames and the vehicle it lay on.
 
 KIT AIS (``--kit-ais``, ``../shared/external/kit_ais`` beside the clone, or ``--kit-dir``): three
@@ -106,8 +106,9 @@ def error_breakdown(tracks: pd.DataFrame, dets: list, truth: pd.DataFrame, *, fr
 
     ``(misses, false_positives)``. A miss is a counted vehicle of a frame that no track corresponds
     to (the CLEAR-MOT frame matching itself); its ``cause``: ``out of frame`` when under half its
-    box lies in the ``frame_shape`` (H, W) image (no box inside the image reaches IoU 0.5 with it),
-    else ``no detection`` (no detection of that frame overlaps it by IoU 0.1), ``detection box``
+    box lies in the ``frame_shape`` (H, W) image (no box inside the image reaches IoU 0.5 with it; none
+    since GENERATOR_VERSION 2.7.0, whose boxes are clipped to the image and whose rows under half
+    visible are distractors, never misses), else ``no detection`` (no detection of that frame overlaps it by IoU 0.1), ``detection box``
     (one overlaps it, none by 0.5), ``tracker`` (a detection fits it, no track does). A false
     positive is a track row no vehicle took (after the metric's distractor removal), with the
     row of ``everything`` (all of tracks.csv, parked vehicles too; default ``truth``) its box overlaps

@@ -660,8 +660,9 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.
     ``tracks``: what the synthetic path counts and treats as distractors,
     ``harness.metrics.objects``; the CLI's ``export`` passes them), the rows that are counted
     objects or distractors: a counted row and a pedestrian's or cyclist's row (read back as a
-    distractor by its class) with flag 1, any other distractor (a vehicle the synthetic path
-    does not count and does not hold against a tracker) with flag 0, ignored; rows that are
+    distractor by its class) with flag 1, any other distractor (a vehicle that stands still all
+    clip, a row of a vehicle under half visible: what the synthetic path does not count and does
+    not hold against a tracker) with flag 0, ignored; rows that are
     neither (a parked car: a track on it is a false positive) are left out. So the real path
     scores the export as the synthetic path scores the sequence, whatever those rules say.
 

@@ -19,7 +19,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from scenes.ground_truth import BandedGroundTruth, FrameSurface, GroundTruth, PairTruth
+from scenes.ground_truth import (
+    BandedGroundTruth,
+    FrameSurface,
+    GroundTruth,
+    PairTruth,
+    canvas_in_image,
+    clip_box_to_image,
+)
 from scenes.motion import camera_path
 from scenes.render import SceneRenderer
 from scenes.sensor import (
@@ -128,6 +135,10 @@ class SceneGenerator:
             self.edges = band_edges(canvas_h, min(rows, canvas_h))
             view = (canvas_w, int(np.diff(self.edges).max()))
             self.canvas_truth = GroundTruth(self.canvas_K, canvas_w, canvas_h, boxes)  # visible fractions
+            # the canvas pixels the lens maps into the image: a vehicle's share is counted there, not on the
+            # whole canvas (which reaches beyond the image's border)
+            self.canvas_in_image = (canvas_in_image(self.lens, img.width_px, img.height_px)
+                                    if self.lens is not None else None)
             self.banded_truth = BandedGroundTruth(self.canvas_K, img.width_px, img.height_px, self.edges, boxes,
                                                   lens=self.lens)
         self.renderer = SceneRenderer(spec, self.world, self.vehicles, self.path.K, znear_m=znear, zfar_m=zfar,
@@ -247,7 +258,15 @@ class SceneGenerator:
         return self._light(rgb, depth, float(self.path.t_s[i]), K), surf
 
     def _tracks(self, i: int, surf) -> None:
+        """The rows of tracks.csv of frame i, as an annotator would box the frame (docs/architecture.md).
+
+        The box is the vehicle's projected box clipped to the image (:func:`clip_box_to_image`;
+        NaN when none of it is in the image); ``x_px, y_px`` stay the projected centre of the
+        whole vehicle (its position, perhaps outside the image); ``visible_fraction`` is the
+        share of the vehicle's whole projected area that the image shows unoccluded.
+        """
         t = float(self.path.t_s[i])
+        w, h = self.spec.image.width_px, self.spec.image.height_px
         if self.banded:
             counts = np.bincount(surf.instances.ravel(), minlength=len(self.vehicles) + 1)
             seen = {vid for vid in range(1, len(self.vehicles) + 1) if counts[vid] > 0}
@@ -259,13 +278,13 @@ class SceneGenerator:
             Ms = [np.vstack([surf.T[vid, b], [0.0, 0.0, 0.0, 1.0]]) for vid in range(1, len(self.vehicles) + 1)]
             canvas_truth = self.canvas_truth
             vis = canvas_truth.visible_fractions(surf.depth, R, C, Ms, _only(canvas_truth.vehicle_bboxes(R, C, Ms),
-                                                                              seen))
+                                                                              seen), in_view=self.canvas_in_image)
         else:  # the surface listed each vehicle's pixels and projected its box already
             seen = {vid for vid, _, _ in surf.vehicle_pixels}
             boxes = surf.vehicle_bboxes
             vis = self.truth.visible_fractions(surf.depth, surf.R, surf.C, surf.vehicle_M, _only(boxes, seen))
         for vid, (v, (bbox, centre)) in enumerate(zip(self.vehicles, boxes), start=1):
-            self.track_rows.append((i, vid, centre[0], centre[1], *bbox, int(vid in seen),
+            self.track_rows.append((i, vid, centre[0], centre[1], *clip_box_to_image(bbox, w, h), int(vid in seen),
                                     v.speed(t), int(v.parked), v.vclass, float(vis[vid - 1]) if vid in seen else 0.0))
 
     def frames(self) -> Iterator[FrameOutput]:

@@ -46,7 +46,8 @@ import numpy as np
 from scenes.motion import project
 from scenes.world import Box
 
-__all__ = ["PairTruth", "FrameSurface", "GroundTruth", "BandedSurface", "BandedGroundTruth", "ray_boxes_depth"]
+__all__ = ["PairTruth", "FrameSurface", "GroundTruth", "BandedSurface", "BandedGroundTruth", "ray_boxes_depth",
+           "clip_box_to_image", "canvas_in_image"]
 
 # depth agreement between the render and an analytic surface, relative + absolute (metres)
 SURFACE_TOL_REL = 2e-3
@@ -129,6 +130,32 @@ def ray_boxes_depth(R: np.ndarray, C: np.ndarray, M: np.ndarray, boxes: list[Box
             hit = (t_near <= t_far) & (t_near > 0)
             best = np.where(hit & (t_near < best), t_near, best)
     return best
+
+
+def clip_box_to_image(bbox, width_px: int, height_px: int) -> tuple[float, float, float, float]:
+    """A box ``(x0, y0, x1, y1)`` (continuous, pixel-centre coordinates, px) clipped to the image.
+
+    The image of ``width_px`` x ``height_px`` pixels covers ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``
+    in these coordinates (a pixel is its centre +- 0.5; :mod:`harness.metrics.matching` reads a
+    detection's inclusive pixel range the same way). A box that does not reach into the image,
+    or with a NaN corner, gives four NaN: no box in the image.
+    """
+    x0, y0, x1, y1 = (float(v) for v in bbox)
+    lo_x, lo_y, hi_x, hi_y = -0.5, -0.5, width_px - 0.5, height_px - 0.5
+    cx0, cy0, cx1, cy1 = max(x0, lo_x), max(y0, lo_y), min(x1, hi_x), min(y1, hi_y)
+    if not (cx0 <= cx1 and cy0 <= cy1):  # NaN compares False too
+        return (np.nan,) * 4
+    return cx0, cy0, cx1, cy1
+
+
+def canvas_in_image(lens, width_px: int, height_px: int) -> np.ndarray:
+    """(Hc, Wc) bool over a lens's undistorted canvas: the pixel centres the lens maps into the output image
+    (``[-0.5, W - 0.5] x [-0.5, H - 0.5]``, as :func:`clip_box_to_image`)."""
+    cw, ch = lens.canvas_size_px
+    ys, xs = np.mgrid[0:ch, 0:cw].astype(np.float64)
+    xd, yd = lens.distort_canvas_px(xs, ys)
+    with np.errstate(invalid="ignore"):
+        return (xd >= -0.5) & (xd <= width_px - 0.5) & (yd >= -0.5) & (yd <= height_px - 0.5)
 
 
 class GroundTruth:
@@ -279,18 +306,25 @@ class GroundTruth:
                 hit_b[sb] &= ~(both & ~b_wins)
 
     def visible_fractions(self, depth: np.ndarray, R: np.ndarray, C: np.ndarray, vehicle_M: list,
-                          bboxes: list) -> np.ndarray:
+                          bboxes: list, *, in_view: np.ndarray | None = None) -> np.ndarray:
         """Per vehicle, the share (V,) float64 of its unoccluded projection that the frame shows.
 
         The unoccluded projection is every pixel centre, inside the image or not, whose ray hits
-        the vehicle's boxes; a pixel shows the vehicle when it is inside the image and the render
-        has nothing more than OCCLUDER_GAP_M nearer than the box there: a tree crown or a bridge
-        deck (both stand higher than that above every road user) or another vehicle in front hides
-        it; the render's anti-aliased silhouette (the ground's depth, or the vehicle's own cabin a
-        sub-pixel away) does not. 0 where nothing projects (behind the camera, or smaller than a
-        pixel between the pixel centres).
+        the vehicle's boxes (the vehicle's whole projected area, in pixels); a pixel shows the
+        vehicle when it is inside the image (and, with ``in_view``, where that is True) and the
+        render has nothing more than OCCLUDER_GAP_M nearer than the box there: a tree crown or a
+        bridge deck (both stand higher than that above every road user) or another vehicle in
+        front hides it; the render's anti-aliased silhouette (the ground's depth, or the vehicle's
+        own cabin a sub-pixel away) does not. 0 where nothing projects (behind the camera, or
+        smaller than a pixel between the pixel centres).
+
+        ``in_view``: (H, W) bool over this grid, the pixels that belong to the output image; for
+        the undistorted canvas of a lens (larger than the image) the canvas pixels the lens maps
+        into the image (:func:`canvas_in_image`). None: the whole grid is the image.
         """
         D = np.asarray(depth, np.float32)
+        if in_view is not None and np.shape(in_view) != (self.h, self.w):
+            raise ValueError(f"in_view: expected shape {(self.h, self.w)}, got {np.shape(in_view)}")
         out = np.zeros(len(vehicle_M))
         for v, ((bbox, _), boxes, M) in enumerate(zip(bboxes, self.vehicle_boxes, vehicle_M)):
             x0, y0, x1, y1 = bbox
@@ -305,6 +339,9 @@ class GroundTruth:
             if not n:
                 continue
             inside = ((cols >= 0) & (cols < self.w))[None, :] & ((rows >= 0) & (rows < self.h))[:, None]
+            if in_view is not None:
+                rc, cc_ = np.clip(rows, 0, self.h - 1), np.clip(cols, 0, self.w - 1)
+                inside &= in_view[rc[:, None], cc_[None, :]]
             seen = hit & inside
             rr, cc = np.nonzero(seen)
             d = D[rows[rr], cols[cc]].astype(np.float64)

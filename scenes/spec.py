@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the same spec would render different frames or truth.
-GENERATOR_VERSION = "2.6.0"
+GENERATOR_VERSION = "2.7.0"  # 2.7.0: tracks.csv boxes clipped to the image, visible_fraction on the image under a lens
 
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 

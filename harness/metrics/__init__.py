@@ -83,7 +83,7 @@ position_error_px, associate_tracks, track_rows      trajectories, CLEAR-MOT ID 
 MOTCounts, mot_counts, mot_rows                        MOTA, MOTP, IDF1 from summed counts
 HOTACounts, hota_counts, hota_rows, alpha_mean_value  HOTA, DetA, AssA, LocA (Luiten 2021) from per-alpha counts
 correspondence, box_iou, box_offset                    when a track or detection matches a vehicle (box-aware)
-counted_objects, distractor_table, keep_estimates      counted vehicles, distractors (MOT16) and their removal
+counted_objects, distractor_table, keep_estimates      counted vehicles, distractors (MOT16, low visibility) and their removal
 detection_rows, detection_counts, moving_vehicles      detection precision and recall per pair
 prepare_photometric, photometric_rows                  photometric residual of the total flow (no truth)
 psnr_shifted, itf_rows                                 stabilisation ITF (no truth)
@@ -114,8 +114,8 @@ from harness.metrics.stabilisation import (  # noqa: F401
 )
 from harness.metrics.matching import _linear_sum_assignment  # noqa: F401
 from harness.metrics.objects import (  # noqa: F401
-    DISTRACTOR_CLASSES, STATIC_SPEED_MPS, VEHICLE_CLASSES, counted_objects, distractor_objects, distractor_table,
-    keep_estimates, static_vehicles,
+    DISTRACTOR_CLASSES, MIN_VISIBLE_FRACTION, STATIC_SPEED_MPS, VEHICLE_CLASSES, counted_objects, distractor_objects,
+    distractor_table, keep_estimates, low_visibility, static_vehicles,
     truth_classes,
 )
 from harness.metrics.trajectories import (  # noqa: F401
@@ -145,7 +145,7 @@ __all__ = [
     "encode_alpha_totals", "decode_alpha_totals",
     "BOX_COLUMNS", "IOU_MIN", "box_iou", "box_offset", "correspondence",
     "VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "truth_classes", "counted_objects",
-    "distractor_objects", "static_vehicles",
+    "distractor_objects", "static_vehicles", "MIN_VISIBLE_FRACTION", "low_visibility",
     "distractor_table", "keep_estimates",
     "detection_rows", "detection_counts", "moving_vehicles",
     "prepare_photometric", "PreparedPhotometric", "photometric_rows", "psnr_shifted", "itf_rows",

@@ -16,9 +16,11 @@ vehicle that is not parked but slower than :data:`MOVING_MIN_MPS` in that frame
 not move either: a motion detector cannot see it in that pair. Rows are ``region``
 "moving" then. Where neither column exists (real footage whose boxes do not say) every
 visible vehicle counts and rows are ``region`` "all". A detection on a vehicle that does
-not count is a false positive (pedestrians and cyclists too: the detection scores have
-no distractors). Only vehicles with a finite box are truth; without any box column
-there are no rows.
+not count is a false positive (pedestrians and cyclists too), with one exception: a
+moving vehicle's row of low visibility (:func:`harness.metrics.objects.low_visibility`:
+mostly outside the image or hidden), as in the tracking metrics, is matched with the
+counted ones and a detection it takes is left out of the detections (neither true nor
+false). Only vehicles with a finite box are truth; without any box column there are no rows.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from harness.metrics.matching import BOX_COLUMNS, correspondence
-from harness.metrics.objects import counted_objects
+from harness.metrics.objects import counted_objects, low_visibility
 from harness.metrics.registry import _row, register_metric
 from harness.metrics.matching import _linear_sum_assignment
 
@@ -83,18 +85,22 @@ def detection_counts(detections, truth_frame: pd.DataFrame) -> tuple[int, int, i
     """``(matches, detections, vehicles, region)`` of one frame: the one-to-one matches of the detections
     with the counted vehicles' boxes (see the module docstring)."""
     counted, region = moving_vehicles(truth_frame)
-    t = truth_frame[counted]
-    tb = np.stack([t[c].to_numpy(np.float64) for c in BOX_COLUMNS], 1) if len(t) else np.zeros((0, 4))
+    tb_all = np.stack([truth_frame[c].to_numpy(np.float64) for c in BOX_COLUMNS], 1).reshape(-1, 4)
+    low = low_visibility(truth_frame) & np.isfinite(tb_all).all(axis=1) & ~counted
+    n_true = int(counted.sum())
+    tb = np.concatenate([tb_all[counted], tb_all[low]])  # the counted vehicles first, then the low-visibility rows
     centres, boxes = detection_boxes(detections)
-    matches = 0
-    if len(t) and len(centres):
+    matches = ignored = 0
+    if len(tb) and len(centres):
         P = np.stack([(tb[:, 0] + tb[:, 2]) / 2, (tb[:, 1] + tb[:, 3]) / 2], 1)
         # the gate is unused: every counted vehicle has a box
         _, ok, cost, _ = correspondence(P, tb, centres, boxes, gate_px=1.0)
         if ok.any():
             ia, ib = _linear_sum_assignment(np.where(ok, cost, 1e6))
-            matches = int(ok[ia, ib].sum())
-    return matches, len(centres), len(t), region
+            hit = ok[ia, ib]
+            matches = int((hit & (ia < n_true)).sum())
+            ignored = int((hit & (ia >= n_true)).sum())
+    return matches, len(centres) - ignored, n_true, region
 
 
 def detection_rows(detections, truth_frame: pd.DataFrame | None, *, frame: int) -> list[dict]:

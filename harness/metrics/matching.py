@@ -19,7 +19,7 @@ in [0, 1]: the Hungarian method compares them across rules. IoU is the MOTChalle
 rule (py-motmetrics' ``iou_matrix`` with ``max_iou=0.5``); the point rule is the
 natural one for a point tracker against boxed truth. Boxes are continuous rectangles
 ``[x0, x1] x [y0, y1]`` in pixel-centre coordinates (tracks.csv's ``bbox_*_px``: the
-extent of the vehicle's projected corners); a :class:`algorithms.tracking.Detection`'s
+extent of the vehicle's projected corners, clipped to the image); a :class:`algorithms.tracking.Detection`'s
 box is an inclusive pixel range and becomes ``[x0 - 0.5, x1 + 0.5]``. A box with a NaN
 corner is no box.
 """

@@ -25,6 +25,21 @@ of :mod:`harness.metrics.matching`); an estimate assigned to a distractor is rem
 from that frame, and so is one that no counted object took whose position lies inside
 an ignore region (a region may hold many estimates). A distractor is never a miss.
 
+Low visibility (synthetic truth, :func:`low_visibility`): a row that would be a counted object but
+whose ``visible_fraction`` is below :data:`MIN_VISIBLE_FRACTION` (0.5: most of the vehicle outside
+the image or hidden, under a tree crown, a bridge or another vehicle) is a distractor, not a
+counted object: neither finding it nor missing it is scored. Its box is the part in the image
+(tracks.csv boxes are clipped to the image, as an annotator draws them), which the half it shows
+may not fill. KITTI's "hard" level leaves out objects truncated by more than 50 % the same way
+(Geiger et al. 2012). Real annotation (a ``gt.txt``: no ``speed_mps`` column) decides for itself
+what counts, by its flags: its visibility is read but not cut on, as the MOT16 devkit's official
+evaluation (``minvis`` 0) and TrackEval do, so a figure on real footage is theirs; ``aerobench
+export`` writes synthetic truth's low-visibility rows with flag 0 (ignored), so that the real path
+scores an export as the synthetic path scores the sequence. As the boxes are the image's, an
+estimate beyond the image border (a point tracker that follows a vehicle out of view, a track box
+coasting past the edge) lies in no box: a point there is a false positive, as a track of a vehicle
+wholly out of view always was, and a box reaching far past the edge may miss IoU 0.5.
+
 Parked vehicles are neither: a track on a parked car is a false positive (a real clip's
 "moving vehicles" truth counts it so).
 """
@@ -41,9 +56,11 @@ DISTRACTOR_CLASSES = ("cyclist", "pedestrian")
 # A vehicle whose speed stays below this in every visible row of the sequence never moves in it (walking pace is
 # 1.4 m/s; the traffic model's queued cars read 0, a creeping one a few tenths): a distractor, not a counted object.
 STATIC_SPEED_MPS = 0.5
+# A counted row whose visible_fraction is below this is a distractor (module docstring).
+MIN_VISIBLE_FRACTION = 0.5
 
-__all__ = ["VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "truth_classes", "static_vehicles", "counted_objects", "distractor_objects",
-           "distractor_table", "keep_estimates"]
+__all__ = ["VEHICLE_CLASSES", "DISTRACTOR_CLASSES", "STATIC_SPEED_MPS", "MIN_VISIBLE_FRACTION", "truth_classes", "static_vehicles",
+           "low_visibility", "counted_objects", "distractor_objects", "distractor_table", "keep_estimates"]
 
 
 def truth_classes(truth: pd.DataFrame) -> np.ndarray:
@@ -82,15 +99,35 @@ def static_vehicles(truth: pd.DataFrame) -> np.ndarray:
     return rows & (moved.to_numpy() < STATIC_SPEED_MPS)
 
 
-def counted_objects(truth: pd.DataFrame) -> np.ndarray:
+def low_visibility(truth: pd.DataFrame, *, min_visible_fraction: float = MIN_VISIBLE_FRACTION) -> np.ndarray:
+    """``(N,)`` bool: rows of synthetic moving-vehicle truth whose ``visible_fraction`` is below ``min_visible_fraction``.
+
+    Rows that the moving-vehicle rule (visible, a vehicle class, ``moving`` / ``parked``) keeps,
+    whose ``visible_fraction`` (0..1) is below the threshold (a missing value reads as 1, fully
+    visible); all False without the column, with ``min_visible_fraction`` 0, or for real
+    annotation (no ``speed_mps`` column: its flags say what counts; module docstring).
+    """
+    if not 0.0 <= min_visible_fraction <= 1.0:
+        raise ValueError(f"min_visible_fraction: expected 0..1, got {min_visible_fraction}")
+    if ("visible_fraction" not in truth.columns or "speed_mps" not in truth.columns
+            or min_visible_fraction == 0.0):
+        return np.zeros(len(truth), bool)
+    vf = pd.to_numeric(truth["visible_fraction"], errors="coerce").fillna(1.0).to_numpy(np.float64)
+    return _moving_vehicles(truth) & (vf < min_visible_fraction)
+
+
+def counted_objects(truth: pd.DataFrame, *, min_visible_fraction: float = MIN_VISIBLE_FRACTION) -> np.ndarray:
     """``(N,)`` bool: the rows of tracks.csv that are counted objects (see the module docstring)."""
-    return _moving_vehicles(truth) & ~static_vehicles(truth)
+    return (_moving_vehicles(truth) & ~static_vehicles(truth)
+            & ~low_visibility(truth, min_visible_fraction=min_visible_fraction))
 
 
-def distractor_objects(truth: pd.DataFrame) -> np.ndarray:
-    """``(N,)`` bool: visible rows of tracks.csv that are distractors: a distractor class (pedestrian, cyclist)
-    or a vehicle that never moves in the sequence (:func:`static_vehicles`)."""
-    return (_visible(truth) & np.isin(truth_classes(truth), DISTRACTOR_CLASSES)) | static_vehicles(truth)
+def distractor_objects(truth: pd.DataFrame, *, min_visible_fraction: float = MIN_VISIBLE_FRACTION) -> np.ndarray:
+    """``(N,)`` bool: visible rows of tracks.csv that are distractors: a distractor class (pedestrian, cyclist),
+    a vehicle that never moves in the sequence (:func:`static_vehicles`) or a moving vehicle's row of low
+    visibility (:func:`low_visibility`)."""
+    return ((_visible(truth) & np.isin(truth_classes(truth), DISTRACTOR_CLASSES)) | static_vehicles(truth)
+            | low_visibility(truth, min_visible_fraction=min_visible_fraction))
 
 
 def distractor_table(truth: pd.DataFrame, ignore: pd.DataFrame | None = None) -> pd.DataFrame:

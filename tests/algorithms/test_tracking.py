@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from algorithms.kalman import THESIS_KALMAN, scalar_kalman
-from algorithms.tracking import MultiTargetTracker, PointTracker, detect_moving_objects, motion_mask
+from algorithms.tracking import MultiTargetTracker, PointTracker, boxes_in_image, detect_moving_objects, motion_mask
 
 
 def test_detection_finds_known_blobs_with_centroids_and_areas():
@@ -549,3 +549,29 @@ def test_a_mover_far_smaller_than_the_sequence_s_vehicles_is_left_out_without_a_
     assert len(run(3)[0]) == 4                         # under five tracks nothing tells what a vehicle's size is
     with pytest.raises(ValueError, match=r"min_area_rel: expected a number in \[0, 1\) \(0: off\)"):
         MultiTargetTracker(min_area_rel=1.0)
+
+
+def test_a_car_leaving_through_the_border_is_boxed_as_the_image_shows_it():
+    # a 30 x 12 px car at 2 px a frame to the right in a 120 px wide image: from frame 36 its front is past the border,
+    # its detection the part in the image; once that is a quarter short (frame 39) the tracker keeps the car's size
+    # (partial_rel), and the output box is the image's
+    from algorithms.detection import Detection
+
+    w_img = 120
+    trk = MultiTargetTracker()
+    for t in range(44):
+        x0, x1 = 20.0 + 2 * t, min(49.0 + 2 * t, w_img - 1.0)
+        trk.step(t, [Detection((x0 + x1) / 2, 40.0, int((x1 - x0 + 1) * 12), x0, 34.0, x1, 45.0, 2.0, 0.0)])
+    rows = {r["frame"]: r for r in trk.rows()}
+    inside = boxes_in_image(np.array([[rows[t][k] for k in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")]
+                                      for t in range(44)]), (80, w_img))
+    for t in range(40, 44):
+        assert rows[t]["bbox_x1_px"] > w_img + 2.0, (t, rows[t])               # the track's whole car
+        assert inside[t, 2] == w_img - 0.5                                      # the part in the image
+        assert inside[t, 0] == pytest.approx(20.0 + 2 * t, abs=1.0), (t, inside[t])
+    np.testing.assert_array_equal(inside[:30], [[rows[t][k] for k in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
+                                                                        "bbox_y1_px")] for t in range(30)])
+    # a box wholly outside the image has nothing to show; a row without a box stays without one
+    out = boxes_in_image(np.array([[130.0, 10.0, 150.0, 20.0], [np.nan] * 4, [-10.0, -5.0, 5.0, 90.0]]), (80, w_img))
+    assert np.isnan(out[:2]).all()
+    np.testing.assert_array_equal(out[2], [-0.5, -0.5, 5.0, 79.5])

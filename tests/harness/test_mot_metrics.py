@@ -187,6 +187,42 @@ def test_a_track_on_a_pedestrian_is_neither_a_false_positive_nor_the_pedestrian_
     assert (c_old.objects, c_old.matches, c_old.false_positives) == (3, 3, 1)
 
 
+def test_a_row_of_low_visibility_is_neither_a_miss_nor_a_track_on_it_a_false_positive():
+    # car 1 in full view; car 2 shows 30 % of itself in frame 0 (most of it beyond the border, its box the part in the
+    # image) and all of itself in frame 1; one boxed track on each car in both frames
+    truth = _boxed([(f, v, x, 20.0, 6.0, {"parked": 0, "class": "car", "visible_fraction": vf, "speed_mps": 5.0})
+                    for f, v, x, vf in ((0, 1, 20.0, 1.0), (0, 2, 80.0, 0.3), (1, 1, 23.0, 1.0), (1, 2, 83.0, 1.0))])
+    est = _points([(f, t, x, 20.0) for f, t, x in ((0, 10, 20.0), (0, 11, 80.0), (1, 10, 23.0), (1, 11, 83.0))])
+    est = est.assign(bbox_x0_px=est["x_filt_px"] - 6.0, bbox_y0_px=14.0, bbox_x1_px=est["x_filt_px"] + 6.0,
+                     bbox_y1_px=26.0)
+    assert M.low_visibility(truth).tolist() == [False, True, False, False]
+    assert M.counted_objects(truth).tolist() == [True, False, True, True]
+    assert M.distractor_objects(truth).tolist() == [False, True, False, False]
+    c = M.mot_counts(est, truth, gate_px=5.0)
+    # frame 0: car 2 is a distractor, track 11 on it removed; frame 1: both counted and matched
+    assert (c.objects, c.predictions, c.matches, c.misses, c.false_positives, c.switches) == (3, 3, 3, 0, 0, 0)
+    assert c.mota == 1.0
+    # without a track on car 2 in frame 0 it is still no miss
+    c = M.mot_counts(est[~((est["frame"] == 0) & (est["track_id"] == 11))], truth, gate_px=5.0)
+    assert (c.objects, c.misses, c.false_positives) == (3, 0, 0)
+    # at the threshold itself the row counts; a threshold of 0 (the MOTChallenge devkit's default) counts every row
+    edge = truth.assign(visible_fraction=np.where(truth["visible_fraction"] < 1, M.MIN_VISIBLE_FRACTION, 1.0))
+    assert M.mot_counts(est, edge, gate_px=5.0).objects == 4
+    assert M.counted_objects(truth, min_visible_fraction=0.0).all()
+    # a parked car of low visibility stays no object and no distractor: a track on it is a false positive
+    parked = truth.assign(parked=np.where(truth["vehicle_id"] == 2, 1, 0))
+    assert not M.distractor_objects(parked).any()
+    assert M.mot_counts(est, parked, gate_px=5.0).false_positives == 2
+    # without the column (older folders, a gt.txt without visibility) no row is low; real annotation (no speed_mps:
+    # a gt.txt) is scored by its flags alone, its visibility not cut on (TrackEval's and the MOT devkit's minvis 0)
+    assert not M.low_visibility(truth.drop(columns=["visible_fraction"])).any()
+    real = truth.drop(columns=["speed_mps"])
+    assert not M.low_visibility(real).any() and M.counted_objects(real).all()
+    assert M.mot_counts(est, real, gate_px=5.0).objects == 4
+    with pytest.raises(ValueError, match="min_visible_fraction: expected 0..1, got 1.5"):
+        M.counted_objects(truth, min_visible_fraction=1.5)
+
+
 def test_a_track_in_an_ignore_region_is_no_false_positive():
     truth = _boxed([(f, 1, 20.0, 20.0, 6.0, {}) for f in (0, 1)])
     # a large ignored region (a parking lot) in frame 0 only, holding two tracks

@@ -127,6 +127,15 @@ def test_detection_does_not_count_a_pedestrian_as_a_moving_vehicle():
     assert (tp, n_det, n_true, region) == (0, 1, 1, "moving")
 
 
+def test_a_detection_on_a_vehicle_of_low_visibility_is_neither_true_nor_false():
+    # vehicle 3 mostly outside the image (its box the part inside): not counted, and a detection on it left out
+    truth = _truth_frame().assign(visible_fraction=[1.0, 1.0, 0.2, 1.0])
+    dets = [(21.0, 19.0, 40.0), (100.0, 20.0, 40.0), (200.0, 200.0, 4.0)]  # on 1, on 3, on nothing
+    assert M.detection_counts(dets, truth) == (1, 2, 1, "moving")
+    # without the column vehicle 3 counts and the detection on it is a true one
+    assert M.detection_counts(dets, _truth_frame()) == (2, 3, 2, "moving")
+
+
 def test_without_a_moving_column_every_visible_vehicle_counts_and_without_boxes_there_are_no_rows():
     truth = _truth_frame().drop(columns=["parked", "speed_mps"])
     assert M.detection_counts([(60.0, 20.0, 1.0)], truth) == (1, 1, 3, "all")

@@ -397,3 +397,9 @@ def test_export_mot_gt_leaves_parked_vehicles_out_and_keeps_the_classes(tmp_path
     assert gt["id"].tolist() == [1, 2, 3] and not gt["ignore"].any()
     with pytest.raises(ValueError, match=r"counted, distractors: expected 4 flags each"):
         export_mot_gt(tracks, tmp_path / "gt4.txt", counted=counted[:2], distractors=distractors[:2])
+    # a distractor of low visibility (here the bus, as if mostly outside the image) is written with flag 0 and its
+    # visibility: a real gt.txt's flags say what counts (MOTChallenge), its visibility is not cut on
+    low = tracks.assign(visible_fraction=[0.3, 1.0, 1.0, 0.0])
+    gt = read_mot_gt(export_mot_gt(low, tmp_path / "gt5.txt", counted=counted, distractors=distractors))
+    assert gt["id"].tolist() == [1, 3] and gt["ignore"].tolist() == [True, False]
+    assert gt["visible_fraction"].tolist() == [0.3, 1.0]
