@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from algorithms.jitter import cumulative_path
+from harness.metrics.objects import low_visibility
 from scenes.formats import atomic_write_bytes, read_flo, write_flo
 
 __all__ = [
@@ -151,7 +152,9 @@ def tracks_table(seq_estimate: Any, true_tracks: pd.DataFrame | None) -> pd.Data
         ``tracks``: frame, track_id, x_px, y_px, x_filt_px, y_filt_px, x_pred_px, y_pred_px, source,
         seed_vehicle_id, and the box ``bbox_x0_px .. bbox_y1_px`` (NaN when absent).
     true_tracks : DataFrame or None
-        The sequence's tracks.csv (frame, vehicle_id, x_px, y_px, visible).
+        The sequence's tracks.csv (frame, vehicle_id, x_px, y_px, visible); ``true_visible`` is 1 where
+        the vehicle is in view as the metrics score it (visible, and not under half visible:
+        :func:`harness.metrics.objects.low_visibility`).
 
     Returns
     -------
@@ -167,7 +170,10 @@ def tracks_table(seq_estimate: Any, true_tracks: pd.DataFrame | None) -> pd.Data
             tracks[c] = np.nan
     tracks["seed_vehicle_id"] = pd.to_numeric(tracks["seed_vehicle_id"], errors="coerce").astype("Int64")
     if true_tracks is not None and len(true_tracks):
-        t = true_tracks[["frame", "vehicle_id", "x_px", "y_px", "visible"]].rename(
+        # in view as the metrics score it: a row under half visible (objects.low_visibility) is no object
+        seen = (pd.to_numeric(true_tracks["visible"], errors="coerce").fillna(0).to_numpy() != 0) & ~low_visibility(
+            true_tracks)
+        t = true_tracks[["frame", "vehicle_id", "x_px", "y_px"]].assign(visible=seen.astype(np.int64)).rename(
             columns={"vehicle_id": "seed_vehicle_id", "x_px": "true_x_px", "y_px": "true_y_px",
                      "visible": "true_visible"})
         t["seed_vehicle_id"] = t["seed_vehicle_id"].astype("Int64")

@@ -214,7 +214,8 @@ def read_tracks(cell_dir: Path) -> pd.DataFrame | None:
     """The cell's tracks.csv as ``frame, source, track_id, seed_vehicle_id, x, y, x_filt, y_filt,
     x_true, y_true, visible`` (px). A track is the pair ``(source, track_id)``; the truth columns are
     filled for point tracks only (the vehicle the track was seeded on). ``visible``: whether that
-    vehicle is in view in the frame (1 / 0; NaN in cell folders written before it was recorded)."""
+    vehicle is in view in the frame as the metrics score it (1 / 0: a row under half visible is not; NaN in
+    cell folders written before it was recorded)."""
     df = artifacts.read_tracks(cell_dir)
     if df is None:
         return None
