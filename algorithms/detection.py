@@ -513,6 +513,18 @@ def _refine_velocity(region: _Region, frames, u: float, v: float, radius_px: int
     return float(dx[iy, ix] + ox) - gu, float(dy[iy, ix] + oy) - gv
 
 
+def _motion_gain(a: np.ndarray, b: np.ndarray, c: np.ndarray | None, u: float, v: float, ground) -> np.ndarray:
+    """Grey levels by which the motion ``(u, v)`` over the ground's ``ground`` explains patch ``a`` of frame t from
+    ``b`` (frame t+1) better than the ground's motion alone, averaged over 3 x 3 px; with ``c`` (frame t-1) the
+    smaller of that and the same test backwards. Patches as :func:`_patch` cuts them, one shape."""
+    gu, gv = ground
+    gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
+    if c is not None:
+        gain = np.minimum(gain, cv2.blur(np.abs(_shifted(c, -gu, -gv) - a) - np.abs(_shifted(c, -u - gu, -v - gv) - a),
+                                         (3, 3)))
+    return gain
+
+
 def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), prev=None, *, join: float = 0.5,
                reach_px: int = 0, reach_join: float = 0.2, margin_px: int = 4,
                gain_grey: float = 2.0, others: list | None = None,
@@ -551,11 +563,7 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     pad = margin_px + reach_px + int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
     xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
     a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
-    gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
-    if prev is not None:
-        c = _patch(prev, xa, ya, xb, yb)
-        gain = np.minimum(gain, cv2.blur(np.abs(_shifted(c, -gu, -gv) - a) - np.abs(_shifted(c, -u - gu, -v - gv) - a),
-                                         (3, 3)))
+    gain = _motion_gain(a, b, None if prev is None else _patch(prev, xa, ya, xb, yb), u, v, ground)
     marked = (gain > gain_grey).astype(np.uint8)
     inner = np.zeros_like(marked)  # within margin_px of the region's box
     inner[max(0, y0 - margin_px) - ya:min(h - 1, y1 + margin_px) - ya + 1,
@@ -725,11 +733,7 @@ def _box_motion(frames, box, u: float, v: float, ground=(0.0, 0.0), prev=None, *
     pad = int(math.ceil(max(abs(u + gu), abs(v + gv), abs(gu), abs(gv)))) + 2
     xa, ya, xb, yb = max(0, x0 - pad), max(0, y0 - pad), min(w - 1, x1 + pad), min(h - 1, y1 + pad)
     a, b = _patch(g0, xa, ya, xb, yb), _patch(g1, xa, ya, xb, yb)
-    gain = cv2.blur(np.abs(_shifted(b, gu, gv) - a) - np.abs(_shifted(b, u + gu, v + gv) - a), (3, 3))
-    if prev is not None:
-        c = _patch(prev, xa, ya, xb, yb)
-        gain = np.minimum(gain, cv2.blur(np.abs(_shifted(c, -gu, -gv) - a) - np.abs(_shifted(c, -u - gu, -v - gv) - a),
-                                         (3, 3)))
+    gain = _motion_gain(a, b, None if prev is None else _patch(prev, xa, ya, xb, yb), u, v, ground)
     return gain[y0 - ya:y1 - ya + 1, x0 - xa:x1 - xa + 1] > gain_grey
 
 
