@@ -80,6 +80,7 @@ crowns. The minimum persistence over frames is the tracker's confirmation
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import cv2
@@ -643,7 +644,7 @@ GAP_SPLIT_MOVED_SHARE = 0.4
 
 def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, length_px: int, road_k: float = 3.0,
                valley: float = 0.12, peak: float = GAP_SPLIT_PEAK, ring_px: int = GAP_SPLIT_RING_PX,
-               moved: np.ndarray | None = None,
+               moved: Callable[[], np.ndarray] | None = None,
                moved_share: float = GAP_SPLIT_MOVED_SHARE) -> list[tuple[int, int, int, int, int]]:
     """The vehicles of a box that a band of road parts: their boxes ``(x0, y0, x1, y1, n)``, or [] for one vehicle.
 
@@ -669,8 +670,9 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
         ``(x0, y0, x1, y1)``, inclusive px.
     u, v : float
         The box's motion, px/frame (its direction alone is used).
-    moved : ndarray, (y1 - y0 + 1, x1 - x0 + 1) bool, optional
-        The box's pixels that its motion explains (:func:`_box_motion`): with it, each part must hold at
+    moved : callable, optional
+        Returns the box's pixels that its motion explains (:func:`_box_motion`; ``(y1 - y0 + 1, x1 - x0 + 1)``
+        bool), called only when the box has parts (most boxes have none): with it, each part must hold at
         least ``moved_share`` of the moving pixels its area would hold at the box's density, else no cut
         (the part is ground, a kerb or a wall the box took in).
 
@@ -706,7 +708,7 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
     if len(parts) < 2:
         return []
     if moved is not None:
-        m = np.asarray(moved, bool)[ys - (y0 - ya), xs - (x0 - xa)]
+        m = np.asarray(moved(), bool)[ys - (y0 - ya), xs - (x0 - xa)]
         density = m.mean()
         if any(not m[sel].sum() >= moved_share * density * sel.sum() for sel in parts):
             return []
@@ -1412,7 +1414,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             cut = _gap_split(frames[0], (x0, y0, x1, y1), u, v, width_px=p["gap_split_width_px"],
                              length_px=p["gap_split_length_px"], road_k=p["gap_split_road_k"],
                              valley=p["gap_split_valley"],
-                             moved=_box_motion(frames, (x0, y0, x1, y1), u, v, ground, prev)) \
+                             moved=lambda: _box_motion(frames, (x0, y0, x1, y1), u, v, ground, prev)) \
                 if p["gap_split_width_px"] > 0 or p["gap_split_length_px"] > 0 else []
             if cut and not any(_too_small_box(q[:4], p, gsd_m_per_px, h, w) for q in cut):
                 n_all = sum(q[4] for q in cut) or 1
