@@ -36,3 +36,18 @@ def test_a_scaled_pipeline_fixes_px_scale_and_a_suite_takes_it(tmp_path):
     assert p.config["detection"]["min_area_px"] == DETECTION_DEFAULTS["min_area_px"]   # scaled when it runs
     assert p.config["tracking"]["multi"]["gate_px"] == MULTI_DEFAULTS["gate_px"]
     assert p.config["flow"]["method"] == "dis"  # the base's flow kept
+
+
+def test_over_worlds_summarises_each_pipeline_over_the_seeds_and_ranks_by_median():
+    import pandas as pd
+
+    rows = [("dis", 1, 0.30), ("dis", 2, 0.60), ("dis", 3, 0.40),
+            ("tv-l1", 1, 0.50), ("tv-l1", 2, 0.20), ("tv-l1", 3, 0.25)]
+    table = pd.DataFrame([{"scene": "city-wide", "scale": 1.0, "pipeline": p, "tracker": "multi", "seed": s,
+                           "mota": m} for p, s, m in rows])
+    out = rehearsal.over_worlds(table).set_index("pipeline")
+    assert out.loc["dis", "worlds"] == 3
+    assert out.loc["dis", "mota_median"] == 0.40 and out.loc["dis", "mota_min"] == 0.30
+    assert out.loc["tv-l1", "mota_max"] == 0.50
+    # tv-l1 wins one world of three and scores higher than dis on it; by median it ranks second
+    assert (out.loc["dis", "rank"], out.loc["tv-l1", "rank"]) == (1, 2)
