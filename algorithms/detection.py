@@ -121,8 +121,17 @@ class Detection(NamedTuple):
 # split_px, split_rel: two velocity groups of a region are two movers when they differ by more than
 #   split_px + split_rel * the larger speed;
 # merge_gap_px, merge_px, merge_rel: regions this close whose velocities agree this well are one mover;
-# parallax_max_ratio, parallax_perp_px, parallax_perp_rel: residuals along the global motion up to this
-#   fraction of it are parallax (0 turns the test off);
+# parallax_max_ratio, parallax_perp_px, parallax_perp_rel: residuals along the global motion up to this fraction of
+#   it are parallax (0 turns the test off). What that gives up, measured on realistic (camera 14 m/s;
+#   benchmarks/tracking_quality.py --frames 30 --breakdown, seeds 8 / 2 / 3, main e36b2f0): the vehicles the best
+#   pipeline misses for most of the clip drive against the flight at 0.11-0.26 of the ground's image motion (two
+#   buses and a car slowing from 1.3-2.2 to 0.5-1 m/s, a car at 3.5-4.5 m/s). 0 here and in long_baseline (whose
+#   detector applies this test too) finds them, and finds roof edges: MOTA pyramidal-hs 0.781 / 0.834 / 0.357 ->
+#   0.781 / 0.809 / 0.464, dis 0.674 / 0.789 / 0.357 -> 0.685 / 0.719 / 0.357. A bus found so stays unconfirmed: it
+#   travels 7-9 px over the clip, under tracking.multi.min_travel_rel times its 51-59 px length; that at 0.1 as well:
+#   pyramidal-hs 0.837 / 0.809 / 0.464, dis 0.669 / 0.719 / 0.536 (dis FP 11 -> 34 on seed 8, the edge band of a
+#   parallax-moved roof). Motion alone cannot tell such a vehicle from a roof; a cast shadow that moves with it might
+#   (not built);
 # parallax_min_fraction, parallax_angle_deg, parallax_speed_rel: a direction shared by regions covering this
 #   fraction of the image (and half the moving area) is a parallax field's (frames registered before they
 #   came, see _common_parallax); its regions up to this many times their median speed are rejected

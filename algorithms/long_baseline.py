@@ -96,7 +96,8 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   long pair's global motion explains as well as its own motion does, up to half detection.min_explained, for
 #   some gamma up to this, is a static structure's parallax (gamma = h / (Z - h): 1 is a building half the flight
 #   height; the city stand-in's tower reaches 0.7), and is left out (0: off). It gives up a vehicle creeping along
-#   the camera's motion, in its sense, slower than this many times it: from two views it is the roof of a building.
+#   the camera's motion, in its sense, slower than this many times it: from two views it is the roof of a building
+#   (what that costs on realistic: beside detection.parallax_max_ratio, which this stage's detector applies too).
 # mid_check: a long-baseline detection must also explain the change from frame t-m (m = k // 2, registered the same
 #   way) to frame t by m times its per-frame motion, at least detection.min_explained (long_baseline_detections'
 #   mid_frame): a slow mover crept there; the place a fast vehicle left before frame t, a region of the long pair
