@@ -51,7 +51,7 @@ from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
 from algorithms.detection import DETECTION_DEFAULTS, ground_fit_at
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
-from algorithms.sequence_size import relative_size_keep, typical_mover
+from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
 
 __all__ = ["Pipeline", "PipelineError", "PairEstimate", "SequenceEstimate", "PIPELINES",
@@ -515,6 +515,9 @@ class Pipeline:
         # (box area px^2, speed px/frame) of the detections so far: the typical mover (detection.sequence_size)
         size_cfg = det_cfg["sequence_size"]
         sizes: deque = deque(maxlen=size_cfg["history"])
+        relative_sizes = size_cfg["small_rel"] > 0 or size_cfg["large_rel"] > 0
+        # no ground sampling distance: the m^2 limits at the one that makes the typical mover vehicle_m2 (sequence_size)
+        gsd_from_movers = gsd is None and size_cfg["vehicle_m2"] is not None
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
@@ -583,8 +586,12 @@ class Pipeline:
                 before = (cv2.warpAffine(gp, Mp[:2], size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
                           if np.allclose(Mp[2], [0, 0, 1]) else
                           cv2.warpPerspective(gp, Mp, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+            gsd_pair = gsd
+            if gsd_from_movers and len(sizes) >= size_cfg["min_history"]:
+                gsd_pair = equivalent_gsd(typical_mover([a for a, _ in sizes], [v for _, v in sizes])[0],
+                                          size_cfg["vehicle_m2"])
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
-                                   frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd, **det_params)
+                                   frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd_pair, **det_params)
             if long_cfg["frames"] >= 2 and len(history) >= 2:
                 # slow movers: frame t against frame t-k registered into it (algorithms.long_baseline)
                 C = compose_models([m for _, m in history])
@@ -599,16 +606,16 @@ class Pipeline:
                     w_long, np.asarray(v_long, bool) & inside, baseline_frames=len(history), frames=(g_t, g_old),
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
-                    gsd_m_per_px=gsd, detection_params=det_params, pair_flow=cur["flow_local"],
+                    gsd_m_per_px=gsd_pair, detection_params=det_params, pair_flow=cur["flow_local"],
                     pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"],
                     parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
-            if size_cfg["small_rel"] > 0 or size_cfg["large_rel"] > 0:
+            if relative_sizes or gsd_from_movers:
                 # pedestrians, posts, roofs: far from the size of the sequence's vehicles (algorithms.sequence_size)
                 sizes.extend(((d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1), math.hypot(d.u_px, d.v_px))
                              for d in dets)
-                if len(sizes) >= size_cfg["min_history"]:
+                if relative_sizes and len(sizes) >= size_cfg["min_history"]:
                     area, speed = typical_mover([a for a, _ in sizes], [v for _, v in sizes])
                     keep = relative_size_keep(dets, area, speed, small_rel=size_cfg["small_rel"],
                                               slow_rel=size_cfg["slow_rel"], large_rel=size_cfg["large_rel"])

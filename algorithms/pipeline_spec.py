@@ -306,6 +306,7 @@ class SequenceSizeSpec(_Section):
     large_rel: float = SEQUENCE_SIZE_DEFAULTS["large_rel"]
     min_history: StrictInt = SEQUENCE_SIZE_DEFAULTS["min_history"]
     history: StrictInt = SEQUENCE_SIZE_DEFAULTS["history"]
+    vehicle_m2: Any = SEQUENCE_SIZE_DEFAULTS["vehicle_m2"]
 
     @model_validator(mode="after")
     def _checked(self) -> SequenceSizeSpec:

@@ -53,7 +53,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["SEQUENCE_SIZE_DEFAULTS", "check_sequence_size", "typical_mover", "relative_size_keep"]
+__all__ = ["SEQUENCE_SIZE_DEFAULTS", "check_sequence_size", "typical_mover", "relative_size_keep", "equivalent_gsd"]
 
 # The keys of the pipeline's `detection.sequence_size` section and their defaults (one home; pipeline_spec checks
 # them with check_sequence_size):
@@ -62,7 +62,12 @@ __all__ = ["SEQUENCE_SIZE_DEFAULTS", "check_sequence_size", "typical_mover", "re
 # large_rel: a detection whose box area is over this many times the typical mover's is left out (0: off);
 # min_history: detections the history must hold before anything is judged;
 # history: the most recent detections the typical mover is taken over.
-SEQUENCE_SIZE_DEFAULTS = {"small_rel": 0.0, "slow_rel": 0.5, "large_rel": 0.0, "min_history": 20, "history": 500}
+# vehicle_m2: without a ground sampling distance, the typical mover's box is taken to cover this many m^2, and the
+#   detector's m^2 limits (min_area_m2, max_area_m2, min_box_m2) apply at the ground sampling distance that gives it,
+#   sqrt(vehicle_m2 / A) (equivalent_gsd; null: off, the default). Section "The m^2 limits without a ground sampling
+#   distance" above.
+SEQUENCE_SIZE_DEFAULTS = {"small_rel": 0.0, "slow_rel": 0.5, "large_rel": 0.0, "min_history": 20, "history": 500,
+                          "vehicle_m2": None}
 
 
 def check_sequence_size(params: Mapping) -> dict:
@@ -77,6 +82,9 @@ def check_sequence_size(params: Mapping) -> dict:
             raise ValueError(f"{key}: expected a finite number >= 0, got {r!r}")
     if 0 < p["large_rel"] <= 1:
         raise ValueError(f"large_rel: expected 0 (off) or a number > 1, got {p['large_rel']!r}")
+    v = p["vehicle_m2"]
+    if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0):
+        raise ValueError(f"vehicle_m2: expected null or a finite number > 0, got {v!r}")
     for key in ("min_history", "history"):
         n = p[key]
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -145,3 +153,20 @@ def relative_size_keep(detections: Sequence, typical_area_px: float, typical_spe
         large = large_rel > 0 and area > large_rel * typical_area_px
         keep.append(not (small or large))
     return keep
+
+
+def equivalent_gsd(typical_area_px: float, vehicle_m2: float) -> float | None:
+    """The ground sampling distance, m/px, at which a box of ``typical_area_px`` px^2 covers ``vehicle_m2`` m^2:
+    ``sqrt(vehicle_m2 / typical_area_px)``; None where the area is unknown (NaN) or not > 0.
+
+    With it the detector's m^2 limits judge a box or region relative to the sequence's typical mover
+    (:func:`typical_mover`): ``min_box_m2`` is ``min_box_m2 / vehicle_m2`` times its box area, whatever the
+    footage's true scale (module docstring, "The m^2 limits without a ground sampling distance").
+    """
+    v = float(vehicle_m2)
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"vehicle_m2: expected a finite number > 0, got {vehicle_m2!r}")
+    a = float(typical_area_px)
+    if not (math.isfinite(a) and a > 0):
+        return None
+    return math.sqrt(v / a)

@@ -8,8 +8,8 @@ import pytest
 
 from algorithms.detection import Detection
 from algorithms.pipeline import Pipeline, PipelineError, get_pipeline
-from algorithms.sequence_size import (SEQUENCE_SIZE_DEFAULTS, check_sequence_size, relative_size_keep,
-                                      typical_mover)
+from algorithms.sequence_size import (SEQUENCE_SIZE_DEFAULTS, check_sequence_size, equivalent_gsd,
+                                      relative_size_keep, typical_mover)
 
 
 def _det(x0, y0, x1, y1, u, v):
@@ -125,6 +125,8 @@ def _pipeline(**section):
     ({"history": 2.5}, r"detection.sequence_size.history: expected an integer"),
     ({"history": 10}, r"detection.sequence_size.history: expected at least min_history \(20\), got 10"),
     ({"bogus": 1}, r"detection.sequence_size.bogus: unknown key; valid: small_rel"),
+    ({"vehicle_m2": 0}, r"detection.sequence_size.vehicle_m2: expected null or a finite number > 0, got 0"),
+    ({"vehicle_m2": True}, r"detection.sequence_size.vehicle_m2: expected null or a finite number > 0, got True"),
 ])
 def test_bad_sequence_size_keys_are_rejected_naming_them(section, match):
     with pytest.raises(PipelineError, match=match):
@@ -135,5 +137,52 @@ def test_the_defaults_are_the_pipeline_keys_and_off():
     assert _pipeline().config["detection"]["sequence_size"] == SEQUENCE_SIZE_DEFAULTS
     assert check_sequence_size({}) == SEQUENCE_SIZE_DEFAULTS
     assert SEQUENCE_SIZE_DEFAULTS["small_rel"] == 0 and SEQUENCE_SIZE_DEFAULTS["large_rel"] == 0
+    assert SEQUENCE_SIZE_DEFAULTS["vehicle_m2"] is None
     with pytest.raises(ValueError, match=r"sequence_size: unknown key\(s\) \['bogus'\]"):
         check_sequence_size({"bogus": 1})
+
+
+# -- the m^2 limits without a ground sampling distance (vehicle_m2) ------------------------------------------
+
+def test_the_equivalent_gsd_makes_the_typical_mover_vehicle_m2():
+    g = equivalent_gsd(500.0, 20.0)
+    assert g == pytest.approx(0.2) and 500.0 * g * g == pytest.approx(20.0)
+    # a box a fifth of the typical mover's is 4 m^2 at it: min_box_m2 relative to the clip's vehicles
+    assert 100.0 * g * g == pytest.approx(4.0)
+    assert equivalent_gsd(math.nan, 20.0) is None and equivalent_gsd(0.0, 20.0) is None
+    with pytest.raises(ValueError, match=r"vehicle_m2: expected a finite number > 0, got 0"):
+        equivalent_gsd(500.0, 0)
+
+
+def _walkers(run):
+    return [[d for d in e.detections if 120 <= d.y_px <= 136] for e in run if hasattr(e, "detections")]
+
+
+def test_without_a_gsd_vehicle_m2_drops_what_the_m2_limits_drop_with_it():
+    # the street's cars box about 30 x 14 px, the pedestrian 8 x 8 px (1.5 px a frame). At 0.22 m a pixel (the
+    # synthetic path: the sequence's ground sampling distance) the cars are about 20 m^2 and the pedestrian's
+    # region and box are under min_area_m2 (3) and min_box_m2 (4): dropped on every pair. Without it and with
+    # vehicle_m2 20, the same limits apply relative to the cars once the history holds min_history detections.
+    frames = _street(12)
+    with_gsd = _walkers(_pipeline(min_history=6, history=100).run(frames, gsd_m_per_px=0.22))
+    without = _walkers(_pipeline(min_history=6, history=100).run(frames))
+    relative = _pipeline(vehicle_m2=20.0, min_history=6, history=100)
+    out = [e.detections for e in relative.run(frames) if hasattr(e, "detections")]
+    assert all(w == [] for w in with_gsd) and all(len(w) == 1 for w in without)
+    walk = [[d for d in ds if 120 <= d.y_px <= 136] for ds in out]
+    assert len(walk[0]) == 1 and len(walk[1]) == 1  # 4 detections a pair: the history is not full before pair 2
+    assert all(w == [] for w in walk[2:]), walk
+    assert all(len(ds) == 3 for ds in out[2:])  # the cars stay
+    # the m^2 areas it fills are those of the equivalent ground sampling distance: the cars about vehicle_m2
+    cars = [d.area_m2 * (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) / d.area_px for d in out[-1]]
+    assert all(10.0 < a < 40.0 for a in cars), cars
+
+
+def test_vehicle_m2_leaves_a_known_ground_sampling_distance_alone():
+    # at 0.5 m a pixel the pedestrian's box is 16 m^2, within the limits: kept, though vehicle_m2 would drop it
+    frames = _street(8)
+    a = [e.detections for e in _pipeline(min_history=6, history=100).run(frames, gsd_m_per_px=0.5)
+         if hasattr(e, "detections")]
+    b = [e.detections for e in _pipeline(vehicle_m2=20.0, min_history=6, history=100).run(frames, gsd_m_per_px=0.5)
+         if hasattr(e, "detections")]
+    assert a == b and all(len(ds) == 4 for ds in a)
