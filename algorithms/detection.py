@@ -140,8 +140,9 @@ class Detection(NamedTuple):
 #   is: a vehicle that moved further than the flow method follows (at 2-3 frames a second 10-50 px a frame; on KIT AIS
 #   a fifth of dis's detections on moving cars had about a third of the car's motion backwards, and their box was the
 #   place the car left). The candidate competes with the flow's under min_explained and its margin over the opposite
-#   motion (a row of parked cars matches one period on and one period back alike: no margin); 0 or at most
-#   refine_px: off, the default (figures in the pipeline files that set it);
+#   motion (a row of parked cars matches one period on and one period back alike: no margin), and only where it
+#   lies beyond refine_px of every flow start (else the start's refinement reaches it: where the flow follows the
+#   vehicles nothing changes); 0 or at most refine_px: off, the default (figures in the pipeline files that set it);
 # nms_iou: regions whose boxes overlap this much are parts of one mover (a vehicle moving more than the flow
 #   method follows leaves parts of different speeds, and a region where the flow failed): with the frames
 #   their union is judged on the motion of each part that explains the change best, without them the largest
@@ -451,9 +452,11 @@ def _motion(region: _Region, starts, frames, ground, p: dict):
     tried = list(starts)
     if p["refine_wide_px"] > p["refine_px"]:
         # a vehicle that moved further than the flow followed (a low frame rate): its own pixels sought within
-        # refine_wide_px of where the ground went, whatever the flow said, then refined as the flow's starts are
+        # refine_wide_px of where the ground went, whatever the flow said, then refined as the flow's starts are;
+        # only beyond refine_px of every start (nearer, the start's own refinement reaches it: where the flow
+        # follows the vehicles, at video rates, nothing changes)
         wide = _wide_velocity(region, frames, p["refine_wide_px"], ground)
-        if wide is not None:
+        if wide is not None and all(math.hypot(wide[0] - u, wide[1] - v) > p["refine_px"] for u, v in starts):
             tried.append(wide)
     for u, v in tried:
         tries = [(u, v)]
