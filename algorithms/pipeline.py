@@ -261,7 +261,8 @@ def _translation(s) -> np.ndarray:
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
                   "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length",
-                  "box_reach_px": "length", "gap_split_width_px": "length", "gap_split_length_px": "length"},
+                  "box_reach_px": "length", "gap_split_width_px": "length", "gap_split_length_px": "length",
+                  "refine_wide_px": "length"},
     "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length", "min_box_px": "area"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
