@@ -237,7 +237,7 @@ DETECTION_DEFAULTS = {
     "max_area_halo_rel": 4.0, "min_box_m2": 4.0,
     "gap_split_width_px": 0, "gap_split_length_px": 0, "gap_split_road_k": 3.0, "gap_split_valley": 0.12,
     "shadow_trim_rel": 0.0, "shadow_ratio_lo": 0.2, "shadow_ratio_hi": 0.8, "shadow_vote": 0.1, "shadow_min_votes": 3,
-    "shadow_scope": "frame", "shadow_clip_min_votes": 30, "shadow_lead_px": 2,
+    "shadow_scope": "frame", "shadow_clip_min_votes": 20, "shadow_lead_px": 2,
 }
 
 
@@ -1311,17 +1311,22 @@ def shadow_lean(gray: np.ndarray, detections: list[Detection], *, max_rel: float
 
 
 def clip_shadow_direction(lean: np.ndarray, motion_px: np.ndarray, *, vote: float = 0.1,
-                          min_votes: int = 30) -> np.ndarray:
+                          min_votes: int = 20) -> np.ndarray:
     """The way the clip's cast shadows fall, from the leans of its detections so far; zero: no shadow.
 
     One sun casts every shadow of a clip the same way on the ground (it moves 0.25 degrees a minute), so the
     detections of all the clip's pairs vote together, each in one ground-fixed frame (the caller turns each
     pair's ``lean`` and motion by the camera's yaw since the clip's first frame; the image axes turn with the
-    camera). Along each axis the rule of :func:`trim_cast_shadows` holds over the votes: the mean lean of the
-    detections moving either way along the axis (those moving across it count for both) must reach ``vote``,
-    the same way for both (a box grown along the motion holds a dark body at one end, the same end for every
-    vehicle that drives that way). An overcast sky casts no shadow: the leans scatter about zero and no axis
-    passes, so nothing is trimmed.
+    camera). Along each axis the detections are grouped as in :func:`trim_cast_shadows`, by the way they move
+    along it (those moving across it count for both). What the body puts at its front or rear (a dark
+    windscreen, a dark body at one end of a box grown along the motion, KIT AIS at 2-3 frames a second) leans
+    one way for the vehicles driving one way and the other way for those driving back: ``lean+ = s + b``,
+    ``lean- = s - b``; the shadow ``s`` leans the same way for both. The axis's shadow lean is the mean of the
+    two groups' mean leans, ``s``; it must reach ``vote``. (The frame's rule, both groups past ``vote``, gives
+    up the shadow wherever the body's lean is the larger: the synthetic city's dark windscreens lean 0.16, its
+    shadows 0.13.) An overcast sky casts no shadow: the leans scatter about zero and no axis passes, so
+    nothing is trimmed; an axis along which the vehicles drive one way only says nothing (``b`` and ``s``
+    cannot be told apart).
 
     Parameters
     ----------
@@ -1332,13 +1337,13 @@ def clip_shadow_direction(lean: np.ndarray, motion_px: np.ndarray, *, vote: floa
     vote : float
         The least mean lean, a fraction in [0, 1], of both groups along an axis.
     min_votes : int
-        The fewest detections with a lean that decide the clip's shadow (until then: none).
+        The fewest detections with a lean in each group of an axis that decide its shadow (until then: none).
 
     Returns
     -------
     ndarray, (2,) float64
-        The shadow's lean (x, y) in the reference frame's axes: per axis the smaller mean of its two
-        groups, 0 where the axis does not pass; both 0 when no shadow is decided.
+        The shadow's lean (x, y) in the reference frame's axes: per axis ``s``, 0 where the axis does not
+        pass; both 0 when no shadow is decided.
     """
     if not 0 <= vote <= 1:
         raise ValueError(f"vote: expected a fraction in [0, 1], got {vote!r}")
@@ -1348,19 +1353,15 @@ def clip_shadow_direction(lean: np.ndarray, motion_px: np.ndarray, *, vote: floa
         raise ValueError(f"motion_px: expected {len(lean)} rows (one per lean), got {len(motion)}")
     out = np.zeros(2)
     seen = np.isfinite(lean).all(axis=1)
-    if seen.sum() < min_votes:
-        return out
     for axis in (0, 1):
         along = np.abs(motion[:, axis]) >= np.abs(motion[:, 1 - axis])
         sense = np.where(along, np.sign(motion[:, axis]), 0.0)
         groups = [seen & (sense >= 0), seen & (sense <= 0)]
-        if not all(gr.any() for gr in groups):
+        if any(gr.sum() < min_votes for gr in groups):
             continue
-        means = [float(lean[gr, axis].mean()) for gr in groups]
-        if min(means) >= vote:
-            out[axis] = min(means)
-        elif max(means) <= -vote:
-            out[axis] = max(means)
+        shadow = float(np.mean([lean[gr, axis].mean() for gr in groups]))
+        if abs(shadow) >= vote:
+            out[axis] = shadow
     return out
 
 

@@ -11,7 +11,8 @@ Per scene (a preset rendered into ``$AEROBENCH_CACHE``, or a rendered sequence f
 visible in frame t (Hungarian on box IoU, pairs under IoU 0.1 left out). Of each matched pair, each side's
 **excess** in px: how far the detection's side lies outside the truth's (left ``tx0 - dx0``, top ``ty0 - dy0``,
 right ``dx1 - tx1``, bottom ``dy1 - ty1``; positive: the box too large there, the side a cast shadow would grow).
-Printed: the matched count, the share at IoU >= 0.5 (what the metrics count a fit), the mean IoU and each side's
+Printed: MOTA and IDF1 of the ``multi`` tracks against the moving vehicles (as ``tracking_quality.py`` scores
+them), the matched count, the share at IoU >= 0.5 (what the metrics count a fit), the mean IoU and each side's
 median excess and its share over 2 px.
 """
 
@@ -32,6 +33,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 from algorithms.pipeline import PIPELINES  # noqa: E402
 from benchmarks._overrides import pipeline_with, scene_overrides  # noqa: E402
 from benchmarks.tracking_quality import _det_boxes, run_multi  # noqa: E402
+from harness.metrics import mot_counts  # noqa: E402
 from harness.metrics.matching import box_iou, boxes_of  # noqa: E402
 
 SIDES = ("left", "top", "right", "bottom")
@@ -95,10 +97,12 @@ def main(argv: list[str] | None = None) -> int:
         truth = truth[truth["frame"] < n]
         if "parked" in truth.columns:
             truth = truth[truth["parked"].astype(int) == 0]
-        truth = truth[truth["visible"].astype(bool)]
+        moving, truth = truth, truth[truth["visible"].astype(bool)]
         for name in args.pipeline:
-            _, dets, _, _ = run_multi(pipeline_with(name, args.set), frames, gsd_m_per_px=seq.meta.get("gsd_m"))
-            row = {"scene": label, "pipeline": name, **summary(match_sides(dets, truth))}
+            tracks, dets, _, _ = run_multi(pipeline_with(name, args.set), frames, gsd_m_per_px=seq.meta.get("gsd_m"))
+            cm = mot_counts(tracks, moving)
+            row = {"scene": label, "pipeline": name, "mota": cm.mota, "idf1": cm.idf1,
+                   **summary(match_sides(dets, truth))}
             rows.append(row)
             print("  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()),
                   flush=True)
