@@ -57,7 +57,11 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    ``change_enough`` (half decorrelated: a flat patch's noise test asks more than a
    replaced content gives). NCC leaves a change of brightness or contrast out.
 8. **cast shadow** (``shadow_trim_rel``, off by default): a shadow moves with its vehicle, so the box of
-   step 6 holds it; :func:`trim_cast_shadows` takes it off on the side the pair's detections vote dark.
+   step 6 holds it; :func:`trim_cast_shadows` takes it off on the side the pair's detections vote dark
+   (``shadow_scope: frame``). With ``shadow_scope: clip`` this function leaves the boxes alone and
+   :class:`algorithms.pipeline.Pipeline` votes once over the clip (one sun): :func:`shadow_lean` each pair,
+   the votes turned into frame 0's axes by the camera's yaw (:func:`image_yaw_rad`, :func:`turn`),
+   :func:`clip_shadow_direction`, :func:`trim_toward`.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
@@ -226,6 +230,14 @@ class Detection(NamedTuple):
 #   detection precision / recall 0.248 / 0.371 -> 0.244 / 0.363, pyramidal-hs unchanged, box-aware pseudo-MOT MOTA
 #   -0.597 / -0.903 -> -0.564 / -0.890. Off until a sequence-level vote (one sun over a clip) makes it hold on every
 #   set.
+# shadow_lead_px: a band may start this far in from the box's side, and is trimmed with what lies before it (the
+#   blurred edge; the ground where the shadow lies at t+1 or lay at t-1, which the box from the frames holds: the
+#   synthetic city's boxes hold 2-5 px of lit ground, then the shadow, then the body). 2 as before it was a key.
+# shadow_scope, shadow_clip_min_votes: "frame" (default), each pair votes its own shadow sides in detect_vehicles;
+#   "clip", Pipeline.run votes once over the clip so far (clip_shadow_direction: the mean of the leans of the
+#   vehicles driving either way along each axis, at least shadow_clip_min_votes of each, past shadow_vote; the
+#   votes turned into frame 0's axes by the camera's yaw) and trims the sides that face that direction
+#   (trim_toward), and detect_vehicles alone trims nothing. FIGURES_CLIP
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
