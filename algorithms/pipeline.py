@@ -593,9 +593,10 @@ class Pipeline:
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
                                    frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd, **det_params)
             if clip_shadow and dets:
+                # one sun: the pair's votes in frame 0's axes, the clip's direction back in frame t's
                 bands, lean = shadow_lean(cur["compensated"][0], dets, max_rel=det_params["shadow_trim_rel"],
-                                          ratio_lo=det_params["shadow_ratio_lo"], ratio_hi=det_params["shadow_ratio_hi"],
-                                          lead_px=round(det_params["shadow_lead_px"]))
+                                          ratio_lo=det_params["shadow_ratio_lo"],
+                                          ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
                 motion = np.array([(d.u_px, d.v_px) for d in dets], dtype=np.float64)
                 shadow_votes.append((turn(lean, -yaw["rad"]), turn(motion, -yaw["rad"])))
                 direction = clip_shadow_direction(np.concatenate([v[0] for v in shadow_votes]),

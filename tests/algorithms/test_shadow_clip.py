@@ -18,8 +18,8 @@ SHADOW_PX = 5
 
 
 def _frame(seed, *, shadow=None, bodies=BODIES, paint=190.0, side_face=0, fronts=None):
-    """Textured ground, light cars (dark windscreen and rear window), each with its cast shadow (the body shifted by ``shadow``
-    (dx, dy) px, the ground darkened to half) or none; ``side_face`` rows along each body's top painted dark (a
+    """Textured ground, light cars (dark windscreen and rear window), each with its cast shadow (the body shifted
+    by ``shadow`` (dx, dy) px, the ground darkened to half) or none; ``side_face`` rows along each body's top painted dark (a
     tall vehicle's side in its own shade: part of the body); with ``fronts`` (per car +1 or -1, the way it drives
     along x) a wide dark windscreen at its front instead of both windows. Returns the frame and the boxes."""
     rng = np.random.default_rng(seed)
