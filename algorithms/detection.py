@@ -238,19 +238,19 @@ class Detection(NamedTuple):
 #   vehicles driving either way along each axis, at least shadow_clip_min_votes of each, past shadow_vote; the
 #   votes turned into frame 0's axes by the camera's yaw) and trims the sides that face that direction
 #   (trim_toward), and detect_vehicles alone trims nothing. Where the boxes are off (benchmarks/box_sides.py, dis,
-#   median px past the truth box, left / top / right / bottom): city 6.2 / 0.1 / -1.2 / -0.6, realistic 2.7 / 3.4 / 0.0 /
-#   -0.6, nominal 2.4 / 2.1 / 0.0 / -0.3, a 2.7.0 city-wide world (s1, 50 frames) 5.9 / 2.0 / -0.5 / -0.2: the shadow
-#   sides, which the frame's vote at 0.35 hardly trimmed (city 6.2, realistic 2.7 / 3.1, s1 5.8 / 2.0: the band
-#   starts past 2 px, and the frame's rule lost the city's shadow to its windscreens). The clip's vote at 0.35 with
-#   shadow_lead_px 5 (s1: left 5.9 -> 4.2): benchmarks/tracking_quality.py --frames 30 (box_sides.py prints the
-#   same MOTA), MOTA off -> clip (dis / pyramidal-hs / pyramidal-lk / tv-l1 / farneback): nominal 0.947 / 0.953 /
-#   0.953 / 0.906 / 0.935 -> 0.982 / 0.976 / 0.971 / 0.859 / 0.959; realistic 0.674 / 0.781 / 0.742 / 0.730 / 0.657
-#   -> 0.719 / 0.736 / 0.697 / 0.697 / 0.601 (the point rule unchanged: boxes that fell under IoU 0.5); urban-parallax
-#   unchanged; fast-vehicles 0.698 / 0.778 / 0.774 / 0.806 -> 0.698 / 0.774 / 0.798 / 0.806; city 0.660 / 0.447 / 0.481
-#   / 0.471 / 0.626 -> 0.660 / 0.461 / 0.490 / 0.505 / 0.621; city-wide world s1 (its first 50 frames, dis) 0.340 ->
-#   0.380, s2 0.304 -> 0.339, s3 0.428 -> 0.470 (the left side 5.9 / 5.9 / 5.8 px past the truth -> 4.2 / 2.0 / 2.7);
-#   but the 1080p stand-ins (aerobench run of a suite of the clip, gt270) dis city 0.564 -> 0.556 and city-wide 0.364
-#   -> 0.310 (IDF1 0.545), KIT AIS (--kit-ais) detection precision / recall dis 0.269 / 0.417 -> 0.267 / 0.411,
+#   median px past the truth box, left / top / right / bottom): city 6.2 / 0.1 / -1.2 / -0.6, realistic 2.7 / 3.4 / 0.0
+#   / -0.6, nominal 2.4 / 2.1 / 0.0 / -0.3, a 2.7.0 city-wide world (s1, 50 frames) 5.9 / 2.0 / -0.5 / -0.2: the shadow
+#   sides, which the frame's vote at 0.35 hardly trimmed (city 6.2, realistic 2.7 / 3.1, s1 5.8 / 2.0: the band starts
+#   past 2 px, and the frame's rule lost the city's shadow to its windscreens). The clip's vote at 0.35 with
+#   shadow_lead_px 5: benchmarks/tracking_quality.py --frames 30 (box_sides.py prints the same MOTA), MOTA off -> clip
+#   (dis / pyramidal-hs / pyramidal-lk / tv-l1 / farneback): nominal 0.947 / 0.953 / 0.953 / 0.906 / 0.935 -> 0.982 /
+#   0.976 / 0.971 / 0.859 / 0.959; realistic 0.674 / 0.781 / 0.742 / 0.730 / 0.657 -> 0.719 / 0.736 / 0.697 / 0.697 /
+#   0.601 (the point rule unchanged: boxes that fell under IoU 0.5); urban-parallax unchanged; fast-vehicles 0.698 /
+#   0.778 / 0.774 / 0.806 / 0.806 -> 0.698 / 0.774 / 0.798 / 0.806 / 0.798; city 0.660 / 0.447 / 0.481 / 0.471 / 0.626
+#   -> 0.660 / 0.461 / 0.490 / 0.505 / 0.621; city-wide worlds s1, s2, s3 (/work/diag/worlds, their first 50 frames,
+#   dis) 0.340 / 0.304 / 0.428 -> 0.380 / 0.339 / 0.470 (the left side 5.9 / 5.9 / 5.8 px past the truth -> 4.2 / 2.0 /
+#   2.7); but the 1080p stand-ins (aerobench run of a suite of the clip, gt270) dis city 0.564 -> 0.556 and city-wide
+#   0.364 -> 0.310 (IDF1 0.545), KIT AIS (--kit-ais) detection precision / recall dis 0.269 / 0.417 -> 0.267 / 0.411,
 #   pyramidal-hs 0.287 / 0.511 unchanged. With shadow_lead_px 2: realistic dis / pyramidal-hs / tv-l1 0.674 / 0.758 /
 #   0.719. Off: it costs realistic to every pipeline but dis, and dis the city-wide stand-in.
 DETECTION_DEFAULTS = {
