@@ -49,7 +49,8 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
-from algorithms.detection import DETECTION_DEFAULTS, ground_fit_at
+from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, ground_fit_at, image_yaw_rad,
+                                  shadow_lean, trim_toward, turn)
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
@@ -261,7 +262,8 @@ def _translation(s) -> np.ndarray:
 PX_SCALED_KEYS = {
     "detection": {"min_magnitude_px": "length", "open_px": "length", "close_px": "length", "min_area_px": "area",
                   "max_area_px": "area", "merge_gap_px": "length", "border_px": "length", "refine_px": "length",
-                  "box_reach_px": "length", "gap_split_width_px": "length", "gap_split_length_px": "length"},
+                  "box_reach_px": "length", "gap_split_width_px": "length", "gap_split_length_px": "length",
+                  "refine_wide_px": "length", "shadow_lead_px": "length"},
     "long_baseline": {"min_displacement_px": "length", "max_speed_px": "length", "min_box_px": "area"},
     "multi": {"gate_px": "length", "min_travel_px": "length", "sigma_meas_px": "length", "hold_search_px": "length"},
 }
@@ -518,6 +520,11 @@ class Pipeline:
         relative_sizes = size_cfg["small_rel"] > 0 or size_cfg["large_rel"] > 0
         # no ground sampling distance: the m^2 limits at the one that makes the typical mover vehicle_m2 (sequence_size)
         gsd_from_movers = gsd is None and size_cfg["vehicle_m2"] is not None
+        # one sun over the clip (detection.shadow_scope clip): every pair's shadow leans and motions in frame 0's
+        # axes, and the camera's yaw from frame 0 to the pair's frame t (the pair models' turns summed)
+        clip_shadow = det_params["shadow_trim_rel"] > 0 and det_params["shadow_scope"] == "clip"
+        shadow_votes: list[tuple[np.ndarray, np.ndarray]] = []
+        yaw = {"rad": 0.0}
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
         point_field = "flow_local" if point_cfg.get("field") == "local" else "filtered"
@@ -592,6 +599,19 @@ class Pipeline:
                                           size_cfg["vehicle_m2"])
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
                                    frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd_pair, **det_params)
+            if clip_shadow and dets:
+                # one sun: the pair's votes in frame 0's axes, the clip's direction back in frame t's
+                bands, lean = shadow_lean(cur["compensated"][0], dets, max_rel=det_params["shadow_trim_rel"],
+                                          ratio_lo=det_params["shadow_ratio_lo"],
+                                          ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
+                motion = np.array([(d.u_px, d.v_px) for d in dets], dtype=np.float64)
+                shadow_votes.append((turn(lean, -yaw["rad"]), turn(motion, -yaw["rad"])))
+                direction = clip_shadow_direction(np.concatenate([v[0] for v in shadow_votes]),
+                                                  np.concatenate([v[1] for v in shadow_votes]),
+                                                  vote=det_params["shadow_vote"],
+                                                  min_votes=det_params["shadow_clip_min_votes"])
+                dets = trim_toward(dets, bands, turn(direction, yaw["rad"]))
+            yaw["rad"] += image_yaw_rad(cur["matrix"])
             if long_cfg["frames"] >= 2 and len(history) >= 2:
                 # slow movers: frame t against frame t-k registered into it (algorithms.long_baseline)
                 C = compose_models([m for _, m in history])

@@ -364,6 +364,10 @@ class DetectionSpec(_Section):
     shadow_ratio_hi: float = DETECTION_DEFAULTS["shadow_ratio_hi"]
     shadow_vote: float = DETECTION_DEFAULTS["shadow_vote"]
     shadow_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_min_votes"]
+    refine_wide_px: StrictInt = DETECTION_DEFAULTS["refine_wide_px"]
+    shadow_scope: StrictStr = DETECTION_DEFAULTS["shadow_scope"]
+    shadow_clip_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_clip_min_votes"]
+    shadow_lead_px: StrictInt = DETECTION_DEFAULTS["shadow_lead_px"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)

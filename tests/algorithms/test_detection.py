@@ -705,3 +705,46 @@ def test_bad_gap_split_keys_are_rejected_naming_them(kwargs, match):
     (key,) = kwargs
     with pytest.raises(PipelineError, match=rf"detection\.{key}"):
         Pipeline.from_dict({**BASE, "detection": kwargs})
+
+
+def test_a_car_beyond_the_flow_s_reach_gets_its_motion_and_box_from_the_wide_search():
+    # 2-3 frames a second: a 30 x 14 px car moves 20-30 px a frame, and the flow (a method that cannot follow it)
+    # gave its region a fifth of that, or a third backwards, as on KIT AIS. The refinement within refine_px of that
+    # falls short, and the box the frames give with it misses the car
+    rng = np.random.default_rng(3)
+    car = (40, 50, 69, 63)
+    valid = np.ones((H, W), bool)
+    for speed, flow_u in ((30, 6.0), (20, -6.0)):
+        m = _moving(rng, [(40, 50, 30, 14, 200.0)], (speed, 0))
+        flow = _field(rng, [(48, 66, 38, 72, (flow_u, 0.0))], blur=0.7)
+        (short,) = detect_vehicles(flow, valid, **m)
+        assert short.u_px < speed - 5 and box_iou(short, car) < 0.5, short
+        for prev in (m["prev_frame"], None):
+            (d,) = detect_vehicles(flow, valid, frames=m["frames"], prev_frame=prev, refine_wide_px=48)
+            assert (d.u_px, d.v_px) == pytest.approx((speed, 0.0), abs=0.5)
+            assert box_iou(d, car) >= 0.8, (speed, prev is None, d)
+
+
+def test_the_wide_search_finds_no_mover_in_static_texture_or_a_row_of_parked_cars():
+    # flow noise over ground that did not move, and over a row of identical parked cars 36 px apart (the search
+    # reaches the next car, one period on, and the one before it as well: no margin over the opposite motion)
+    rng = np.random.default_rng(11)
+    g = _ground(rng)
+    noisy = g + rng.normal(0, 2.0, g.shape).astype(np.float32)
+    flow = _field(rng, [(40, 60, 60, 80, (1.5, 0.5))])
+    valid = np.ones((H, W), bool)
+    assert detect_vehicles(flow, valid, frames=(g, noisy), prev_frame=g, refine_wide_px=48) == []
+    row = _road(rng)
+    for x0 in range(8, W - 30, 36):
+        row = _paint_car(row, x0, 50, 30, 14, roof=190.0)
+    noisy = row + rng.normal(0, 2.0, row.shape).astype(np.float32)
+    flow = _field(rng, [(48, 66, 42, 76, (3.0, 0.0))], blur=0.7)
+    assert detect_vehicles(flow, valid, frames=(row, noisy), prev_frame=row, refine_wide_px=48) == []
+
+
+def test_a_bad_wide_search_radius_is_rejected_naming_it():
+    z = np.zeros((4, 4), np.float32)
+    with pytest.raises(ValueError, match=r"refine_wide_px: expected an integer >= 0, got 4.5"):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), frames=(z, z), refine_wide_px=4.5)
+    with pytest.raises(PipelineError, match=r"detection.refine_wide_px"):
+        Pipeline.from_dict({**BASE, "detection": {"refine_wide_px": -1}})

@@ -410,6 +410,8 @@ def test_px_sizes_scale_with_the_frame_lengths_by_the_factor_and_areas_by_its_sq
     assert seen["split_px"] == DETECTION_DEFAULTS["split_px"]     # a noise threshold: not scaled
     # a width in px (the narrowest car a band of road leaves after a cut) is scaled as a length
     assert seen["gap_split_width_px"] == 2 * PIPELINES["dis"]["detection"]["gap_split_width_px"] > 0
+    # the wide search's radius (how far a vehicle moves a frame) too
+    assert seen["refine_wide_px"] == 2 * PIPELINES["dis"]["detection"]["refine_wide_px"] > 0
     assert made["gate_px"] == 2 * MULTI_DEFAULTS["gate_px"]
 
 
