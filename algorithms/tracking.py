@@ -615,7 +615,7 @@ class _Track:
     held: int = 0  # consecutive frames placed by the template (no detection)
     hist: list = field(default_factory=list)  # (frame, filtered ground-fixed centre) at its detections
     seen: list = field(default_factory=list)  # (frame, ground-fixed centre of the detection) until confirmed
-    flows: list = field(default_factory=list)  # the detections' ground-fixed flow (u, v) px/frame, as seen
+    flows: list = field(default_factory=list)  # the detections' ground-fixed flow (u, v) px/frame, until confirmed
     sizes: deque = field(default_factory=lambda: deque(maxlen=25))  # filtered (w, h) at its last detections
     ground_checked: bool = False  # its template was compared with the place before the vehicle came
     first: tuple | None = None  # (frame, ground-fixed box, template) of its first detection, to extend it back
@@ -1032,8 +1032,9 @@ class MultiTargetTracker:
         ``merge_hits`` frames is one vehicle: the track with more detections takes the detection's box and the
         other ends, its rows joining the first's (offline: in each frame both output, the box is the union of
         the two parts'). A track that took in a part does not start tracks from detections lying
-        ``merge_inside`` within its box (the other part, in frames the vehicle splits again); its own part's
-        detection is completed to its size (``partial_rel``). Two cars nose to tail that the detector joins now
+        ``merge_inside`` within its box (the other part, in frames the vehicle splits again): the parts within
+        its box are joined into one detection first (:meth:`_join_parts`), one part alone is completed to its
+        size (``partial_rel``). Two cars nose to tail that the detector joins now
         and then are counted in the frames it joins them; ``merge_hits`` frames of it are needed.
         """
         p = self.params
@@ -1183,7 +1184,8 @@ class MultiTargetTracker:
         ``|m|`` times the frames from the first detection to the last reaches ``need``; and the boxes went
         that way: the median centre of the later half of the detections lies, along ``m``, at least half
         the flow's distance past the median of the earlier half (a region that recurs in place stays). False
-        when a detection has no flow (``use_velocity`` off, or plain ``(x, y, area)`` detections).
+        when a detection has no flow (``use_velocity`` off, or plain ``(x, y, area)`` detections), and with
+        ``steady_flow_rel`` 0.
         """
         rel = self.params["steady_flow_rel"]
         if not rel > 0 or len(trk.flows) < max(3, self.birth_hits):
