@@ -658,3 +658,36 @@ def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_t
     with pytest.raises(ValueError, match=r"steady_flow_rel: expected a number in \[0, 1\] \(0: off\), got 2"):
         MultiTargetTracker(steady_flow_rel=2)
 
+
+
+def _iou_xyxy(a, b):
+    iw = max(0.0, min(a[0, 2], b[0, 2]) - max(a[0, 0], b[0, 0]))
+    ih = max(0.0, min(a[0, 3], b[0, 3]) - max(a[0, 1], b[0, 1]))
+    area = lambda q: (q[0, 2] - q[0, 0]) * (q[0, 3] - q[0, 1])  # noqa: E731
+    return iw * ih / (area(a) + area(b) - iw * ih)
+
+
+def test_a_car_found_as_its_two_ends_then_whole_is_one_track_when_one_end_s_track_takes_the_whole():
+    # a 34 x 48 px car at 2 px a frame down whose uniform roof does not move in the flow: its two ends are found
+    # (30 x 14 px, 17 px before and behind its centre) but in frames 12-20, where it is found whole; the front's
+    # track takes the whole detection (within its gate) and grows over the rear's, which coasts inside it: after
+    # merge_hits such frames (merge_covered) the rear joins it, and the car is one track, boxed whole throughout
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(40):
+            x, y = 80.0, 40.0 + 2.0 * t
+            trk.step(t, [_box_det(x, y, 34, 48, 0.0, 2.0)] if 12 <= t <= 20 else
+                     [_box_det(x, y + 17, 30, 14, 0.0, 2.0), _box_det(x, y - 17, 30, 14, 0.0, 2.0)])
+        return trk.rows()
+
+    rows = run()
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(40))
+    for r in rows:   # but the frames in which the front's filter moves from its end to the whole car
+        y = 40.0 + 2.0 * r["frame"]
+        box = np.array([[r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"] + 1, r["bbox_y1_px"] + 1]])
+        if not 12 <= r["frame"] <= 14:
+            assert _iou_xyxy(box, np.array([[63.5, y - 23.5, 97.5, y + 24.5]])) > 0.85, r
+    assert len({r["track_id"] for r in run(merge_covered=False)}) == 2
+    with pytest.raises(ValueError, match="merge_covered: expected true/false"):
+        MultiTargetTracker(merge_covered="yes")
