@@ -575,3 +575,119 @@ def test_a_car_leaving_through_the_border_is_boxed_as_the_image_shows_it():
     out = boxes_in_image(np.array([[130.0, 10.0, 150.0, 20.0], [np.nan] * 4, [-10.0, -5.0, 5.0, 90.0]]), (80, w_img))
     assert np.isnan(out[:2]).all()
     np.testing.assert_array_equal(out[2], [-0.5, -0.5, 5.0, 79.5])
+
+
+def _box_det(x, y, w, h, u=0.0, v=0.0):
+    from algorithms.detection import Detection
+
+    return Detection(x, y, int(w * h), x - (w - 1) / 2, y - (h - 1) / 2, x + (w - 1) / 2, y + (h - 1) / 2, u, v)
+
+
+def test_a_truck_found_in_two_parts_and_whole_by_turns_is_one_track_boxed_whole():
+    # an 80 x 30 px truck at 1.5 px a frame whose region splits into two 30 x 20 px parts (cab, body: their centres
+    # 25 px from the truck's, beyond the gate, and IoU 0.25 with it) in frames 0-11 and every odd frame after, and
+    # is found whole in the even ones from frame 12: two part tracks are confirmed; the whole detection, which
+    # neither takes, covers both, moving alike, and after merge_hits such frames they are one track, boxed whole
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)   # no frames: the parts coast through the whole ones
+        for t in range(40):
+            x, y = 60.0 + 1.5 * t, 50.0
+            whole = t >= 12 and t % 2 == 0
+            trk.step(t, [_box_det(x, y, 80, 30, 1.5)] if whole else
+                     [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
+        return trk.rows()
+
+    rows = run()
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(40))
+    for r in rows:   # before the merge the union of the two parts' boxes, after it the truck's (parts completed)
+        x = 60.0 + 1.5 * r["frame"]
+        np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
+                                   [x - 39.5, 35.5, x + 39.5, 64.5], atol=2.5, err_msg=str(r["frame"]))
+    assert len({r["track_id"] for r in run(merge_hits=0)}) == 2   # off: a track per part
+    with pytest.raises(ValueError, match=r"merge_hits: expected an integer >= 0 \(0: off\), got -1"):
+        MultiTargetTracker(merge_hits=-1)
+    with pytest.raises(ValueError, match=r"merge_inside: expected a number in \(0, 1\], got 0"):
+        MultiTargetTracker(merge_inside=0)
+
+
+def test_two_cars_nose_to_tail_that_the_detector_joins_twice_stay_two_tracks():
+    # two 30 x 14 px cars 36 px apart at the same 1.5 px a frame; in frames 15 and 25 their regions join into one
+    # 66 x 14 px detection: each keeps its own track, as without merging (the joined box overlaps one car's track
+    # by IoU 0.45, which takes it: a detection some track takes never counts towards merge_hits)
+    def run(joined, **kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(40):
+            x = 60.0 + 1.5 * t
+            dets = ([_box_det(x + 18, 40.0, 66, 14, 1.5)] if t in joined else
+                    [_box_det(x, 40.0, 30, 14, 1.5), _box_det(x + 36, 40.0, 30, 14, 1.5)])
+            trk.step(t, dets)
+        return trk.rows()
+
+    rows = run((15, 25))
+    assert len({r["track_id"] for r in rows}) == 2
+    assert rows == run((15, 25), merge_hits=0)
+    assert len({r["track_id"] for r in run((15, 20, 25, 30))}) == 2
+
+
+def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_there_is_not():
+    # 30 frames (pairs 0-28, the last frame extrapolated): a 30 x 14 px car at 0.4 px a frame found in pairs 26-28
+    # (too short a drive for the travel rule); a region flickering in place there, its flow turning about
+    rng = np.random.default_rng(3)
+
+    def run(**kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(29):
+            dets = []
+            if t >= 26:
+                dets.append(_box_det(50.0 + 0.4 * t, 40.0, 30, 14, 0.4 + rng.normal(0, 0.03), rng.normal(0, 0.03)))
+                a = rng.uniform(0, 2 * np.pi)
+                dets.append(_box_det(150.0 + rng.normal(0, 1), 80.0 + rng.normal(0, 1), 20, 12, np.cos(a), np.sin(a)))
+            trk.step(t, dets)
+        trk.extrapolate(29)
+        return trk.rows()
+
+    assert run() == []                                       # the default: off
+    rows = run(end_min_hits=3)
+    assert {r["track_id"] for r in rows} == {0}              # the car, not the flicker
+    assert [r["frame"] for r in rows] == [26, 27, 28, 29]
+    assert rows[-1]["x_filt_px"] == pytest.approx(50.0 + 0.4 * 29, abs=1.0)
+    assert run(end_min_hits=4) == []                         # three detections are fewer
+    with pytest.raises(ValueError, match=r"end_min_hits: expected an integer >= 0 \(0: off\), got 1.5"):
+        MultiTargetTracker(end_min_hits=1.5)
+    with pytest.raises(ValueError, match=r"steady_flow_rel: expected a number in \[0, 1\] \(0: off\), got 2"):
+        MultiTargetTracker(steady_flow_rel=2)
+
+
+
+def _iou_xyxy(a, b):
+    iw = max(0.0, min(a[0, 2], b[0, 2]) - max(a[0, 0], b[0, 0]))
+    ih = max(0.0, min(a[0, 3], b[0, 3]) - max(a[0, 1], b[0, 1]))
+    area = lambda q: (q[0, 2] - q[0, 0]) * (q[0, 3] - q[0, 1])  # noqa: E731
+    return iw * ih / (area(a) + area(b) - iw * ih)
+
+
+def test_a_car_found_as_its_two_ends_then_whole_is_one_track_when_one_end_s_track_takes_the_whole():
+    # a 34 x 48 px car at 2 px a frame down whose uniform roof does not move in the flow: its two ends are found
+    # (30 x 14 px, 17 px before and behind its centre) but in frames 12-20, where it is found whole; the front's
+    # track takes the whole detection (within its gate) and grows over the rear's, which coasts inside it: after
+    # merge_hits such frames (merge_covered) the rear joins it, and the car is one track, boxed whole throughout
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(40):
+            x, y = 80.0, 40.0 + 2.0 * t
+            trk.step(t, [_box_det(x, y, 34, 48, 0.0, 2.0)] if 12 <= t <= 20 else
+                     [_box_det(x, y + 17, 30, 14, 0.0, 2.0), _box_det(x, y - 17, 30, 14, 0.0, 2.0)])
+        return trk.rows()
+
+    rows = run()
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(40))
+    for r in rows:   # but the frames in which the front's filter moves from its end to the whole car
+        y = 40.0 + 2.0 * r["frame"]
+        box = np.array([[r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"] + 1, r["bbox_y1_px"] + 1]])
+        if not 12 <= r["frame"] <= 14:
+            assert _iou_xyxy(box, np.array([[63.5, y - 23.5, 97.5, y + 24.5]])) > 0.85, r
+    assert len({r["track_id"] for r in run(merge_covered=False)}) == 2
+    with pytest.raises(ValueError, match="merge_covered: expected true/false"):
+        MultiTargetTracker(merge_covered="yes")
