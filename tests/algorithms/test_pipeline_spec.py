@@ -64,3 +64,29 @@ def test_a_broken_builtin_file_is_refused_naming_the_file(tmp_path, monkeypatch)
     (tmp_path / "bad-one.yaml").unlink()
     with pytest.raises(PipelineError, match=r"renamed.yaml: name: expected 'renamed' \(the file's name\), got 'other'"):
         builtin_pipelines()
+
+
+@pytest.mark.parametrize("section, defaults", [
+    ("MultiSpec", "algorithms.tracking:MULTI_DEFAULTS"),
+    ("DetectionSpec", "algorithms.detection:DETECTION_DEFAULTS"),
+])
+def test_a_spec_section_takes_every_key_its_stage_defines(section, defaults):
+    """A key added to a stage's defaults is settable from a pipeline file or a suite (merge_hits was not)."""
+    import importlib
+
+    module, name = defaults.split(":")
+    keys = set(getattr(importlib.import_module(module), name))
+    fields = set(getattr(pipeline_spec, section).model_fields)
+    assert keys <= fields, f"{section} lacks {sorted(keys - fields)}"
+
+
+def test_the_tracker_part_joining_keys_are_set_from_a_pipeline_file():
+    import copy
+
+    d = copy.deepcopy(builtin_pipelines()["dis"])
+    d["tracking"]["multi"] = {**d["tracking"]["multi"], "merge_hits": 0, "end_min_hits": 5}
+    spec = resolve_pipeline(d)
+    assert spec["tracking"]["multi"]["merge_hits"] == 0 and spec["tracking"]["multi"]["end_min_hits"] == 5
+    d["tracking"]["multi"]["merge_hits"] = -1
+    with pytest.raises(PipelineError, match="merge_hits"):
+        resolve_pipeline(d)
