@@ -680,10 +680,18 @@ class _Track:
 # hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
 #   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
 #   would otherwise be held for ever);
+# back_min_travel_rel: a confirmed track is followed back from its first detection (a vehicle that waited at a light
+#   when the clip began stood where it was first found: once it has left that place, which then looks different, the
+#   kept frames before are searched for its first template, :meth:`MultiTargetTracker._extend_back`) once its
+#   ground-fixed centre has travelled this many times its first box's larger side. 1.0, the default, was the
+#   hold's travel (hold_min_travel_rel) before it had a key of its own: a car of a queue that creeps at 0.5-2 m/s
+#   (0.15-0.6 px a frame at 0.13 m a pixel and 25 fps) does not travel its 35 px length within a 100-frame clip,
+#   and was never followed back to the frames in which it crept too slowly to be detected. Its place looks
+#   different well before it leaves its box (the one-off test that the first template no longer matches there
+#   stays: a template of ground or a marking matches the place after the "vehicle" left and is never followed back);
+#   at or under min_travel_rel every confirmed track is tried at its confirmation;
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
-#   most it is followed back from its first detection (a vehicle that waited at a light when the clip began
-#   stood where it was first found: once it has left that place, which then looks different, the kept frames
-#   before are searched for its first template);
+#   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
 #   it first holds a track, that the place looked
 #   different before the vehicle came: in the latest kept frame in which the track was a box side or more away,
@@ -722,7 +730,8 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100, "steady_flow_rel": 0.8,
+                  "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100,
+                  "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -896,7 +905,7 @@ class MultiTargetTracker:
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
-                     "hold_min_travel_rel", "min_trend_f"):
+                     "hold_min_travel_rel", "back_min_travel_rel", "min_trend_f"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
@@ -1025,7 +1034,7 @@ class MultiTargetTracker:
         if img is not None:
             for trk in survivors:
                 if trk.confirmed and trk.first is not None and \
-                        trk.travel >= p["hold_min_travel_rel"] * max(trk.first[2].shape):
+                        trk.travel >= p["back_min_travel_rel"] * max(trk.first[2].shape):
                     self._extend_back(trk, img, off)
         # kept as 8 bits: 2 MB a 1080p frame
         if img is not None and (p["hold_min_ncc"] > 0 or (p["fill_gaps"] and p["fill_min_ncc"] > 0)):
@@ -1282,9 +1291,9 @@ class MultiTargetTracker:
         """Follow a track back from its first detection through the kept frames while its first template matches.
 
         A vehicle waiting at a light when the clip starts is found only when it drives off; it
-        stood where its first detection was. Once the track has left its first box (by
-        ``hold_min_travel_rel`` sides), the place looks different now (else the template is of the
-        ground, and nothing is added), and the kept frames before the first detection are searched
+        stood where its first detection was. Once the track has travelled ``back_min_travel_rel`` sides
+        of its first box, the place must look different now (else the template is of the ground, and
+        nothing is added; the test is made once), and the kept frames before the first detection are searched
         (``hold_search_px`` around the place found in the frame after, ``hold_min_ncc``), newest
         first, until a frame does not match, a frame is not kept, or ``hold_frames`` are added.
         """

@@ -230,6 +230,37 @@ def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame(
     assert min(r["frame"] for r in mark.rows()) == 10
 
 
+def test_a_queued_car_that_creeps_off_is_followed_back_before_it_has_left_its_box():
+    # it waits 10 frames, then creeps at 0.5 px/frame (a queue at a light, 1.6 m/s at 0.13 m/px and 25 fps): in 20
+    # frames it travels 10 px, under its 14 px length. Followed back once it travelled a quarter of its length
+    # (back_min_travel_rel 0.25), not with the default (a whole length)
+    xs = [30.0] * 10 + [30.0 + 0.5 * k for k in range(1, 21)]
+    first_row = {}
+    for rel in (1.0, 0.25):
+        trk = MultiTargetTracker(death_misses=3, back_min_travel_rel=rel)
+        for t, x in enumerate(xs):
+            trk.step(t, [_car_det(x, 40.0, 0.5)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
+        rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
+        assert {r["track_id"] for r in rows} == {0}
+        first_row[rel] = min(r["frame"] for r in rows)
+        if rel == 0.25:
+            assert sorted(r["frame"] for r in rows) == list(range(len(xs)))
+            waiting = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] < 10])
+            assert np.abs(waiting - [30.0, 40.0]).max() < 1.0
+    assert first_row == {1.0: 10, 0.25: 0}
+    # a "car" that is a marking is still not followed back, however early it is tried
+    import cv2
+
+    ground = cv2.GaussianBlur(np.random.default_rng(4).uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    mark = MultiTargetTracker(death_misses=3, back_min_travel_rel=0.0)
+    for t, x in enumerate(xs):
+        mark.step(t, [_car_det(x, 40.0, 0.5)] if t >= 10 else [], image=ground)
+    assert min(r["frame"] for r in mark.rows()) == 10
+    with pytest.raises(ValueError, match="back_min_travel_rel: expected a finite number >= 0"):
+        MultiTargetTracker(back_min_travel_rel=-0.5)
+
+
 def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
     rng = np.random.default_rng(2)
     trk = MultiTargetTracker()
