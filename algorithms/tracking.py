@@ -690,6 +690,11 @@ class _Track:
 #   different well before it leaves its box (the one-off test that the first template no longer matches there
 #   stays: a template of ground or a marking matches the place after the "vehicle" left and is never followed back);
 #   at or under min_travel_rel every confirmed track is tried at its confirmation;
+# back_track_size: the rows a track is followed back by get the size it has had at its detections (the median of its
+#   filtered box at its last 25, as partial_rel completes a partial view), centred where its first template matched;
+#   false, the default: the first detection's box, which is part of the vehicle where that detection was (a slow
+#   car's first long-baseline box is often its front or rear edge, or half the car: world 3 below, a 17 x 36 px
+#   box on a 30 x 36 px car followed back through 54 frames at IoU 0.24, each row a false positive and a miss);
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
@@ -730,7 +735,8 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "hold_frames": 250, "hold_history": 100,
+                  "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "back_track_size": False,
+                  "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
@@ -901,7 +907,7 @@ class MultiTargetTracker:
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
-        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered"):
+        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
@@ -1307,6 +1313,8 @@ class MultiTargetTracker:
         kept = {f: (g, o) for f, g, o in self._seen}
         at = box[:2].copy()
         r = max(p["hold_search_px"], 0.5 * max(th, tw))
+        # the rows' box: the first detection's, or the size the track has had since (back_track_size)
+        bw, bh = (np.median(np.asarray(trk.sizes), axis=0) if p["back_track_size"] and trk.sizes else (tw, th))
         for frame in range(f0 - 1, max(-1, f0 - 1 - p["hold_frames"]), -1):
             if frame not in kept:
                 return
@@ -1315,7 +1323,7 @@ class MultiTargetTracker:
             if found is None or not found[0] >= p["hold_min_ncc"]:
                 return
             at = found[1] - o
-            box_then = np.array([at[0], at[1], tw, th])
+            box_then = np.array([at[0], at[1], bw, bh])
             self._emit(trk, frame, box_then, box_then, box_then, o)
 
     def _ends_steady(self, trk: _Track) -> bool:

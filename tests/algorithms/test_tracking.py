@@ -261,6 +261,29 @@ def test_a_queued_car_that_creeps_off_is_followed_back_before_it_has_left_its_bo
         MultiTargetTracker(back_min_travel_rel=-0.5)
 
 
+def test_rows_followed_back_take_the_tracks_size_when_the_first_detection_was_part_of_the_car():
+    # it waits 10 frames, then drives off; its first detection is its front half (7 of its 14 px), the rest whole
+    from algorithms.detection import Detection
+
+    xs = [30.0] * 10 + [30.0 + 1.5 * k + 0.1 * k * k for k in range(1, 16)]
+    widths = {}
+    for own_size in (False, True):
+        trk = MultiTargetTracker(death_misses=3, back_track_size=own_size)
+        for t, x in enumerate(xs):
+            if t == 10:
+                x0 = int(round(x))  # the front half: x .. x + 6
+                dets = [Detection(x + 3.0, 40.0, 56, x0, 36, x0 + 6, 43, 1.5, 0.0)]
+            else:
+                dets = [_car_det(x, 40.0, 1.5)] if t > 10 else []
+            trk.step(t, dets, image=_car_scene(80, 160, x, 40.0))
+        back = [r for r in trk.rows() if r["frame"] < 10 and not np.isnan(r["x_filt_px"])]
+        assert len(back) == 10
+        widths[own_size] = np.median([r["bbox_x1_px"] - r["bbox_x0_px"] for r in back])
+    assert abs(widths[False] - 7) <= 1.5 and abs(widths[True] - 14) <= 1.5
+    with pytest.raises(ValueError, match="back_track_size: expected true/false"):
+        MultiTargetTracker(back_track_size=1)
+
+
 def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
     rng = np.random.default_rng(2)
     trk = MultiTargetTracker()
