@@ -689,15 +689,16 @@ class _Track:
 #   and was never followed back to the frames in which it crept too slowly to be detected. Its place looks
 #   different well before it leaves its box (the one-off test that the first template no longer matches there
 #   stays: a template of ground or a marking matches the place after the "vehicle" left and is never followed back);
-#   at or under min_travel_rel every confirmed track is tried at its confirmation. 0.25 in dis and pyramidal-hs (three
-#   1080p city-wide worlds, dis MOTA pooled 0.342 -> 0.366; the figures, KIT AIS's and the synthetic scenes' are there);
+#   at or under min_travel_rel every confirmed track is tried at its confirmation. 0.25 in dis (three 1080p city-wide
+#   worlds, MOTA pooled 0.342 -> 0.366; the figures, KIT AIS's and the synthetic scenes' are there); measured on
+#   pyramidal-hs too (figures in its file), off there until its twin pyramidal-lk is measured;
 # back_track_size: the rows a track is followed back by get the size it has had at its detections (the median of its
 #   filtered box at its last 25, as partial_rel completes a partial view), centred where its first template matched;
 #   false, the default: the first detection's box, which is part of the vehicle where that detection was (a slow
 #   car's first long-baseline box is often its front or rear edge, or half the car: world 3 below, a 17 x 36 px
-#   box on a 30 x 36 px car followed back through 54 frames at IoU 0.24, each row a false positive and a miss). On in
-#   pyramidal-hs, off in dis (its figures in both files: with back_min_travel_rel 0.25 it gains a world for dis and
-#   costs a KIT AIS row, and alone its effect on the worlds is mixed);
+#   box on a 30 x 36 px car followed back through 54 frames at IoU 0.24, each row a false positive and a miss). Off in
+#   the built-ins (figures in dis.yaml and pyramidal-hs.yaml: with back_min_travel_rel 0.25 it gains a world for dis
+#   and costs a KIT AIS row; on pyramidal-hs it is part of the pair that wins there; alone its effect is mixed);
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
