@@ -81,7 +81,9 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   it does not help everywhere (tv-l1 and pyramidal-lk on the stand-in, dis's precision on KIT AIS), hence off by
 #   default;
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
-#   there; px-scaled): 0.25 px a frame at k = 6;
+#   there; px-scaled): 0.25 px a frame at k = 6; the detector's noise_k times the long pair's median residual
+#   raises it where the flow is noisier. 1.0 in dis (algorithms/pipelines/dis.yaml: the 1080p city-wide worlds' long
+#   pairs have a residual of 0.14 px, and a queue creeping at 0.25 px a frame was under the 1.5 px floor);
 # max_speed_px: a long-baseline detection faster than this, px a frame (px-scaled), is left out: faster vehicles
 #   are the one-pair detector's, and what it did not find at that speed it rejected (parallax of a roof that
 #   the camera's motion over k frames makes look like a mover, a fast vehicle's trail);

@@ -463,6 +463,8 @@ class MultiSpec(_Section):
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]
     hold_min_travel_rel: float = MULTI_DEFAULTS["hold_min_travel_rel"]
+    back_min_travel_rel: float = MULTI_DEFAULTS["back_min_travel_rel"]
+    back_track_size: StrictBool = MULTI_DEFAULTS["back_track_size"]
     hold_frames: StrictInt = MULTI_DEFAULTS["hold_frames"]
     hold_history: StrictInt = MULTI_DEFAULTS["hold_history"]
     steady_flow_rel: float = MULTI_DEFAULTS["steady_flow_rel"]

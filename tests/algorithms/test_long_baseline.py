@@ -92,6 +92,29 @@ def test_a_static_textured_scene_gives_nothing_over_the_long_baseline():
     assert long_baseline_detections(wk, vk & inside, baseline_frames=6, frames=(noisy[6], old), composed=C) == []
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_car_creeping_at_0_25_px_a_frame_needs_the_lower_floor_and_static_noise_passes_neither(seed):
+    # 1.5 px over six frames, which the flow under-estimates: under the default floor (min_displacement_px 1.5), over
+    # dis's 1.0; the long pair's own noise (noise_k times its median residual) still keeps a static noisy scene out
+    k, speed = 6, 0.25
+    frames = _sequence(k + 2, speed_px=speed, seed=seed)
+    C = compose_models([np.eye(3)] * k)
+    old, inside = register_into(frames[0], C)
+    wk, vk = dis(_u8(frames[k]), _u8(old))
+    run = lambda w, v, f, o, md: long_baseline_detections(w, v & inside, baseline_frames=k, frames=(f, o),  # noqa: E731
+                                                          composed=C, min_displacement_px=md)
+    assert run(wk, vk, frames[k], old, 1.5) == []
+    (d,) = run(wk, vk, frames[k], old, 1.0)
+    assert (d.u_px, d.v_px) == pytest.approx((speed, 0.0), abs=0.08)
+    assert box_iou(d, _car_box(k, speed)) >= 0.8, d
+    still = _sequence(k + 1, speed_px=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    noisy = [f + rng.normal(0, 2.0, f.shape).astype(np.float32) for f in still]
+    old_n, _ = register_into(noisy[0], C)
+    wn, vn = dis(_u8(noisy[k]), _u8(old_n))
+    assert run(wn, vn, noisy[k], old_n, 1.0) == []
+
+
 def test_models_compose_oldest_first_and_registration_undoes_them():
     A = np.array([[1.0, 0, 2.0], [0, 1.0, -1.0], [0, 0, 1.0]])
     B = np.array([[np.cos(0.01), -np.sin(0.01), 0.5], [np.sin(0.01), np.cos(0.01), 0.25], [0, 0, 1.0]])

@@ -230,6 +230,60 @@ def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame(
     assert min(r["frame"] for r in mark.rows()) == 10
 
 
+def test_a_queued_car_that_creeps_off_is_followed_back_before_it_has_left_its_box():
+    # it waits 10 frames, then creeps at 0.5 px/frame (a queue at a light, 1.6 m/s at 0.13 m/px and 25 fps): in 20
+    # frames it travels 10 px, under its 14 px length. Followed back once it travelled a quarter of its length
+    # (back_min_travel_rel 0.25), not with the default (a whole length)
+    xs = [30.0] * 10 + [30.0 + 0.5 * k for k in range(1, 21)]
+    first_row = {}
+    for rel in (1.0, 0.25):
+        trk = MultiTargetTracker(death_misses=3, back_min_travel_rel=rel)
+        for t, x in enumerate(xs):
+            trk.step(t, [_car_det(x, 40.0, 0.5)] if t >= 10 else [], image=_car_scene(80, 160, x, 40.0))
+        rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
+        assert {r["track_id"] for r in rows} == {0}
+        first_row[rel] = min(r["frame"] for r in rows)
+        if rel == 0.25:
+            assert sorted(r["frame"] for r in rows) == list(range(len(xs)))
+            waiting = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in rows if r["frame"] < 10])
+            assert np.abs(waiting - [30.0, 40.0]).max() < 1.0
+    assert first_row == {1.0: 10, 0.25: 0}
+    # a "car" that is a marking is still not followed back, however early it is tried
+    import cv2
+
+    ground = cv2.GaussianBlur(np.random.default_rng(4).uniform(60, 140, (80, 160)).astype(np.float32), (0, 0), 1.5)
+    ground[38:42, 10:150] = 230.0
+    mark = MultiTargetTracker(death_misses=3, back_min_travel_rel=0.0)
+    for t, x in enumerate(xs):
+        mark.step(t, [_car_det(x, 40.0, 0.5)] if t >= 10 else [], image=ground)
+    assert min(r["frame"] for r in mark.rows()) == 10
+    with pytest.raises(ValueError, match="back_min_travel_rel: expected a finite number >= 0"):
+        MultiTargetTracker(back_min_travel_rel=-0.5)
+
+
+def test_rows_followed_back_take_the_tracks_size_when_the_first_detection_was_part_of_the_car():
+    # it waits 10 frames, then drives off; its first detection is its front half (7 of its 14 px), the rest whole
+    from algorithms.detection import Detection
+
+    xs = [30.0] * 10 + [30.0 + 1.5 * k + 0.1 * k * k for k in range(1, 16)]
+    widths = {}
+    for own_size in (False, True):
+        trk = MultiTargetTracker(death_misses=3, back_track_size=own_size)
+        for t, x in enumerate(xs):
+            if t == 10:
+                x0 = int(round(x))  # the front half: x .. x + 6
+                dets = [Detection(x + 3.0, 40.0, 56, x0, 36, x0 + 6, 43, 1.5, 0.0)]
+            else:
+                dets = [_car_det(x, 40.0, 1.5)] if t > 10 else []
+            trk.step(t, dets, image=_car_scene(80, 160, x, 40.0))
+        back = [r for r in trk.rows() if r["frame"] < 10 and not np.isnan(r["x_filt_px"])]
+        assert len(back) == 10
+        widths[own_size] = np.median([r["bbox_x1_px"] - r["bbox_x0_px"] for r in back])
+    assert abs(widths[False] - 7) <= 1.5 and abs(widths[True] - 14) <= 1.5
+    with pytest.raises(ValueError, match="back_track_size: expected true/false"):
+        MultiTargetTracker(back_track_size=1)
+
+
 def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is():
     rng = np.random.default_rng(2)
     trk = MultiTargetTracker()
