@@ -365,6 +365,59 @@ def test_with_box_reach_parts_a_diagonal_follower_behind_a_band_of_ground_stays_
     assert max(box_iou(d, lead) for d in dets) >= 0.85, (dets, lead)
 
 
+@pytest.mark.parametrize("gap_px", [6, 8, 10])
+def test_with_box_reach_parts_a_follower_nose_to_tail_over_untextured_asphalt_stays_out(gap_px):
+    # two 26 x 14 px cars at 34 degrees, gap_px apart nose to tail at one velocity, on untextured asphalt (the
+    # synthetic city: warping it by the motion changes nothing, so it is no static texture), the flow found on the
+    # leader alone: without the road test the band between them is no ground and the follower joins the leader's
+    # box; with it the asphalt's grey (the ring around the leader's box) makes that band ground, the follower stays out
+    # (the asphalt next to the moving edges is marked by the motion, so it must count as ground marked or not)
+    du, dv = 3, 2
+    angle = math.degrees(math.atan2(dv, du))
+    e = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    rng = np.random.default_rng(13)
+    g = 90.0 + rng.normal(0.0, 0.4, (H, W)).astype(np.float32)
+    lead_c = np.array([90.0, 66.0])
+    follow_c = lead_c - e * (26 + gap_px)
+    frames = [_paint_at(_paint_at(g, *(follow_c + (k - 1) * np.array([du, dv])), 26, 14, angle),
+                        *(lead_c + (k - 1) * np.array([du, dv])), 26, 14, angle) for k in range(3)]
+    lead, follow = ((xs.min(), ys.min(), xs.max(), ys.max()) for ys, xs in
+                    (np.nonzero(np.abs(_paint_at(g, *c, 26, 14, angle) - g) > 2) for c in (lead_c, follow_c)))
+    flow = _field(rng, [(54, 78, 78, 102, (float(du), float(dv)))])
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], box_reach_px=48, box_reach_parts=True)
+
+    def covered(d):  # the share of the follower's box inside the detection's
+        w = min(d.x1_px, follow[2]) - max(d.x0_px, follow[0]) + 1
+        h = min(d.y1_px, follow[3]) - max(d.y0_px, follow[1]) + 1
+        return max(0, w) * max(0, h) / ((follow[2] - follow[0] + 1) * (follow[3] - follow[1] + 1))
+
+    (joined,) = detect_vehicles(flow, np.ones((H, W), bool), box_reach_road_k=0.0, **kw)
+    assert covered(joined) > 0.8, (joined, follow)
+    (d,) = detect_vehicles(flow, np.ones((H, W), bool), **kw)
+    assert covered(d) < 0.25 and box_iou(d, lead) >= 0.7, (d, lead, follow)
+
+
+def test_static_band_counts_road_coloured_pixels_as_ground_only_with_the_road_mask():
+    # a hull 40 px along the motion (+x) and 12 px across, nothing static: a 4 px band of road-coloured asphalt
+    # across the lane is ground with the road mask, a uniform roof that is not road-coloured is not
+    from algorithms.detection import _road_grey, _static_band
+
+    grey = np.full((30, 60), 200.0)  # a uniform trailer roof
+    grey[:, 24:28] = 90.0            # asphalt between two vehicles
+    ring = np.full(40, 90.0)
+    ring[::2] += 1.0                 # the ground around the box: 90-91
+    road_grey, sigma = _road_grey(ring)
+    road = np.abs(grey - road_grey) <= 1.0 * sigma
+    moved = np.zeros(grey.shape, np.uint8)
+    static = np.zeros(grey.shape, bool)
+    pts = np.array([[5, 8], [44, 8], [44, 21], [5, 21]])
+    assert _static_band(pts, moved, static, 1.0, 0.0) == 0.0
+    assert _static_band(pts, moved, static, 1.0, 0.0, road=road) == pytest.approx(1.0)
+    grey[:, 24:28] = 200.0
+    assert _static_band(pts, moved, static, 1.0, 0.0, road=np.abs(grey - road_grey) <= sigma) == 0.0
+    assert _road_grey(ring[:15]) is None
+
+
 def test_static_band_finds_a_band_of_ground_across_the_lane_not_static_pixels_along_its_sides():
     # a hull 40 px along the motion (+x) and 12 px across: static pixels along both sides (the ground beside a
     # trailer) give no line a majority; a 4 px band of static ground across the lane gives a line of it
@@ -466,6 +519,7 @@ def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
     ({"box_reach_px": 2.5}, r"box_reach_px: expected an integer >= 0, got 2.5"),
     ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
     ({"box_reach_parts": 1}, r"box_reach_parts: expected true/false, got 1"),
+    ({"box_reach_road_k": -1.0}, r"box_reach_road_k: expected a finite number >= 0, got -1.0"),
     ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
 ])
 def test_bad_box_keys_and_a_misshapen_previous_frame_are_rejected(kwargs, match):
