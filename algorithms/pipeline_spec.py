@@ -349,6 +349,8 @@ class DetectionSpec(_Section):
     box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]
     box_reach_px: StrictInt = DETECTION_DEFAULTS["box_reach_px"]
     box_reach_join: float = DETECTION_DEFAULTS["box_reach_join"]
+    box_reach_parts: StrictBool = DETECTION_DEFAULTS["box_reach_parts"]
+    box_reach_road_k: float = DETECTION_DEFAULTS["box_reach_road_k"]
     change_noise_k: float = DETECTION_DEFAULTS["change_noise_k"]
     change_enough: float = DETECTION_DEFAULTS["change_enough"]
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]

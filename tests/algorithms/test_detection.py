@@ -299,6 +299,142 @@ def test_a_bus_whose_flow_found_its_front_alone_gets_its_whole_box_within_reach_
         assert lead.x0_px >= 74 and lead.y0_px >= 48, (x_rear, y_rear, lead)
 
 
+def _paint_at(img, cx, cy, length, width, angle_deg, *, roof=150.0, outline=30.0):
+    """A vehicle seen from above centred at (cx, cy), driving at ``angle_deg`` (image axes, y down): a 2 px dark
+    outline around a uniform roof, painted with sub-pixel corners."""
+    out = img.copy()
+    a = math.radians(angle_deg)
+    along, across = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    for ln, wd, grey in ((length, width, outline), (length - 4, width - 4, roof)):
+        corners = [np.array([cx, cy]) + s * ln / 2 * along + t * wd / 2 * across
+                   for s, t in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        cv2.fillConvexPoly(out, np.round(np.array(corners) * 16).astype(np.int32), grey, shift=4)
+    return out
+
+
+def _truck_at(img, cx, cy, angle_deg, *, length=72, width=18, cab=20):
+    """A truck centred at (cx, cy) driving at ``angle_deg``: a uniform light trailer and, ahead of it, a cab."""
+    e = np.array([math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))])
+    out = _paint_at(img, *(np.array([cx, cy]) - e * (cab + 2) / 2), length - cab - 2, width, angle_deg, roof=200.0)
+    return _paint_at(out, *(np.array([cx, cy]) + e * (length - cab) / 2), cab, width - 2, angle_deg, roof=235.0)
+
+
+@pytest.mark.parametrize("step", [(2, 1), (3, 2), (2, 2)])
+def test_a_diagonal_truck_whose_flow_found_its_cab_alone_gets_its_whole_box_with_box_reach_parts(step):
+    # a 72 x 18 px truck at 27, 34 and 45 degrees whose flow reached the threshold on its cab alone (the city-wide
+    # world's truck 202: its uniform trailer moves along its own sides). The trailer's rear edge lies in the lane
+    # within reach, but the hull of the cab's axis-aligned box and that edge sweeps the ground beside the trailer:
+    # the box's corners keep the cab alone, the parts' own pixels join the whole truck
+    du, dv = step
+    angle = math.degrees(math.atan2(dv, du))
+    rng = np.random.default_rng(11)
+    g = _ground(rng)
+    frames = [_truck_at(g, 76 + (k - 1) * du, 60 + (k - 1) * dv, angle) for k in range(3)]  # t-1, t, t+1
+    ys, xs = np.nonzero(np.abs(frames[1] - g) > 1)
+    truck = (xs.min(), ys.min(), xs.max(), ys.max())
+    cx, cy = np.array([76.0, 60.0]) + 26 * np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    flow = _field(rng, [(int(cy) - 13, int(cy) + 13, int(cx) - 13, int(cx) + 13, (float(du), float(dv)))])
+    valid = np.ones((H, W), bool)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], box_reach_px=48)
+    (cab,) = detect_vehicles(flow, valid, box_reach_parts=False, **kw)
+    assert box_iou(cab, truck) < 0.3, (cab, truck)
+    (d,) = detect_vehicles(flow, valid, box_reach_parts=True, **kw)
+    assert box_iou(d, truck) >= 0.9, (d, truck)
+    assert (d.u_px, d.v_px) == pytest.approx((du, dv), abs=0.3)
+
+
+@pytest.mark.parametrize("gap_px", [10, 16])
+def test_with_box_reach_parts_a_diagonal_follower_behind_a_band_of_ground_stays_out(gap_px):
+    # two 26 x 14 px cars at 34 degrees, one gap_px behind the other at the same velocity, the flow found on the
+    # leader alone: the ground between them is a band of static texture across the lane, so the follower's edges,
+    # in the lane and within reach, stay out of the leader's box
+    du, dv = 3, 2
+    angle = math.degrees(math.atan2(dv, du))
+    e = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    rng = np.random.default_rng(12)
+    g = _ground(rng)
+    lead_c = np.array([90.0, 66.0])
+    follow_c = lead_c - e * (26 + gap_px)
+    frames = [_paint_at(_paint_at(g, *(follow_c + (k - 1) * np.array([du, dv])), 26, 14, angle),
+                        *(lead_c + (k - 1) * np.array([du, dv])), 26, 14, angle) for k in range(3)]
+    ys, xs = np.nonzero(np.abs(_paint_at(g, *lead_c, 26, 14, angle) - g) > 1)
+    lead = (xs.min(), ys.min(), xs.max(), ys.max())
+    flow = _field(rng, [(54, 78, 78, 102, (float(du), float(dv)))])
+    dets = detect_vehicles(flow, np.ones((H, W), bool), frames=(frames[1], frames[2]), prev_frame=frames[0],
+                           box_reach_px=48, box_reach_parts=True)
+    assert max(box_iou(d, lead) for d in dets) >= 0.85, (dets, lead)
+
+
+@pytest.mark.parametrize("gap_px", [6, 8, 10])
+def test_with_box_reach_parts_a_follower_nose_to_tail_over_untextured_asphalt_stays_out(gap_px):
+    # two 26 x 14 px cars at 34 degrees, gap_px apart nose to tail at one velocity, on untextured asphalt (the
+    # synthetic city: warping it by the motion changes nothing, so it is no static texture), the flow found on the
+    # leader alone: without the road test the band between them is no ground and the follower joins the leader's
+    # box; with it the asphalt's grey (the ring around the leader's box) makes that band ground, the follower stays out
+    # (the asphalt next to the moving edges is marked by the motion, so it must count as ground marked or not)
+    du, dv = 3, 2
+    angle = math.degrees(math.atan2(dv, du))
+    e = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    rng = np.random.default_rng(13)
+    g = 90.0 + rng.normal(0.0, 0.4, (H, W)).astype(np.float32)
+    lead_c = np.array([90.0, 66.0])
+    follow_c = lead_c - e * (26 + gap_px)
+    frames = [_paint_at(_paint_at(g, *(follow_c + (k - 1) * np.array([du, dv])), 26, 14, angle),
+                        *(lead_c + (k - 1) * np.array([du, dv])), 26, 14, angle) for k in range(3)]
+    lead, follow = ((xs.min(), ys.min(), xs.max(), ys.max()) for ys, xs in
+                    (np.nonzero(np.abs(_paint_at(g, *c, 26, 14, angle) - g) > 2) for c in (lead_c, follow_c)))
+    flow = _field(rng, [(54, 78, 78, 102, (float(du), float(dv)))])
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], box_reach_px=48, box_reach_parts=True)
+
+    def covered(d):  # the share of the follower's box inside the detection's
+        w = min(d.x1_px, follow[2]) - max(d.x0_px, follow[0]) + 1
+        h = min(d.y1_px, follow[3]) - max(d.y0_px, follow[1]) + 1
+        return max(0, w) * max(0, h) / ((follow[2] - follow[0] + 1) * (follow[3] - follow[1] + 1))
+
+    (joined,) = detect_vehicles(flow, np.ones((H, W), bool), box_reach_road_k=0.0, **kw)
+    assert covered(joined) > 0.8, (joined, follow)
+    (d,) = detect_vehicles(flow, np.ones((H, W), bool), **kw)
+    assert covered(d) < 0.25 and box_iou(d, lead) >= 0.7, (d, lead, follow)
+
+
+def test_static_band_counts_road_coloured_pixels_as_ground_only_with_the_road_mask():
+    # a hull 40 px along the motion (+x) and 12 px across, nothing static: a 4 px band of road-coloured asphalt
+    # across the lane is ground with the road mask, a uniform roof that is not road-coloured is not
+    from algorithms.detection import _road_grey, _static_band
+
+    grey = np.full((30, 60), 200.0)  # a uniform trailer roof
+    grey[:, 24:28] = 90.0            # asphalt between two vehicles
+    ring = np.full(40, 90.0)
+    ring[::2] += 1.0                 # the ground around the box: 90-91
+    road_grey, sigma = _road_grey(ring)
+    road = np.abs(grey - road_grey) <= 1.0 * sigma
+    moved = np.zeros(grey.shape, np.uint8)
+    static = np.zeros(grey.shape, bool)
+    pts = np.array([[5, 8], [44, 8], [44, 21], [5, 21]])
+    assert _static_band(pts, moved, static, 1.0, 0.0) == 0.0
+    assert _static_band(pts, moved, static, 1.0, 0.0, road=road) == pytest.approx(1.0)
+    grey[:, 24:28] = 200.0
+    assert _static_band(pts, moved, static, 1.0, 0.0, road=np.abs(grey - road_grey) <= sigma) == 0.0
+    assert _road_grey(ring[:15]) is None
+
+
+def test_static_band_finds_a_band_of_ground_across_the_lane_not_static_pixels_along_its_sides():
+    # a hull 40 px along the motion (+x) and 12 px across: static pixels along both sides (the ground beside a
+    # trailer) give no line a majority; a 4 px band of static ground across the lane gives a line of it
+    from algorithms.detection import _static_band
+
+    moved = np.zeros((30, 60), np.uint8)
+    static = np.zeros(moved.shape, bool)
+    pts = np.array([[5, 8], [44, 8], [44, 21], [5, 21]])
+    static[8:11, :], static[19:22, :] = True, True  # the sides, 3 px each (eroded to 1 px inside the hull)
+    assert _static_band(pts, moved, static, 1.0, 0.0) < 0.5
+    static[:, 24:28] = True
+    assert _static_band(pts, moved, static, 1.0, 0.0) == pytest.approx(1.0)
+    # the same band where the motion marks it (the changed edges of one vehicle) is no ground
+    moved[:, 24:28] = 1
+    assert _static_band(pts, moved, static, 1.0, 0.0) < 0.5
+
+
 def test_a_part_ahead_in_the_lane_joins_only_where_the_whole_motion_explains_it_better_than_half():
     # a bus's front part (the box) and, 20 px ahead in its lane over uniform road (nothing static between), a part
     # that is a bus's rear edge when the whole motion explains its change better than half of it does, and a slower
@@ -382,6 +518,8 @@ def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
     ({"box_reach_join": -0.1}, r"box_reach_join: expected a finite number >= 0, got -0.1"),
     ({"box_reach_px": 2.5}, r"box_reach_px: expected an integer >= 0, got 2.5"),
     ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
+    ({"box_reach_parts": 1}, r"box_reach_parts: expected true/false, got 1"),
+    ({"box_reach_road_k": -1.0}, r"box_reach_road_k: expected a finite number >= 0, got -1.0"),
     ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
 ])
 def test_bad_box_keys_and_a_misshapen_previous_frame_are_rejected(kwargs, match):
