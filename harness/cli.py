@@ -727,7 +727,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rules", default=None, help="gate rules YAML for the baseline comparison "
                                                  "(default: gate_rules.yaml of aerobench)")
     s.add_argument("--workers", type=int, default=None,
-                   help="processes drawing the pictures and figures (default: one per core)")
+                   help="processes drawing the pictures and figures (default: one per core, at most one per "
+                        "scene)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(fn=cmd_report)
 

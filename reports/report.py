@@ -53,13 +53,18 @@ def _draw_block(data: RunData, cells: pd.DataFrame, section: str, base: str) -> 
 
 @contextmanager
 def figure_pool(run_dir: str | os.PathLike, workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
-    """``workers`` spawned figure processes (None: one per core), started and importing at once; None when
-    one process (this one) is all there is to use. No more than the run has scene blocks."""
+    """``workers`` spawned figure processes (None: one per core, at most one per scene), started and importing
+    at once; None when one process (this one) is all there is to use. No more than the run has scene blocks.
+
+    A figure process first imports what drawing needs (~2 s of CPU, about what one scene's blocks take to
+    draw), so by default a one-scene report is drawn here: two processes started for it took twice the CPU
+    (4.3 -> 8.4 s for `aerobench report` of tiny) and no less time."""
     from harness.executors import default_workers, worker_setup, worker_threads
 
     n = workers or default_workers()
-    try:  # run.json names the cells: 3 blocks a scene at most
-        n = min(n, len(SCENE_SECTIONS) * len({scene_base(c.scene) for c in read_run(run_dir).cells}))
+    try:  # run.json names the cells: a block a section a scene at most
+        scenes = len({scene_base(c.scene) for c in read_run(run_dir).cells})
+        n = min(n, len(SCENE_SECTIONS) * scenes if workers else scenes)
     except (OSError, ValueError):  # load_run reports it, in one place
         pass
     if n <= 1:

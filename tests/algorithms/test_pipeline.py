@@ -445,7 +445,8 @@ def _small_movers(n: int, size: int = 960, car=(30, 14), seed: int = 4) -> list[
 def test_px_scale_auto_follows_the_size_of_the_vehicles_not_only_the_frame():
     from algorithms.pipeline import px_scale_factor
 
-    frames = _small_movers(10)
+    # three frames: two pairs of twelve cars give 24 boxes to take the median of (SIZE_SAMPLE_MIN is 10)
+    frames = _small_movers(3)
     d = get_pipeline("dis").to_dict()
     d["tracking"] = {"point": False, "multi": None}
     _, seq = _run(Pipeline.from_dict(d), frames)

@@ -92,7 +92,8 @@ def test_a_frame_does_not_depend_on_what_the_process_rendered_before(tmp_path):
     """Workers reuse one renderer for many scenes: `nominal` rendered after `realistic` (sun, shadow maps,
     rolling-shutter bands: other shader programs) must give the pixels a fresh process gives. A cache of
     uniform locations keyed by program once broke this: `standard` rendered near-black frames."""
-    two = {"image.n_frames": 2}
+    # half the presets' 640x480: the same shader programs (the realistic frame still spans three shutter bands)
+    two = {"image.n_frames": 2, "image.width_px": 320, "image.height_px": 240}
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as fresh:
         expected = fresh.submit(_second_frame, "nominal", two, tmp_path / "fresh").result()
     _second_frame("realistic", {**two, "light.mode": "sun"}, tmp_path / "before")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 
 import pytest
 
@@ -21,9 +20,7 @@ def _text(fragment: str) -> str:
     return re.sub(r"<[^>]+>", "", fragment)
 
 
-@pytest.fixture(scope="module")
-def fixture_report(run_dir, tmp_path_factory) -> dict[str, Path]:
-    return write_report(run_dir, out_dir=tmp_path_factory.mktemp("first_screen"))
+# fixture_report (conftest): the session's report of run_dir, the one test_report reads; not written again here
 
 
 @pytest.fixture(scope="module")

@@ -268,9 +268,9 @@ def test_warping_by_true_flow_reproduces_every_new_mover():
 
     # low (30 m: a pedestrian is 5 px wide), flat light without vehicle shadows (a shadow moving over
     # static ground breaks brightness constancy by design); seeds one after another until every class
-    # has moved in view (two or three do)
+    # has moved in view (seeds 1, 5 and 7 do between them: tried first, each world costs seconds to build)
     pooled: dict[str, np.ndarray] = {}
-    for seed in range(1, 9):
+    for seed in (1, 5, 7, 2, 3, 4, 6, 8):
         if set(CLASSES) <= set(pooled):
             break
         spec = load_scene_spec("tiny", overrides={
