@@ -149,7 +149,7 @@ class Detection(NamedTuple):
 #   motion), the only cause; a bus whose box is a diagonal's (as long as wide) or a car at 2.5 or less is not
 #   covered, and a roof patch that happens to be boxed long along the flight line is let through (realistic: 6
 #   boxes in 30 frames, 2.0-3.8 times, none in 3 frames in a row: the tracker's birth rule keeps them out; the
-#   bus stays unconfirmed without tracking.multi.travel_across). 0: off, the default (figures in the files that
+#   bus stays unconfirmed without tracking.multi.travel_lengthwise_rel). 0: off, the default (figures in the files that
 #   set it);
 # parallax_min_fraction, parallax_angle_deg, parallax_speed_rel: a direction shared by regions covering this
 #   fraction of the image (and half the moving area) is a parallax field's (frames registered before they

@@ -454,7 +454,7 @@ class MultiSpec(_Section):
     birth_gap: StrictInt = MULTI_DEFAULTS["birth_gap"]
     min_travel_px: float = MULTI_DEFAULTS["min_travel_px"]
     min_travel_rel: float = MULTI_DEFAULTS["min_travel_rel"]
-    travel_across: StrictBool = MULTI_DEFAULTS["travel_across"]
+    travel_lengthwise_rel: float = MULTI_DEFAULTS["travel_lengthwise_rel"]
     min_trend_f: float = MULTI_DEFAULTS["min_trend_f"]
     partial_rel: float = MULTI_DEFAULTS["partial_rel"]
     death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
