@@ -645,8 +645,8 @@ class _Track:
 #   length within a clip. A region jumping about in place still has no trend (min_trend_f); a box elongated across
 #   its motion (a roof's edge band) and a joined box of two cars side by side (farneback on the synthetic city, an
 #   80 x 50 px box confirmed ahead of its car's own track when every box moving along its longer side was judged
-#   on its shorter one: MOTA 0.626 -> 0.456) stay judged on their larger side. 0: off, the default (figures in the
-#   files that set it);
+#   on its shorter one: MOTA 0.626 -> 0.456) stay judged on their larger side. 0: off, the default; 2.5 in
+#   pyramidal-hs, pyramidal-lk and farneback, with detection.parallax_lengthwise_rel (figures in their files);
 # min_trend_f: ... and a constant velocity fitted to its detections' centres explains their scatter: the F
 #   statistic of the fit, (explained / 2) / (residual / (2n - 4)) over its n detections, reaches this (a
 #   vehicle drives on at a steady speed however much its box jitters, and the trend grows with every frame;
