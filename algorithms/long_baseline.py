@@ -54,7 +54,8 @@ from collections.abc import Mapping, Sequence
 import cv2
 import numpy as np
 
-from algorithms.detection import DETECTION_DEFAULTS, Detection, detect_vehicles, explained_in_box, ground_fit_at
+from algorithms.detection import (DETECTION_DEFAULTS, Detection, detect_vehicles, explained_in_box, ground_fit_at,
+                                  moves_lengthwise)
 from algorithms.global_motion import global_flow, is_translation
 
 __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "register_into",
@@ -99,7 +100,8 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   some gamma up to this, is a static structure's parallax (gamma = h / (Z - h): 1 is a building half the flight
 #   height; the city stand-in's tower reaches 0.7), and is left out (0: off). It gives up a vehicle creeping along
 #   the camera's motion, in its sense, slower than this many times it: from two views it is the roof of a building
-#   (what that costs on realistic: beside detection.parallax_max_ratio, which this stage's detector applies too).
+#   (what that costs on realistic: beside detection.parallax_max_ratio, which this stage's detector applies too;
+#   a detection that moves along its length, detection.parallax_lengthwise_rel, is judged by neither).
 # mid_check: a long-baseline detection must also explain the change from frame t-m (m = k // 2, registered the same
 #   way) to frame t by m times its per-frame motion, at least detection.min_explained (long_baseline_detections'
 #   mid_frame): a slow mover crept there; the place a fast vehicle left before frame t, a region of the long pair
@@ -298,6 +300,8 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
         grid = pf[4::8, 4::8][pv[4::8, 4::8]]
         ref = np.median(grid, axis=0) if len(grid) else np.zeros(2)
     min_explained = params.get("min_explained", DETECTION_DEFAULTS["min_explained"])
+    # a vehicle moving along its length is not judged as parallax (detection.parallax_lengthwise_rel)
+    lengthwise = params.get("parallax_lengthwise_rel", DETECTION_DEFAULTS["parallax_lengthwise_rel"])
     if mid_frame is not None:
         mid, m = mid_frame
         if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or not 0 < m < k:
@@ -322,8 +326,8 @@ def long_baseline_detections(flow: np.ndarray, valid: np.ndarray, *, baseline_fr
             box_m2 = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) * gsd_m_per_px ** 2
             if (lo is not None and box_m2 < lo) or (hi is not None and box_m2 > hi):
                 continue
-        if parallax_max_ratio > 0 and _parallax_explains(d, frames, g, ground[i], parallax_max_ratio,
-                                                         min_explained / 2):
+        if parallax_max_ratio > 0 and not moves_lengthwise(d, lengthwise) and _parallax_explains(
+                d, frames, g, ground[i], parallax_max_ratio, min_explained / 2):
             continue
         if mid_frame is not None and min_explained > 0:
             # frame t-m: m of the k motions, about m / k of the ground's residual

@@ -70,6 +70,25 @@ def test_parallax_along_the_global_motion_is_rejected_and_motion_across_it_is_no
     assert detect_vehicles(scene, valid, global_flow_px=shift) == []
 
 
+def test_a_bus_moving_along_its_length_slower_than_a_roofs_parallax_is_kept_with_parallax_lengthwise_rel():
+    # a bus (12 x 50 px) pulling into a stop along the flight line, at 0.18 times the ground's image motion: from
+    # the flow alone the parallax of a roof 15 % of the flight height up, rejected by default; a roof's parallax
+    # points along the flight whatever its shape, a vehicle drives along its length
+    rng = np.random.default_rng(4)
+    valid = np.ones((H, W), bool)
+    shift = (0.0, 5.0)
+    bus = _field(rng, [(30, 80, 70, 82, (0.0, 0.9))])
+    assert detect_vehicles(bus, valid, global_flow_px=shift) == []
+    (d,) = detect_vehicles(bus, valid, global_flow_px=shift, parallax_lengthwise_rel=2.5)
+    assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx((70, 30, 81, 79), abs=2)
+    # a square roof and a bar across the motion (a roof's edge) are still parallax with the key on
+    for block in ((30, 60, 30, 60), (40, 52, 30, 90)):
+        field = _field(rng, [(*block, (0.0, 0.9))])
+        assert detect_vehicles(field, valid, global_flow_px=shift, parallax_lengthwise_rel=2.5) == []
+    with pytest.raises(ValueError, match="parallax_lengthwise_rel: expected a finite number >= 0"):
+        detect_vehicles(bus, valid, parallax_lengthwise_rel=-1.0)
+
+
 def test_ground_residual_removes_a_smooth_field_and_keeps_a_block():
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
     f = np.stack([0.5 + 0.01 * xx - 0.005 * yy, -0.3 + 0.004 * xx + 0.008 * yy], axis=-1)

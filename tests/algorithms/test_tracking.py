@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from algorithms.detection import Detection
 from algorithms.kalman import THESIS_KALMAN, scalar_kalman
 from algorithms.tracking import MultiTargetTracker, PointTracker, boxes_in_image, detect_moving_objects, motion_mask
 
@@ -294,6 +295,26 @@ def test_a_region_that_recurs_in_place_is_never_confirmed_and_one_that_drives_is
     rows = trk.rows()
     assert {r["track_id"] for r in rows} == {1}
     assert [r["frame"] for r in rows] == list(range(30))   # the car's rows before confirmation are output too
+
+
+def test_a_slow_bus_moving_along_its_length_is_confirmed_with_travel_lengthwise_rel():
+    # a bus (15 x 60 px box) creeping down the image at 0.3 px a frame covers 9 px in 30 frames: under a quarter of
+    # its length (15 px), the default's need, but past a quarter of its width; a bar as wide as the bus is long,
+    # moving across its own long side (a roof's edge band), is judged on that side either way, and so is a box
+    # 30 x 60 px, under travel_lengthwise_rel times as long as wide (two cars side by side joined)
+    def run(**kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(30):
+            y = 0.3 * t
+            trk.step(t, [Detection(50.0, 60.0 + y, 900, 43.0, 30.0 + y, 57.0, 89.0 + y, 0.0, 0.3),
+                         Detection(150.0, 60.0 + y, 900, 120.0, 53.0 + y, 179.0, 67.0 + y, 0.0, 0.3),
+                         Detection(240.0, 60.0 + y, 1800, 225.0, 30.0 + y, 254.0, 89.0 + y, 0.0, 0.3)])
+        return {r["track_id"] for r in trk.rows()}
+
+    assert run() == set()
+    assert run(travel_lengthwise_rel=2.5) == {0}
+    with pytest.raises(ValueError, match="travel_lengthwise_rel: expected a finite number >= 0, got -1"):
+        MultiTargetTracker(travel_lengthwise_rel=-1)
 
 
 def test_a_slow_car_whose_box_jitters_is_confirmed_and_a_swaying_crown_seldom_is():
