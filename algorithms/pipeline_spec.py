@@ -467,6 +467,7 @@ class MultiSpec(_Section):
     hold_min_travel_rel: float = MULTI_DEFAULTS["hold_min_travel_rel"]
     back_min_travel_rel: float = MULTI_DEFAULTS["back_min_travel_rel"]
     back_track_size: StrictBool = MULTI_DEFAULTS["back_track_size"]
+    back_stop_inside: float = MULTI_DEFAULTS["back_stop_inside"]
     hold_frames: StrictInt = MULTI_DEFAULTS["hold_frames"]
     hold_history: StrictInt = MULTI_DEFAULTS["hold_history"]
     steady_flow_rel: float = MULTI_DEFAULTS["steady_flow_rel"]

@@ -699,6 +699,12 @@ class _Track:
 #   box on a 30 x 36 px car followed back through 54 frames at IoU 0.24, each row a false positive and a miss). Off in
 #   the built-ins (figures in dis.yaml and pyramidal-hs.yaml: with back_min_travel_rel 0.25 it gains a world for dis
 #   and costs a KIT AIS row; on pyramidal-hs it is part of the pair that wins there; alone its effect is mixed);
+# back_stop_inside: the following back stops at a frame where this share of the followed box lies within the box of
+#   another confirmed track's row in that frame: that vehicle was tracked there already. A part of a vehicle found
+#   late (a van's front corner, a bus's front end, where a region split) gets a track of its own that merge_covered
+#   joins only while it runs; followed back, its first template matches the part along the vehicle's whole way
+#   (the hold's search radius follows a car at 2-3 px a frame), each row beside the vehicle's track a false positive
+#   (the world at seed 2 of the 1080p city-wide view: two such tracks, 166 rows). 0: off, the default;
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
@@ -740,6 +746,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "back_track_size": False,
+                  "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "sigma_accel_px": 0.5,
@@ -836,6 +843,16 @@ def _ncc_at(img: np.ndarray, tpl: np.ndarray, centre_ground, off: np.ndarray) ->
     return None if here is None else float(cv2.matchTemplate(here, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
 
 
+def _inside_share(box: np.ndarray, others: np.ndarray) -> float:
+    """The largest share of ``box`` (``cx, cy, w, h``, its rows' inclusive extent ``cx +- (w - 1) / 2``) that lies
+    within one of ``others`` (``(n, 4)`` inclusive ``x0, y0, x1, y1``, the same frame of reference)."""
+    hw, hh = (box[2] - 1.0) / 2, (box[3] - 1.0) / 2
+    x0, y0, x1, y1 = box[0] - hw, box[1] - hh, box[0] + hw, box[1] + hh
+    iw = np.clip(np.minimum(x1, others[:, 2]) - np.maximum(x0, others[:, 0]) + 1.0, 0.0, None)
+    ih = np.clip(np.minimum(y1, others[:, 3]) - np.maximum(y0, others[:, 1]) + 1.0, 0.0, None)
+    return float((iw * ih).max() / (box[2] * box[3])) if len(others) else 0.0
+
+
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
     ax0, ay0, ax1, ay1 = a[:, 0] - a[:, 2] / 2, a[:, 1] - a[:, 3] / 2, a[:, 0] + a[:, 2] / 2, a[:, 1] + a[:, 3] / 2
@@ -907,6 +924,9 @@ class MultiTargetTracker:
         v = p["steady_flow_rel"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
             raise ValueError(f"steady_flow_rel: expected a number in [0, 1] (0: off), got {v!r}")
+        v = p["back_stop_inside"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"back_stop_inside: expected a number in [0, 1] (0: off), got {v!r}")
         for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -1305,7 +1325,9 @@ class MultiTargetTracker:
         of its first box, the place must look different now (else the template is of the ground, and
         nothing is added; the test is made once), and the kept frames before the first detection are searched
         (``hold_search_px`` around the place found in the frame after, ``hold_min_ncc``), newest
-        first, until a frame does not match, a frame is not kept, or ``hold_frames`` are added.
+        first, until a frame does not match, a frame is not kept, ``hold_frames`` are added, or (with
+        ``back_stop_inside``) the place found lies that much within another confirmed track's box in
+        that frame: the vehicle, of which this track's first box may be a part, was tracked there.
         """
         p = self.params
         f0, box, tpl = trk.first
@@ -1319,7 +1341,9 @@ class MultiTargetTracker:
         r = max(p["hold_search_px"], 0.5 * max(th, tw))
         # the rows' box: the first detection's, or the size the track has had since (back_track_size)
         bw, bh = (np.median(np.asarray(trk.sizes), axis=0) if p["back_track_size"] and trk.sizes else (tw, th))
-        for frame in range(f0 - 1, max(-1, f0 - 1 - p["hold_frames"]), -1):
+        first = max(-1, f0 - 1 - p["hold_frames"])
+        taken = self._boxes_between(first + 1, f0) if p["back_stop_inside"] > 0 else {}
+        for frame in range(f0 - 1, first, -1):
             if frame not in kept:
                 return
             g, o = kept[frame]
@@ -1328,7 +1352,19 @@ class MultiTargetTracker:
                 return
             at = found[1] - o
             box_then = np.array([at[0], at[1], bw, bh])
+            if frame in taken and _inside_share(box_then + np.r_[o, 0.0, 0.0], taken[frame]) >= p["back_stop_inside"]:
+                return
             self._emit(trk, frame, box_then, box_then, box_then, o)
+
+    def _boxes_between(self, f0: int, f1: int) -> dict[int, np.ndarray]:
+        """The boxes of the confirmed tracks' rows of frames ``f0 <= frame < f1``, by frame: ``(n, 4)`` inclusive
+        ``x0, y0, x1, y1`` in the image."""
+        out: dict[int, list] = {}
+        for r in self._rows:
+            if f0 <= r["frame"] < f1 and not math.isnan(r["bbox_x0_px"]):
+                out.setdefault(r["frame"], []).append((r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"],
+                                                       r["bbox_y1_px"]))
+        return {f: np.asarray(b, dtype=np.float64) for f, b in out.items()}
 
     def _ends_steady(self, trk: _Track) -> bool:
         """Whether a tentative track still detected when the clip ends is a vehicle the clip ended on (``end_min_hits``).
