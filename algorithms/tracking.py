@@ -649,6 +649,14 @@ class _Track:
 #   uniform roof): that side is kept and the box completed to that size, so that a vehicle that passes under a
 #   crown a little at a time keeps its size (a top view does not shrink); a box inside on both sides is taken as it
 #   is (1: off);
+# partial_abreast: a partial view is not completed where the completed box would cover half or more of another
+#   detection of the frame that lies abreast of it (side by side across the motion): two cars in adjacent lanes
+#   that the detector joined into one region when their track was born gave the track the two cars' size, and
+#   every later detection of one of them, found apart, was completed back over the other (the 1080p city-wide world
+#   at seed 3: a 47 px wide track over two 17 px cars for 50 frames, each row a false positive and two misses): the
+#   track's size then starts again from the detection's (BoxKalman.restart_size; filtered, a 47 px size took 30
+#   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
+#   the default;
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -742,7 +750,8 @@ class _Track:
 #   motorbikes only) and KIT AIS (dis / pyramidal-hs track precision 0.429 / 0.319, recall 0.438 / 0.382);
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 0, "min_travel_px": 3.0, "min_travel_rel": 0.25,
-                  "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "min_trend_f": 10.0, "partial_rel": 0.25, "partial_abreast": False, "death_misses": 10,
+                  "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "back_track_size": False,
@@ -806,6 +815,38 @@ def _completed(box: np.ndarray, ref: np.ndarray, rel: float) -> np.ndarray:
             out[c] = lo + ref[s] / 2 if d_lo <= d_hi else hi - ref[s] / 2
             out[s] = ref[s]
     return out
+
+
+def _abreast(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> bool:
+    """Whether the boxes ``a`` and ``b`` ``(cx, cy, w, h)`` lie side by side across the motion ``v``: their centres
+    apart across it by at least half their mean extent across it, and along it by less than half their mean extent
+    along it (two cars in adjacent lanes; not a cab and its trailer, nor a car close behind another)."""
+    speed = float(np.hypot(v[0], v[1]))
+    if not speed > 0:
+        return False
+    ex, ey = float(v[0]) / speed, float(v[1]) / speed
+    dx, dy = float(b[0] - a[0]), float(b[1] - a[1])
+    along, across = abs(dx * ex + dy * ey), abs(dy * ex - dx * ey)
+    extent_along = (abs(ex) * (a[2] + b[2]) + abs(ey) * (a[3] + b[3])) / 2
+    extent_across = (abs(ey) * (a[2] + b[2]) + abs(ex) * (a[3] + b[3])) / 2
+    return across >= 0.5 * extent_across and along < 0.5 * extent_along
+
+
+def _completes_over_abreast(box: np.ndarray, full: np.ndarray, v: np.ndarray, boxes: np.ndarray, own: int) -> bool:
+    """Whether completing the detection ``box`` to ``full`` (``partial_rel``) covers half or more of another
+    detection of the frame (``boxes``, ``own`` the index of ``box``) that lies abreast of it (:func:`_abreast`): the
+    rest of the track's size is another vehicle, seen, not a part of this one out of view (``partial_abreast``)."""
+    if np.array_equal(box, full):
+        return False
+    x0, y0, x1, y1 = full[0] - full[2] / 2, full[1] - full[3] / 2, full[0] + full[2] / 2, full[1] + full[3] / 2
+    for j, o in enumerate(boxes):
+        if j == own:
+            continue
+        iw = min(x1, o[0] + o[2] / 2) - max(x0, o[0] - o[2] / 2)
+        ih = min(y1, o[1] + o[3] / 2) - max(y0, o[1] - o[3] / 2)
+        if iw > 0 and ih > 0 and iw * ih >= 0.5 * o[2] * o[3] and _abreast(box, o, v):
+            return True
+    return False
 
 
 def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float = 2.0) -> np.ndarray | None:
@@ -931,7 +972,8 @@ class MultiTargetTracker:
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
-        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size"):
+        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size",
+                     "partial_abreast"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
@@ -1016,7 +1058,13 @@ class MultiTargetTracker:
                 c = det_of[i]
                 z = boxes[c]
                 if trk.confirmed and trk.sizes:  # the size it has had lately, against a partial view
-                    z = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
+                    full = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
+                    if p["partial_abreast"] and _completes_over_abreast(z, full, vels[c], boxes, c):
+                        # the size it had was two vehicles': it starts again from this one's
+                        trk.kf.restart_size(float(z[2]), float(z[3]))
+                        trk.sizes.clear()
+                    else:
+                        z = full
                 trk.kf.update(z, vels[c])
                 trk.sizes.append(trk.kf.x[2:4].copy())
                 trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
