@@ -656,7 +656,7 @@ class _Track:
 #   at seed 3: a 47 px wide track over two 17 px cars for 50 frames, each row a false positive and two misses): the
 #   track's size then starts again from the detection's (BoxKalman.restart_size; filtered, a 47 px size took 30
 #   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
-#   the default;
+#   the default; on in dis (figures there);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -712,7 +712,8 @@ class _Track:
 #   late (a van's front corner, a bus's front end, where a region split) gets a track of its own that merge_covered
 #   joins only while it runs; followed back, its first template matches the part along the vehicle's whole way
 #   (the hold's search radius follows a car at 2-3 px a frame), each row beside the vehicle's track a false positive
-#   (the world at seed 2 of the 1080p city-wide view: two such tracks, 166 rows). 0: off, the default;
+#   (the world at seed 2 of the 1080p city-wide view: two such tracks, 166 rows). 0: off, the default; 0.8 in dis
+#   (figures there);
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
