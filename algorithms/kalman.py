@@ -276,6 +276,18 @@ class BoxKalman:
         self.x[2:4] = np.maximum(self.x[2:4], 1.0)  # a size never shrinks below a pixel
         return self.x[:4].copy()
 
+    def restart_size(self, w: float, h: float) -> None:
+        """Take the size as ``(w, h)``, its rate 0, both with the initial uncertainty (sigma_meas_px), the centre
+        and its velocity as they are: the filter had learned a size that was not one vehicle's."""
+        if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+            raise ValueError(f"w, h: expected finite sizes > 0, got {w!r}, {h!r}")
+        sm2 = self.R[0, 0]
+        self.x[[2, 3, 6, 7]] = [w, h, 0.0, 0.0]
+        for i in (2, 3, 6, 7):
+            self.P[i, :] = 0.0
+            self.P[:, i] = 0.0
+            self.P[i, i] = sm2
+
     def update(self, box, velocity=None) -> np.ndarray:
         """Correct with a measured box ``(cx, cy, w, h)`` and, when finite, the centre velocity ``(vcx, vcy)``.
 

@@ -658,6 +658,14 @@ class _Track:
 #   uniform roof): that side is kept and the box completed to that size, so that a vehicle that passes under a
 #   crown a little at a time keeps its size (a top view does not shrink); a box inside on both sides is taken as it
 #   is (1: off);
+# partial_abreast: a partial view is not completed where the completed box would cover half or more of another
+#   detection of the frame that lies abreast of it (side by side across the motion): two cars in adjacent lanes
+#   that the detector joined into one region when their track was born gave the track the two cars' size, and
+#   every later detection of one of them, found apart, was completed back over the other (the 1080p city-wide world
+#   at seed 3: a 47 px wide track over two 17 px cars for 50 frames, each row a false positive and two misses): the
+#   track's size then starts again from the detection's (BoxKalman.restart_size; filtered, a 47 px size took 30
+#   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
+#   the default; on in dis (figures there);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -708,6 +716,13 @@ class _Track:
 #   box on a 30 x 36 px car followed back through 54 frames at IoU 0.24, each row a false positive and a miss). Off in
 #   the built-ins (figures in dis.yaml and pyramidal-hs.yaml: with back_min_travel_rel 0.25 it gains a world for dis
 #   and costs a KIT AIS row; on pyramidal-hs it is part of the pair that wins there; alone its effect is mixed);
+# back_stop_inside: the following back stops at a frame where this share of the followed box lies within the box of
+#   another confirmed track's row in that frame: that vehicle was tracked there already. A part of a vehicle found
+#   late (a van's front corner, a bus's front end, where a region split) gets a track of its own that merge_covered
+#   joins only while it runs; followed back, its first template matches the part along the vehicle's whole way
+#   (the hold's search radius follows a car at 2-3 px a frame), each row beside the vehicle's track a false positive
+#   (the world at seed 2 of the 1080p city-wide view: two such tracks, 166 rows). 0: off, the default; 0.8 in dis
+#   (figures there);
 # hold_frames: the most consecutive frames a track is held without a detection (250: 10 s at 25 fps), and the
 #   most it is followed back from its first detection (back_min_travel_rel);
 # hold_history: frames the tracker keeps (8 bits: 2 MB a 1080p frame) to follow tracks back, and to check, before
@@ -745,10 +760,12 @@ class _Track:
 #   motorbikes only) and KIT AIS (dis / pyramidal-hs track precision 0.429 / 0.319, recall 0.438 / 0.382);
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 0, "min_travel_px": 3.0, "min_travel_rel": 0.25,
-                  "travel_lengthwise_rel": 0.0, "min_trend_f": 10.0, "partial_rel": 0.25, "death_misses": 10, "coast_gate_growth": 0.5,
+                  "travel_lengthwise_rel": 0.0, "min_trend_f": 10.0, "partial_rel": 0.25, "partial_abreast": False,
+                  "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
                   "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "back_track_size": False,
+                  "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "sigma_accel_px": 0.5,
@@ -810,6 +827,38 @@ def _completed(box: np.ndarray, ref: np.ndarray, rel: float) -> np.ndarray:
     return out
 
 
+def _abreast(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> bool:
+    """Whether the boxes ``a`` and ``b`` ``(cx, cy, w, h)`` lie side by side across the motion ``v``: their centres
+    apart across it by at least half their mean extent across it, and along it by less than half their mean extent
+    along it (two cars in adjacent lanes; not a cab and its trailer, nor a car close behind another)."""
+    speed = float(np.hypot(v[0], v[1]))
+    if not speed > 0:
+        return False
+    ex, ey = float(v[0]) / speed, float(v[1]) / speed
+    dx, dy = float(b[0] - a[0]), float(b[1] - a[1])
+    along, across = abs(dx * ex + dy * ey), abs(dy * ex - dx * ey)
+    extent_along = (abs(ex) * (a[2] + b[2]) + abs(ey) * (a[3] + b[3])) / 2
+    extent_across = (abs(ey) * (a[2] + b[2]) + abs(ex) * (a[3] + b[3])) / 2
+    return across >= 0.5 * extent_across and along < 0.5 * extent_along
+
+
+def _completes_over_abreast(box: np.ndarray, full: np.ndarray, v: np.ndarray, boxes: np.ndarray, own: int) -> bool:
+    """Whether completing the detection ``box`` to ``full`` (``partial_rel``) covers half or more of another
+    detection of the frame (``boxes``, ``own`` the index of ``box``) that lies abreast of it (:func:`_abreast`): the
+    rest of the track's size is another vehicle, seen, not a part of this one out of view (``partial_abreast``)."""
+    if np.array_equal(box, full):
+        return False
+    x0, y0, x1, y1 = full[0] - full[2] / 2, full[1] - full[3] / 2, full[0] + full[2] / 2, full[1] + full[3] / 2
+    for j, o in enumerate(boxes):
+        if j == own:
+            continue
+        iw = min(x1, o[0] + o[2] / 2) - max(x0, o[0] - o[2] / 2)
+        ih = min(y1, o[1] + o[3] / 2) - max(y0, o[1] - o[3] / 2)
+        if iw > 0 and ih > 0 and iw * ih >= 0.5 * o[2] * o[3] and _abreast(box, o, v):
+            return True
+    return False
+
+
 def _crop(img: np.ndarray, box: np.ndarray, off: np.ndarray, *, min_std: float = 2.0) -> np.ndarray | None:
     """The pixels of ``img`` inside the ground-fixed box ``(cx, cy, w, h)`` (image = ground + ``off``), float32;
     None when it is not wholly inside, under 4 px a side, or without contrast (std under ``min_std`` grey levels)."""
@@ -843,6 +892,16 @@ def _ncc_at(img: np.ndarray, tpl: np.ndarray, centre_ground, off: np.ndarray) ->
     here = _crop(img.astype(np.float32, copy=False), np.array([centre_ground[0], centre_ground[1], tw, th]), off,
                  min_std=0.0)
     return None if here is None else float(cv2.matchTemplate(here, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
+
+
+def _inside_share(box: np.ndarray, others: np.ndarray) -> float:
+    """The largest share of ``box`` (``cx, cy, w, h``, its rows' inclusive extent ``cx +- (w - 1) / 2``) that lies
+    within one of ``others`` (``(n, 4)`` inclusive ``x0, y0, x1, y1``, the same frame of reference)."""
+    hw, hh = (box[2] - 1.0) / 2, (box[3] - 1.0) / 2
+    x0, y0, x1, y1 = box[0] - hw, box[1] - hh, box[0] + hw, box[1] + hh
+    iw = np.clip(np.minimum(x1, others[:, 2]) - np.maximum(x0, others[:, 0]) + 1.0, 0.0, None)
+    ih = np.clip(np.minimum(y1, others[:, 3]) - np.maximum(y0, others[:, 1]) + 1.0, 0.0, None)
+    return float((iw * ih).max() / (box[2] * box[3])) if len(others) else 0.0
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -929,11 +988,15 @@ class MultiTargetTracker:
         v = p["steady_flow_rel"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
             raise ValueError(f"steady_flow_rel: expected a number in [0, 1] (0: off), got {v!r}")
+        v = p["back_stop_inside"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"back_stop_inside: expected a number in [0, 1] (0: off), got {v!r}")
         for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
-        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size"):
+        for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size",
+                     "partial_abreast"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
@@ -1018,7 +1081,13 @@ class MultiTargetTracker:
                 c = det_of[i]
                 z = boxes[c]
                 if trk.confirmed and trk.sizes:  # the size it has had lately, against a partial view
-                    z = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
+                    full = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
+                    if p["partial_abreast"] and _completes_over_abreast(z, full, vels[c], boxes, c):
+                        # the size it had was two vehicles': it starts again from this one's
+                        trk.kf.restart_size(float(z[2]), float(z[3]))
+                        trk.sizes.clear()
+                    else:
+                        z = full
                 trk.kf.update(z, vels[c])
                 trk.sizes.append(trk.kf.x[2:4].copy())
                 trk.hits, trk.misses, trk.held = trk.hits + 1, 0, 0
@@ -1332,7 +1401,9 @@ class MultiTargetTracker:
         of its first box, the place must look different now (else the template is of the ground, and
         nothing is added; the test is made once), and the kept frames before the first detection are searched
         (``hold_search_px`` around the place found in the frame after, ``hold_min_ncc``), newest
-        first, until a frame does not match, a frame is not kept, or ``hold_frames`` are added.
+        first, until a frame does not match, a frame is not kept, ``hold_frames`` are added, or (with
+        ``back_stop_inside``) the place found lies that much within another confirmed track's box in
+        that frame: the vehicle, of which this track's first box may be a part, was tracked there.
         """
         p = self.params
         f0, box, tpl = trk.first
@@ -1346,7 +1417,9 @@ class MultiTargetTracker:
         r = max(p["hold_search_px"], 0.5 * max(th, tw))
         # the rows' box: the first detection's, or the size the track has had since (back_track_size)
         bw, bh = (np.median(np.asarray(trk.sizes), axis=0) if p["back_track_size"] and trk.sizes else (tw, th))
-        for frame in range(f0 - 1, max(-1, f0 - 1 - p["hold_frames"]), -1):
+        first = max(-1, f0 - 1 - p["hold_frames"])
+        taken = self._boxes_between(first + 1, f0) if p["back_stop_inside"] > 0 else {}
+        for frame in range(f0 - 1, first, -1):
             if frame not in kept:
                 return
             g, o = kept[frame]
@@ -1355,7 +1428,19 @@ class MultiTargetTracker:
                 return
             at = found[1] - o
             box_then = np.array([at[0], at[1], bw, bh])
+            if frame in taken and _inside_share(box_then + np.r_[o, 0.0, 0.0], taken[frame]) >= p["back_stop_inside"]:
+                return
             self._emit(trk, frame, box_then, box_then, box_then, o)
+
+    def _boxes_between(self, f0: int, f1: int) -> dict[int, np.ndarray]:
+        """The boxes of the confirmed tracks' rows of frames ``f0 <= frame < f1``, by frame: ``(n, 4)`` inclusive
+        ``x0, y0, x1, y1`` in the image."""
+        out: dict[int, list] = {}
+        for r in self._rows:
+            if f0 <= r["frame"] < f1 and not math.isnan(r["bbox_x0_px"]):
+                out.setdefault(r["frame"], []).append((r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"],
+                                                       r["bbox_y1_px"]))
+        return {f: np.asarray(b, dtype=np.float64) for f, b in out.items()}
 
     def _ends_steady(self, trk: _Track) -> bool:
         """Whether a tentative track still detected when the clip ends is a vehicle the clip ended on (``end_min_hits``).

@@ -184,6 +184,31 @@ def test_box_kalman_recovers_a_constant_velocity_and_growth():
         kf.update((1.0, 2.0, 3.0))
 
 
+
+def test_box_kalman_restarted_size_follows_the_new_size_at_once_and_keeps_the_motion():
+    # a filter that learned a 40 x 10 px box (two cars abreast) restarts its size at 20 x 10: the centre and its
+    # motion are kept, the size is the new one with its rate 0, and an update at that size stays there, where the
+    # filter alone is still halfway
+    runs = {}
+    for restart in (False, True):
+        kf = BoxKalman((10.0, 20.0, 40.0, 10.0))
+        for k in range(1, 30):
+            kf.predict()
+            kf.update((10.0 + 2.0 * k, 20.0, 40.0, 10.0))
+        before = kf.x.copy()
+        if restart:
+            kf.restart_size(20.0, 10.0)
+            np.testing.assert_array_equal(kf.x[[0, 1, 4, 5]], before[[0, 1, 4, 5]])
+            np.testing.assert_array_equal(kf.x[[2, 3, 6, 7]], [20.0, 10.0, 0.0, 0.0])
+        kf.predict()
+        kf.update((70.0, 20.0, 20.0, 10.0))
+        runs[restart] = kf.x.copy()
+    assert abs(runs[True][2] - 20.0) < 0.5 and runs[False][2] > 25.0
+    assert runs[True][4] == pytest.approx(2.0, abs=0.05)
+    with pytest.raises(ValueError, match=r"w, h: expected finite sizes > 0"):
+        BoxKalman((0.0, 0.0, 4.0, 4.0)).restart_size(0.0, 4.0)
+
+
 BASE = {"name": "t", "flow": {"method": "dis"}}
 
 

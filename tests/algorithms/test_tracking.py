@@ -262,6 +262,93 @@ def test_a_queued_car_that_creeps_off_is_followed_back_before_it_has_left_its_bo
         MultiTargetTracker(back_min_travel_rel=-0.5)
 
 
+def test_two_cars_abreast_found_joined_at_first_are_not_completed_back_into_one_box():
+    # two 14 x 8 px cars in adjacent lanes at 1.5 px a frame, 10 px apart across the motion: the detector joins them
+    # (one 14 x 18 px region) in the first 8 frames, then finds them apart. The track born on the joined region has
+    # the two cars' size; each later detection of the upper car is a "partial view" with its top side on the track's,
+    # completed back over the lower car (partial_abreast false) unless the lower car, detected apart in the same
+    # frame beside it, is the rest (true). Nose to tail, a cab and its trailer found apart, it still completes
+    from algorithms.detection import Detection
+
+    def dets(t):
+        x = 30.0 + 1.5 * t
+        x0 = int(round(x)) - 7
+        if t < 8:
+            return [Detection(x, 44.5, 224, x0, 36, x0 + 13, 53, 1.5, 0.0)]
+        return [Detection(x, 39.5, 112, x0, 36, x0 + 13, 43, 1.5, 0.0),
+                Detection(x, 49.5, 112, x0, 46, x0 + 13, 53, 1.5, 0.0)]
+
+    heights, covered = {}, {}
+    for abreast in (False, True):
+        trk = MultiTargetTracker(death_misses=3, partial_abreast=abreast)
+        for t in range(40):
+            trk.step(t, dets(t))
+        last = [r for r in trk.rows() if r["frame"] == 39 and not np.isnan(r["bbox_y0_px"])]
+        heights[abreast] = sorted(r["bbox_y1_px"] - r["bbox_y0_px"] + 1 for r in last)
+        covered[abreast] = sorted((r["bbox_y0_px"] + r["bbox_y1_px"]) / 2 for r in last)
+    assert heights[False][-1] > 15              # one box still over both cars
+    assert len(heights[True]) == 2 and max(heights[True]) < 11                  # one box a car,
+    assert np.abs(np.array(covered[True]) - [39.5, 49.5]).max() < 1.5            # on each
+
+    # nose to tail: a 30 x 8 px truck, tracked whole, then found as its cab (10 px) and trailer (18 px) apart, a gap
+    # of 2 px between: each is a part along the motion, not abreast, and the track keeps the whole truck's size
+    def truck(t):
+        x = 30.0 + 1.5 * t
+        x0 = int(round(x)) - 15
+        if t < 12:
+            return [Detection(x, 39.5, 240, x0, 36, x0 + 29, 43, 1.5, 0.0)]
+        return [Detection(x0 + 24.5, 39.5, 80, x0 + 20, 36, x0 + 29, 43, 1.5, 0.0),
+                Detection(x0 + 8.5, 39.5, 144, x0, 36, x0 + 17, 43, 1.5, 0.0)]
+
+    trk = MultiTargetTracker(death_misses=3, partial_abreast=True)
+    for t in range(20):
+        trk.step(t, truck(t))
+    first = [r for r in trk.rows() if r["track_id"] == 0 and r["frame"] >= 12]
+    assert first and min(r["bbox_x1_px"] - r["bbox_x0_px"] + 1 for r in first) > 25
+    with pytest.raises(ValueError, match="partial_abreast: expected true/false"):
+        MultiTargetTracker(partial_abreast=1)
+
+
+def test_a_part_of_a_tracked_vehicle_found_late_is_not_followed_back_along_it():
+    # a 30 x 8 px van at 1.5 px a frame, tracked whole from frame 0; from frame 12 its front third is also found
+    # apart (a region split). That part's track is confirmed and followed back on its first template, which matches
+    # the front of the van all along its way: a second track on the van before frame 12 (back_stop_inside 0), not
+    # where the van's track already is (0.8)
+    import cv2
+
+    from algorithms.detection import Detection
+
+    ground = cv2.GaussianBlur(np.random.default_rng(5).uniform(90, 110, (80, 200)).astype(np.float32), (0, 0), 1.5)
+
+    def scene(x):
+        img = ground.copy()
+        x0 = int(round(x)) - 15
+        img[36:44, x0:x0 + 30] = 50.0
+        img[38:42, x0 + 21:x0 + 28] = 230.0  # the windscreen and bonnet: the front's texture
+        img[37:43, x0 + 3:x0 + 6] = 180.0
+        return img
+
+    xs = [40.0 + 1.5 * t for t in range(30)]
+    first = {}
+    for stop in (0.0, 0.8):
+        trk = MultiTargetTracker(death_misses=3, back_min_travel_rel=0.25, back_stop_inside=stop)
+        for t, x in enumerate(xs):
+            x0 = int(round(x)) - 15
+            dets = [Detection(x, 39.5, 240, x0, 36, x0 + 29, 43, 1.5, 0.0)]
+            if t >= 12:
+                dets.append(Detection(x0 + 24.5, 39.5, 80, x0 + 20, 36, x0 + 29, 43, 1.5, 0.0))
+            trk.step(t, dets, image=scene(x))
+        rows = [r for r in trk.rows() if not np.isnan(r["x_filt_px"])]
+        by_track = {}
+        for r in rows:
+            by_track.setdefault(r["track_id"], []).append(r["frame"])
+        assert len(by_track) == 2 and sorted(by_track[0]) == list(range(30))   # the van, every frame
+        first[stop] = min(by_track[1])
+    assert first[0.0] < 10 and first[0.8] >= 12
+    with pytest.raises(ValueError, match=r"back_stop_inside: expected a number in \[0, 1\]"):
+        MultiTargetTracker(back_stop_inside=1.5)
+
+
 def test_rows_followed_back_take_the_tracks_size_when_the_first_detection_was_part_of_the_car():
     # it waits 10 frames, then drives off; its first detection is its front half (7 of its 14 px), the rest whole
     from algorithms.detection import Detection
