@@ -205,8 +205,11 @@ def hs_iterate(Ex: np.ndarray, Ey: np.ndarray, Et: np.ndarray, u: np.ndarray, v:
         if tol > 0 and change < tol:
             break
     if done % 2 == 1:  # the latest sweep sits in the scratch buffers
-        u[:, :] = src_u
-        v[:, :] = src_v
+        # element by element: ``u[:, :] = src_u``'s shape check compiles numba's string code (~1.5 s cold)
+        for i in range(h):
+            for j in range(w):
+                u[i, j] = src_u[i, j]
+                v[i, j] = src_v[i, j]
     return done
 
 

@@ -705,7 +705,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "them, score them and write results.parquet and the report into the run folder.")
     s.add_argument("suite", help="built-in suite name or suite YAML")
     s.add_argument("--out", required=True, help="the run folder (must be empty unless --resume)")
-    s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
+    s.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core, fewer for a small "
+                   "suite)")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     s.add_argument("--executor", choices=EXECUTORS, default="process",
                    help="where the cells run: local worker processes (default), a dask cluster at --scheduler, "

@@ -96,7 +96,8 @@ def run_suite(
     out_dir : path
         The run folder; must be empty or absent unless ``resume``.
     workers : int, optional
-        Worker processes (``process``, ``dask-local``); default one per core.
+        Worker processes (``process``, ``dask-local``); default one per core, fewer when the
+        work would not keep them busy (:func:`harness.scheduling.run_workers`).
     resume : bool
         Keep the cells already in ``out_dir`` that succeeded with the same config hash,
         and run the rest (failed cells are tried again).

@@ -86,7 +86,15 @@ def _code_lengths(freq, max_bits):  # pragma: no cover - numba
             if f[s] > 0:
                 leaves[k] = s
                 k += 1
-        leaves = leaves[np.argsort(f[leaves], kind="mergesort")]
+        # by count, ties by symbol (stable): an insertion sort of at most 257 leaves. np.argsort's
+        # mergesort gives the same order but took ~2.5 s of the first render's numba compilation
+        for a in range(1, used):
+            leaf = leaves[a]
+            b = a
+            while b > 0 and f[leaves[b - 1]] > f[leaf]:
+                leaves[b] = leaves[b - 1]
+                b -= 1
+            leaves[b] = leaf
         m = used - 1  # internal nodes
         weight = np.empty(m, np.int64)
         parent = np.full(used + m, -1, np.int64)  # leaves 0..used-1 (sorted order), then nodes
@@ -211,7 +219,8 @@ def deflate_huffman(data, block, out):  # pragma: no cover - numba
         lit_code = _canonical_codes(lit_len)
         # the 257 literal/length lengths and the 2 distance lengths, coded by the code-length code
         seq = np.empty(259, np.int64)
-        seq[:257] = lit_len
+        for q in range(257):  # not ``seq[:257] = lit_len``: its size check compiles numba's string code (~1.5 s)
+            seq[q] = lit_len[q]
         seq[257] = 1
         seq[258] = 1
         cl_freq = np.zeros(19, np.int64)

@@ -9,6 +9,7 @@ import copy
 import errno
 import gc
 import json
+import math
 import weakref
 from concurrent.futures import Future
 from contextlib import contextmanager
@@ -20,6 +21,7 @@ import pytest
 from tests.harness.harness_testdata import TINY_SUITE
 
 import harness.executors
+import harness.suites
 from algorithms.registry import register_flow
 import harness.runner as runner
 import harness.scheduling as scheduling
@@ -182,6 +184,37 @@ def test_groups_per_scene_gives_two_tasks_a_worker_and_never_more_than_the_cells
     assert scheduling.groups_per_scene(1, 7, 1) == 1  # one worker waits for nobody
     with pytest.raises(ValueError, match="expected positive counts"):
         scheduling.groups_per_scene(0, 7, 2)
+
+
+def test_a_run_starts_by_default_no_more_workers_than_its_work_keeps_busy():
+    tiny, _ = _cells([{"preset": "tiny"}], ["thesis-lk", "thesis-hs", "dis"])
+    assert scheduling.run_workers(tiny, 8) == 1  # a one-scene tiny run: one worker, its cells in one task
+    big, _ = _cells([{"preset": "tiny", "overrides": {"image.width_px": 640, "image.height_px": 480}}],
+                    ["thesis-lk", "thesis-hs", "dis"])
+    assert scheduling.run_workers(big, 2) == 2 and scheduling.run_workers(big, 1) == 1
+    work = sum(scheduling.cell_cost(c) for c in big) + scheduling.scene_cost(big[0].variant)
+    assert scheduling.run_workers(big, 64) == math.ceil(work / scheduling.WORKER_START_COST) < 64
+    smoke = expand(harness.suites.load_suite("smoke"))
+    assert scheduling.run_workers(smoke, 2) == 2  # CI's smoke run keeps both cores
+
+
+def test_the_default_workers_reach_the_pool_and_explicit_workers_are_kept(tmp_path, monkeypatch):
+    cells, suite = _cells([{"preset": "tiny"}], ["thesis-lk", "dis"])
+    opened = []
+
+    @contextmanager
+    def fake_executor(kind, *, workers=None, scheduler=None):
+        opened.append(workers)
+        yield _Recorder()
+
+    monkeypatch.setattr(harness.executors, "open_executor", fake_executor)
+    monkeypatch.setattr(harness.executors, "default_workers", lambda: 4)
+    monkeypatch.setattr(scheduling, "kernels_to_compile", lambda *a, **k: [])
+    for workers in (None, 3):
+        (tmp_path / str(workers)).mkdir()
+        scheduling.execute(cells, tmp_path / str(workers), tmp_path / "cache", {}, suite, "process", workers, None,
+                           False)
+    assert opened == [1, 3]
 
 
 def test_cell_groups_balance_the_cost_and_keep_every_cell_once():
