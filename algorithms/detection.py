@@ -96,7 +96,7 @@ from algorithms.registry import register_stage
 
 __all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "explained_in_box",
            "shadow_bands", "trim_cast_shadows", "shadow_lean", "clip_shadow_direction", "trim_toward",
-           "image_yaw_rad", "turn"]
+           "image_yaw_rad", "turn", "box_extents", "moves_lengthwise"]
 
 
 class Detection(NamedTuple):
@@ -1344,19 +1344,24 @@ def _along(d: Detection, gv, bound: float, p: dict) -> bool:
     return 0 <= along <= bound and perp <= p["parallax_perp_px"] + p["parallax_perp_rel"] * math.hypot(d.u_px, d.v_px)
 
 
-def moves_lengthwise(d: Detection, rel: float) -> bool:
-    """Whether ``d``'s box reaches at least ``rel`` times as far along its motion ``(u_px, v_px)`` as across it.
+def box_extents(w: float, h: float, u: float, v: float) -> tuple[float, float] | None:
+    """How far an axis-aligned ``w`` x ``h`` px box reaches along the motion ``(u, v)`` and across it: ``w |e_x| +
+    h |e_y|`` and ``w |e_y| + h |e_x|`` for the unit motion ``e``; None without motion. A bus driving along its length
+    up the image, 15 x 59 px: 59 along, 15 across."""
+    s = math.hypot(u, v)
+    if not s > 0:
+        return None
+    ex, ey = abs(u) / s, abs(v) / s
+    return w * ex + h * ey, w * ey + h * ex
 
-    The box's extents along and across the unit motion ``e`` are ``w |e_x| + h |e_y|`` and ``w |e_y| + h |e_x|``
-    (``w, h``: its inclusive width and height, px): a bus driving along its length up the image, 15 x 59 px, reaches
-    3.9 times as far along; a square box or one without motion, 1. False for ``rel`` 0 (off) or no motion.
+
+def moves_lengthwise(d: Detection, rel: float) -> bool:
+    """Whether ``d``'s box (its inclusive width and height) reaches at least ``rel`` times as far along its motion
+    ``(u_px, v_px)`` as across it (:func:`box_extents`): a bus driving along its length up the image, 15 x 59 px,
+    3.9 times; a square box, 1. False for ``rel`` 0 (off) or no motion.
     """
-    s = math.hypot(d.u_px, d.v_px)
-    if not rel > 0 or not s > 0:
-        return False
-    w, h = d.x1_px - d.x0_px + 1, d.y1_px - d.y0_px + 1
-    ex, ey = abs(d.u_px) / s, abs(d.v_px) / s
-    return w * ex + h * ey >= rel * (w * ey + h * ex)
+    ext = box_extents(d.x1_px - d.x0_px + 1, d.y1_px - d.y0_px + 1, d.u_px, d.v_px) if rel > 0 else None
+    return ext is not None and ext[0] >= rel * ext[1]
 
 
 def _parallax(d: Detection, g, p: dict, h: int, w: int) -> bool:

@@ -66,7 +66,7 @@ import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from algorithms.detection import Detection
+from algorithms.detection import Detection, box_extents
 from algorithms.global_motion import _parabola_offset
 from algorithms.kalman import THESIS_KALMAN, BoxKalman, ConstantVelocityKalman, kalman_cv_filter, scalar_kalman
 from algorithms.registry import register_stage
@@ -831,15 +831,14 @@ def _abreast(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> bool:
     """Whether the boxes ``a`` and ``b`` ``(cx, cy, w, h)`` lie side by side across the motion ``v``: their centres
     apart across it by at least half their mean extent across it, and along it by less than half their mean extent
     along it (two cars in adjacent lanes; not a cab and its trailer, nor a car close behind another)."""
-    speed = float(np.hypot(v[0], v[1]))
-    if not speed > 0:
+    mu, mv = float(v[0]), float(v[1])
+    ext = box_extents((a[2] + b[2]) / 2, (a[3] + b[3]) / 2, mu, mv)  # their mean extents along and across
+    if ext is None:
         return False
-    ex, ey = float(v[0]) / speed, float(v[1]) / speed
+    speed = math.hypot(mu, mv)
     dx, dy = float(b[0] - a[0]), float(b[1] - a[1])
-    along, across = abs(dx * ex + dy * ey), abs(dy * ex - dx * ey)
-    extent_along = (abs(ex) * (a[2] + b[2]) + abs(ey) * (a[3] + b[3])) / 2
-    extent_across = (abs(ey) * (a[2] + b[2]) + abs(ex) * (a[3] + b[3])) / 2
-    return across >= 0.5 * extent_across and along < 0.5 * extent_along
+    along, across = abs(dx * mu + dy * mv) / speed, abs(dy * mu - dx * mv) / speed
+    return across >= 0.5 * ext[1] and along < 0.5 * ext[0]
 
 
 def _completes_over_abreast(box: np.ndarray, full: np.ndarray, v: np.ndarray, boxes: np.ndarray, own: int) -> bool:
@@ -937,12 +936,8 @@ def _travel_side(w: float, h: float, vel, lengthwise_rel: float) -> float:
     """The box side the birth travel is judged on: the larger side of a ``w`` x ``h`` px axis-aligned box, or its
     extent across the motion ``vel`` (px/frame) where it reaches ``lengthwise_rel`` (> 0) times as far along the
     motion as across it (a vehicle driving along its length, up, down or across the image: its width)."""
-    s = float(np.hypot(*vel))
-    if not lengthwise_rel > 0 or not s > 0:
-        return max(w, h)
-    ex, ey = abs(float(vel[0])) / s, abs(float(vel[1])) / s
-    along, across = w * ex + h * ey, w * ey + h * ex
-    return across if along >= lengthwise_rel * across else max(w, h)
+    ext = box_extents(w, h, float(vel[0]), float(vel[1])) if lengthwise_rel > 0 else None
+    return ext[1] if ext is not None and ext[0] >= lengthwise_rel * ext[1] else max(w, h)
 
 
 class MultiTargetTracker:
