@@ -307,7 +307,16 @@ class Detection(NamedTuple):
 #   2.7); but the 1080p stand-ins (aerobench run of a suite of the clip, gt270) dis city 0.564 -> 0.556 and city-wide
 #   0.364 -> 0.310 (IDF1 0.545), KIT AIS (--kit-ais) detection precision / recall dis 0.269 / 0.417 -> 0.267 / 0.411,
 #   pyramidal-hs 0.287 / 0.511 unchanged. With shadow_lead_px 2: realistic dis / pyramidal-hs / tv-l1 0.674 / 0.758 /
-#   0.719. Off: it costs realistic to every pipeline but dis, and dis the city-wide stand-in.
+#   0.719. Off: it costs realistic to every pipeline but dis, and dis the city-wide stand-in. Those figures trimmed the
+#   pair's boxes before the long pair's were merged in (merge_detections): a slow mover's box from the long pair held
+#   its shadow, and beside a trimmed pair box of the same car it overlapped too little to replace it (two boxes, a
+#   false positive). The clip's trim now applies to the merged boxes, the pair's alone still voting
+#   (algorithms.pipeline; figures in dis.yaml).
+# shadow_diagonal_deg: with shadow_scope clip, a box whose motion lies more than this many degrees off both image
+#   axes is not trimmed: a vehicle driving diagonally fills its axis-aligned box only along a diagonal, and the band
+#   darker than the opposite side's at the box's edge is a corner of its body or the ground beside it, not a shadow
+#   along its side (the 1080p city-wide world at seed 1: vans on a 40-degree street cut to a corner, 63 rows off
+#   their vehicle). 0: every box trimmed.
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
@@ -320,7 +329,7 @@ DETECTION_DEFAULTS = {
     "max_area_halo_rel": 4.0, "min_box_m2": 4.0, "refine_wide_px": 0,
     "gap_split_width_px": 0, "gap_split_length_px": 0, "gap_split_road_k": 3.0, "gap_split_valley": 0.12,
     "shadow_trim_rel": 0.0, "shadow_ratio_lo": 0.2, "shadow_ratio_hi": 0.8, "shadow_vote": 0.1, "shadow_min_votes": 3,
-    "shadow_scope": "frame", "shadow_clip_min_votes": 20, "shadow_lead_px": 2,
+    "shadow_scope": "frame", "shadow_clip_min_votes": 20, "shadow_lead_px": 2, "shadow_diagonal_deg": 20.0,
 }
 
 
@@ -403,6 +412,8 @@ def _check_keys(params: dict) -> dict:
             raise ValueError(f"{k}: expected an integer >= 1, got {p[k]!r}")
     if p["shadow_scope"] not in ("frame", "clip"):
         raise ValueError(f"shadow_scope: expected frame or clip, got {p['shadow_scope']!r}")
+    if not p["shadow_diagonal_deg"] <= 45:
+        raise ValueError(f"shadow_diagonal_deg: expected degrees in [0, 45], got {p['shadow_diagonal_deg']!r}")
     return p
 
 
@@ -1658,13 +1669,15 @@ def turn(vectors, angle_rad: float) -> np.ndarray:
 
 
 def trim_toward(detections: list[Detection], bands: np.ndarray, direction, *,
-                min_cos: float = 0.5) -> list[Detection]:
+                min_cos: float = 0.5, diagonal_deg: float = 0.0) -> list[Detection]:
     """``detections`` with their cast shadow taken off the sides that face ``direction``.
 
     A side faces the shadow when its outward normal lies within ``arccos(min_cos)`` of ``direction`` (60
     degrees: a shadow that falls along a diagonal of the image reaches out of two adjacent sides, one along an
     axis out of one). There each box loses its own band, at most 1.5 times the median band of the detections
-    that have one on that side (:func:`trim_cast_shadows`).
+    that have one on that side (:func:`trim_cast_shadows`). A detection whose motion ``(u_px, v_px)`` lies more
+    than ``diagonal_deg`` off both image axes keeps its box (``shadow_diagonal_deg``: a vehicle driving
+    diagonally does not fill its axis-aligned box, whose edge bands hold a corner of it; 0: every box trimmed).
 
     Parameters
     ----------
@@ -1676,6 +1689,8 @@ def trim_toward(detections: list[Detection], bands: np.ndarray, direction, *,
         The shadow's direction in frame t's axes (x right, y down); zero: no shadow, nothing trimmed.
     min_cos : float
         In (0, 1].
+    diagonal_deg : float
+        In [0, 45].
 
     Returns
     -------
@@ -1687,11 +1702,20 @@ def trim_toward(detections: list[Detection], bands: np.ndarray, direction, *,
         raise ValueError(f"bands: expected {len(detections)} rows (one per detection), got {len(b)}")
     if not 0 < min_cos <= 1:
         raise ValueError(f"min_cos: expected a number in (0, 1], got {min_cos!r}")
+    if not 0 <= diagonal_deg <= 45:
+        raise ValueError(f"diagonal_deg: expected degrees in [0, 45], got {diagonal_deg!r}")
     s = np.asarray(direction, dtype=np.float64).reshape(2)
     norm = math.hypot(*s)
     cut = np.zeros(4)
     if not detections or not norm > 0:
         return list(detections)
+    if diagonal_deg > 0:
+        # each motion's angle off the x axis, folded into [0, 90]: diagonal between diagonal_deg and 90 - it; such
+        # a box's bands are no shadow's, neither trimmed nor counted in the median
+        u, v = np.array([d.u_px for d in detections]), np.array([d.v_px for d in detections])
+        off_x = np.degrees(np.arctan2(np.abs(v), np.abs(u)))
+        diagonal = (np.hypot(u, v) > 0) & (off_x > diagonal_deg) & (off_x < 90 - diagonal_deg)
+        b = np.where(diagonal[:, None], 0, b)
     for side, normal in enumerate(((-1, 0), (0, -1), (1, 0), (0, 1))):
         with_band = b[:, side] > 0
         if (normal[0] * s[0] + normal[1] * s[1]) / norm >= min_cos and with_band.any():

@@ -524,6 +524,7 @@ class Pipeline:
         # axes, and the camera's yaw from frame 0 to the pair's frame t (the pair models' turns summed)
         clip_shadow = det_params["shadow_trim_rel"] > 0 and det_params["shadow_scope"] == "clip"
         shadow_votes: list[tuple[np.ndarray, np.ndarray]] = []
+        shadow = {"direction": np.zeros(2)}  # the clip's shadow so far, in frame 0's axes (zero: none)
         yaw = {"rad": 0.0}
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
@@ -599,18 +600,19 @@ class Pipeline:
                                           size_cfg["vehicle_m2"])
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
                                    frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd_pair, **det_params)
+            shadow_kw = dict(max_rel=det_params["shadow_trim_rel"], ratio_lo=det_params["shadow_ratio_lo"],
+                             ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
             if clip_shadow and dets:
-                # one sun: the pair's votes in frame 0's axes, the clip's direction back in frame t's
-                bands, lean = shadow_lean(cur["compensated"][0], dets, max_rel=det_params["shadow_trim_rel"],
-                                          ratio_lo=det_params["shadow_ratio_lo"],
-                                          ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
+                # one sun: the pair's votes in frame 0's axes (the long pair's boxes, found over six frames, do not vote)
+                _, lean = shadow_lean(cur["compensated"][0], dets, **shadow_kw)
                 motion = np.array([(d.u_px, d.v_px) for d in dets], dtype=np.float64)
                 shadow_votes.append((turn(lean, -yaw["rad"]), turn(motion, -yaw["rad"])))
-                direction = clip_shadow_direction(np.concatenate([v[0] for v in shadow_votes]),
-                                                  np.concatenate([v[1] for v in shadow_votes]),
-                                                  vote=det_params["shadow_vote"],
-                                                  min_votes=det_params["shadow_clip_min_votes"])
-                dets = trim_toward(dets, bands, turn(direction, yaw["rad"]))
+                shadow["direction"] = clip_shadow_direction(np.concatenate([v[0] for v in shadow_votes]),
+                                                            np.concatenate([v[1] for v in shadow_votes]),
+                                                            vote=det_params["shadow_vote"],
+                                                            min_votes=det_params["shadow_clip_min_votes"])
+            # the clip's direction in frame t's axes
+            shadow_at_t = turn(shadow["direction"], yaw["rad"])
             yaw["rad"] += image_yaw_rad(cur["matrix"])
             if long_cfg["frames"] >= 2 and len(history) >= 2:
                 # slow movers: frame t against frame t-k registered into it (algorithms.long_baseline)
@@ -631,6 +633,12 @@ class Pipeline:
                     parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
                 dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
+            if clip_shadow and dets and np.any(shadow_at_t):
+                # the merged boxes lose their shadow: a slow mover's box from the long pair holds it as the pair's
+                # does, and trimmed before the merge the pair's box no longer replaced or suppressed the long pair's
+                # of the same vehicle (two boxes, a false positive)
+                bands, _ = shadow_lean(cur["compensated"][0], dets, **shadow_kw)
+                dets = trim_toward(dets, bands, shadow_at_t, diagonal_deg=det_params["shadow_diagonal_deg"])
             if relative_sizes or gsd_from_movers:
                 # pedestrians, posts, roofs: far from the size of the sequence's vehicles (algorithms.sequence_size)
                 sizes.extend(((d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1), math.hypot(d.u_px, d.v_px))

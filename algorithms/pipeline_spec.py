@@ -371,6 +371,7 @@ class DetectionSpec(_Section):
     shadow_scope: StrictStr = DETECTION_DEFAULTS["shadow_scope"]
     shadow_clip_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_clip_min_votes"]
     shadow_lead_px: StrictInt = DETECTION_DEFAULTS["shadow_lead_px"]
+    shadow_diagonal_deg: float = DETECTION_DEFAULTS["shadow_diagonal_deg"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)

@@ -162,6 +162,22 @@ def test_a_diagonal_shadow_faces_two_sides_an_axis_one():
     assert trim_toward(dets, bands, (0.0, 0.0)) == dets
 
 
+def test_a_box_moving_diagonally_keeps_its_sides_and_its_bands_do_not_set_the_cut():
+    # three boxes with a 6 px band on the left: one driving along x, one along y, one at 40 degrees off x (its axis-
+    # aligned box's left band is a corner of its body); the diagonal one's 12 px band would raise the median cut
+    dets = _dets([(10, 10, 40, 30), (60, 10, 80, 40), (100, 10, 140, 40)],
+                 [(2.0, 0.0), (0.0, -1.5), (1.5, 1.26)])
+    bands = np.array([[6, 0, 0, 0], [6, 0, 0, 0], [12, 0, 0, 0]])
+    along_x, along_y, diagonal = trim_toward(dets, bands, (-1.0, 0.0), diagonal_deg=20.0)
+    assert (along_x.x0_px, along_y.x0_px) == (16.0, 66.0)
+    assert diagonal == dets[2]
+    # off (0), every box is trimmed, the diagonal one at most 1.5 times the median band, 6 px: 9 px
+    assert trim_toward(dets, bands, (-1.0, 0.0))[2].x0_px == 109.0
+    # 20 degrees off an axis is along it (and a box without a motion is trimmed)
+    near_axis = _dets([(10, 10, 40, 30), (60, 10, 80, 40)], [(1.0, 0.35), (0.0, 0.0)])
+    assert [d.x0_px for d in trim_toward(near_axis, bands[:2], (-1.0, 0.0), diagonal_deg=20.0)] == [16.0, 66.0]
+
+
 def test_bad_inputs_are_rejected_naming_them():
     with pytest.raises(ValueError, match=r"motion_px: expected 2 rows \(one per lean\), got 1"):
         clip_shadow_direction(np.zeros((2, 2)), np.zeros((1, 2)))
@@ -169,6 +185,8 @@ def test_bad_inputs_are_rejected_naming_them():
         clip_shadow_direction(np.zeros((2, 2)), np.zeros((2, 2)), vote=1.5)
     with pytest.raises(ValueError, match=r"bands: expected 1 rows \(one per detection\), got 2"):
         trim_toward(_dets([(10, 10, 40, 30)]), np.zeros((2, 4)), (1.0, 0.0))
+    with pytest.raises(ValueError, match=r"diagonal_deg: expected degrees in \[0, 45\], got 50"):
+        trim_toward(_dets([(10, 10, 40, 30)]), np.zeros((1, 4)), (1.0, 0.0), diagonal_deg=50)
     with pytest.raises(ValueError, match=r"matrix: expected a \(3, 3\) model, got shape \(2, 3\)"):
         image_yaw_rad(np.eye(3)[:2])
     with pytest.raises(ValueError, match=r"gray: expected an \(H, W\) frame, got shape \(4, 4, 3\)"):
@@ -178,6 +196,7 @@ def test_bad_inputs_are_rejected_naming_them():
 @pytest.mark.parametrize("key, value, match", [
     ("shadow_scope", "sequence", r"shadow_scope: expected frame or clip, got 'sequence'"),
     ("shadow_clip_min_votes", 0, r"shadow_clip_min_votes: expected an integer >= 1, got 0"),
+    ("shadow_diagonal_deg", 60.0, r"shadow_diagonal_deg: expected degrees in \[0, 45\], got 60.0"),
 ])
 def test_bad_clip_keys_are_rejected_naming_them(key, value, match):
     with pytest.raises(ValueError, match=match):
@@ -214,8 +233,8 @@ def _left_offsets(det, frames, shadow):
     from algorithms.pipeline import SequenceEstimate
 
     out = []
-    p = Pipeline.from_dict({"name": "t", "flow": {"method": "dis"},
-                            "detection": {"min_area_m2": None, "max_area_m2": None, "min_box_m2": None, **det}})
+    det = {"min_area_m2": None, "max_area_m2": None, "min_box_m2": None, **det}
+    p = Pipeline.from_dict({"name": "t", "flow": {"method": "dis"}, "detection": det})
     for e in p.run(frames):
         if isinstance(e, SequenceEstimate):
             continue
@@ -243,3 +262,38 @@ def test_the_pipeline_votes_once_over_the_clip_and_trims_from_when_it_has_decide
     assert _left_offsets({"shadow_trim_rel": 0.35, "shadow_scope": "clip", "shadow_clip_min_votes": 10 ** 6},
                          frames, shadow) == off
 
+
+
+def test_the_clip_trims_the_boxes_the_long_pair_merged_in(monkeypatch):
+    # a slow mover's box from the long pair (algorithms.long_baseline) holds its shadow as the pair's box does; the
+    # merge is made to return the pair's boxes as the detector found them, shadow and all (what a long-pair box that
+    # replaced one would be): what leaves the detection stage is trimmed all the same once the clip has decided
+    import algorithms.pipeline as P
+    from algorithms.pipeline import SequenceEstimate
+
+    found = {}
+
+    def lean(gray, dets, **kw):  # a pair's vote (its first call) sees its boxes as detected, before any trim
+        found["dets"] = list(dets)
+        return shadow_lean(gray, dets, **kw)
+
+    def merge(dets, slow, **kw):
+        return found.pop("dets")
+
+    monkeypatch.setattr(P, "shadow_lean", lean)
+    monkeypatch.setattr(P, "merge_detections", merge)
+    shadow = (-SHADOW_PX, 0)
+    frames = [_run_frame(t, shadow)[0] for t in range(6)]
+    det = {"min_area_m2": None, "max_area_m2": None, "min_box_m2": None, "shadow_trim_rel": 0.35,
+           "shadow_scope": "clip", "shadow_clip_min_votes": 6, "long_baseline": {"frames": 2}}
+    checked = 0
+    for e in Pipeline.from_dict({"name": "t", "flow": {"method": "dis"}, "detection": det}).run(frames):
+        if isinstance(e, SequenceEstimate) or e.index < 2:  # the long pair from pair 2 on; the shadow from pair 1
+            continue
+        bodies = _run_frame(e.index, shadow)[1]
+        assert len(e.detections) == len(RUN_BODIES)
+        for d in e.detections:
+            (b,) = [b for b in bodies if b[0] - 8 <= d.x_px <= b[2] and b[1] <= d.y_px <= b[3]]
+            assert abs(d.x0_px - b[0]) <= 1, (e.index, d, b)
+        checked += 1
+    assert checked >= 2
