@@ -525,6 +525,8 @@ class Pipeline:
         clip_shadow = det_params["shadow_trim_rel"] > 0 and det_params["shadow_scope"] == "clip"
         shadow_votes: list[tuple[np.ndarray, np.ndarray]] = []
         shadow = {"direction": np.zeros(2)}  # the clip's shadow so far, in frame 0's axes (zero: none)
+        shadow_kw = dict(max_rel=det_params["shadow_trim_rel"], ratio_lo=det_params["shadow_ratio_lo"],
+                         ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
         yaw = {"rad": 0.0}
         points = []
         point_cfg = track_cfg["point"] if isinstance(track_cfg["point"], Mapping) else {}
@@ -600,8 +602,6 @@ class Pipeline:
                                           size_cfg["vehicle_m2"])
             dets = detect_vehicles(det_field, cur["valid"], global_flow_px=cur["global_px"],
                                    frames=cur["compensated"], prev_frame=before, gsd_m_per_px=gsd_pair, **det_params)
-            shadow_kw = dict(max_rel=det_params["shadow_trim_rel"], ratio_lo=det_params["shadow_ratio_lo"],
-                             ratio_hi=det_params["shadow_ratio_hi"], lead_px=det_params["shadow_lead_px"])
             if clip_shadow and dets:
                 # one sun: the pair's votes in frame 0's axes (the long pair's boxes, found over six frames, do not vote)
                 _, lean = shadow_lean(cur["compensated"][0], dets, **shadow_kw)
