@@ -773,7 +773,12 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
 
 
 def boxes_in_image(boxes_px: np.ndarray, shape_px: tuple[int, int]) -> np.ndarray:
-    """``(N, 4)`` float64: ``boxes_px`` (``x0, y0, x1, y1`` rows, px) clipped to the image, as an annotator draws them.
+    """``(N, 4)`` float64: the tracker's boxes as a sequence holds them, clipped to the image as an annotator draws them.
+
+    ``boxes_px``: ``x0, y0, x1, y1`` rows, inclusive pixel ranges (the tracker's rows: a box ``w`` px
+    wide spans ``cx +- (w - 1) / 2``). Returned continuous in pixel-centre coordinates, as every box of
+    a sequence and its truth (:data:`scenes.formats.MOT_ORIGIN_PX`): half a pixel out on every side,
+    ``[x0 - 0.5, x1 + 0.5]``, so ``w`` px wide.
 
     The multi-target tracker keeps a vehicle's whole size while part of it is past the border
     (``partial_rel``: a top view does not shrink), so its box may reach past the edge; the truth
@@ -782,7 +787,7 @@ def boxes_in_image(boxes_px: np.ndarray, shape_px: tuple[int, int]) -> np.ndarra
     part seen. Each box is clipped to those bounds; one wholly outside the image becomes NaN (the
     vehicle is out of view: nothing to box); NaN rows stay NaN. ``shape_px``: (H, W) of the frames.
     """
-    b = np.array(boxes_px, dtype=np.float64, copy=True).reshape(-1, 4)
+    b = np.array(boxes_px, dtype=np.float64, copy=True).reshape(-1, 4) + np.array([-0.5, -0.5, 0.5, 0.5])
     h, w = (float(v) for v in shape_px)
     with np.errstate(invalid="ignore"):
         b[:, 0] = np.maximum(b[:, 0], -0.5)

@@ -222,14 +222,15 @@ def synthetic(args) -> int:
 # ------------------------------------------------------------------------------------------- KIT AIS
 
 def _read_yolo(path: Path, w: int, h: int) -> np.ndarray:
-    """(N, 4) boxes x0, y0, x1, y1 in px of a YOLO label file (``class cx cy w h`` as fractions)."""
+    """(N, 4) boxes x0, y0, x1, y1 in px of a YOLO label file (``class cx cy w h`` as fractions of the image's
+    edges), in pixel-centre coordinates as a sequence's boxes (pixel i spans [i - 0.5, i + 0.5])."""
     if not path.is_file():
         return np.zeros((0, 4))
     a = np.loadtxt(path, ndmin=2)
     if a.size == 0:
         return np.zeros((0, 4))
     cx, cy, bw, bh = a[:, 1] * w, a[:, 2] * h, a[:, 3] * w, a[:, 4] * h
-    return np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=1)
+    return np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=1) - 0.5
 
 
 def moving_labels(boxes: list[np.ndarray], path_px: np.ndarray, *, link_px: float, move_px: float,

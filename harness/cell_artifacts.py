@@ -31,8 +31,9 @@ mot_table(tracks) / mot_truth_table(true_tracks) -> DataFrame   MOTChallenge row
 write_mot_tracks(cell_dir, tracks) -> [Path], write_mot(path, table), read_mot(path), read_mot_tracks(cell_dir)
 
 MOTChallenge export: one line per frame x track, ``frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z``
-(frames 1-based; ``bb_left = x0 + 1``: MOTChallenge's first pixel is 1, ours is 0, both at the pixel's
-centre; ``x, y, z`` = -1, no world coordinates). A track with a box (``bbox_*_px``, e.g. the multi-target
+(frames 1-based; boxes as :func:`scenes.formats.mot_box` writes them, ``bb_left = x0 + 1.5``, ``bb_width =
+x1 - x0``: MOTChallenge's first pixel is 1 and its bb_left a box's edge, our pixel 0 is centred on 0; ``x, y,
+z`` = -1, no world coordinates). A track with a box (``bbox_*_px``, e.g. the multi-target
 tracker's) is written with it; a point track (the thesis point tracker, or any tracker without a box)
 gets a fixed :data:`MOT_POINT_BOX_PX` x :data:`MOT_POINT_BOX_PX` px box centred on its filtered
 position, a carrier only: :func:`read_mot_tracks` gives a box of exactly that size back as a point (the
@@ -53,7 +54,7 @@ import pandas as pd
 
 from algorithms.jitter import cumulative_path
 from harness.metrics.objects import low_visibility
-from scenes.formats import atomic_write_bytes, read_flo, write_flo
+from scenes.formats import atomic_write_bytes, box_of_mot, mot_box, read_flo, write_flo
 
 __all__ = [
     "CELL_FORMAT", "CELL_FILE", "STABILISATION_FILE", "TRACKS_FILE", "ERROR_FILE", "CELL_INFO_KEYS",
@@ -333,8 +334,9 @@ def mot_file(tracker: str) -> str:
 
 
 def _mot_rows(frame, ids, x0, y0, x1, y1, conf) -> pd.DataFrame:
+    left, top, width, height = mot_box(x0, y0, x1, y1)
     return pd.DataFrame({"frame": np.asarray(frame, np.int64) + 1, "id": np.asarray(ids, np.int64),
-                         "bb_left": x0 + 1.0, "bb_top": y0 + 1.0, "bb_width": x1 - x0, "bb_height": y1 - y0,
+                         "bb_left": left, "bb_top": top, "bb_width": width, "bb_height": height,
                          "conf": conf, "x": -1, "y": -1, "z": -1}, columns=list(MOT_COLUMNS))
 
 
@@ -394,8 +396,9 @@ def write_mot_tracks(cell_dir: str | os.PathLike, tracks: pd.DataFrame | None) -
 def read_mot(path: str | os.PathLike) -> pd.DataFrame:
     """A MOTChallenge text file as boxes: ``frame`` (0-based), ``id``, ``bbox_x0_px .. bbox_y1_px``, ``conf``.
 
-    Comma- or whitespace-separated, 6 to 10 columns (the first six required). ``x0 = bb_left - 1``,
-    ``x1 = x0 + bb_width`` (the same arithmetic as py-motmetrics, so both see the same boxes).
+    Comma- or whitespace-separated, 6 to 10 columns (the first six required). The boxes by
+    :func:`scenes.formats.box_of_mot`: ``x0 = bb_left - 1.5``, ``x1 = x0 + bb_width`` (py-motmetrics'
+    arithmetic up to the shift of origin, so both see the same overlaps).
 
     Raises
     ------
@@ -419,9 +422,9 @@ def read_mot(path: str | os.PathLike) -> pd.DataFrame:
             raise CellArtifactError(f"{path}:{n}: expected a 1-based integer frame, got {fields[0]!r}")
         rows.append(vals + [1.0] * (7 - len(vals)))
     a = np.asarray(rows, np.float64).reshape(-1, 7)
-    x0, y0 = a[:, 2] - 1, a[:, 3] - 1
+    x0, y0, x1, y1 = box_of_mot(a[:, 2], a[:, 3], a[:, 4], a[:, 5])
     return pd.DataFrame({"frame": a[:, 0].astype(np.int64) - 1, "id": a[:, 1].astype(np.int64),
-                         "bbox_x0_px": x0, "bbox_y0_px": y0, "bbox_x1_px": x0 + a[:, 4], "bbox_y1_px": y0 + a[:, 5],
+                         "bbox_x0_px": x0, "bbox_y0_px": y0, "bbox_x1_px": x1, "bbox_y1_px": y1,
                          "conf": a[:, 6]})
 
 

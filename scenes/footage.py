@@ -33,9 +33,10 @@ absent file, never a file of zeros:
 
 Box conversion: a box whose edges are ``[L, R]`` in edge coordinates (the image spans
 ``[0, W]``; MOTChallenge ``L = bb_left - 1``, ``R = L + bb_width``; YOLO ``L = (cx - w/2) W``)
-is scaled to ``[L sx, R sx]`` and written as the inclusive pixel-centre extent
-``x0 = L sx, x1 = R sx - 1``, centre ``(x0 + x1) / 2``; the same in y. ``sx = W' / W`` is the
-scale the resize really applied (``W' = round(W scale)``).
+is scaled to ``[L sx, R sx]`` and written in pixel-centre coordinates (pixel i spans
+``[i - 0.5, i + 0.5]``, as every box of a sequence, see :data:`scenes.formats.MOT_ORIGIN_PX`):
+``x0 = L sx - 0.5, x1 = R sx - 0.5``, centre ``(x0 + x1) / 2``; the same in y. ``sx = W' / W`` is
+the scale the resize really applied (``W' = round(W scale)``).
 
 The cache entry of a clip is keyed by :func:`footage_hash`: the bytes of every file read
 (the video, or the frames of the range and their labels, the ground-truth file, the
@@ -75,6 +76,7 @@ from scenes.formats import (
     read_kitti_flow,
     read_mot_gt,
     read_mot_labels,
+    mot_box,
     read_yolo_boxes,
 )
 from scenes.sequence import MASK_PNG, SEQUENCE_LAYOUT, _csv_bytes, _FolderWriter
@@ -103,7 +105,7 @@ __all__ = [
 ]
 
 # version of what ingestion writes; part of the cache key
-FOOTAGE_VERSION = 2  # 2: 10-column MOT lines with a class column, labels.txt
+FOOTAGE_VERSION = 3  # 2: 10-column MOT lines with a class column, labels.txt; 3: boxes in pixel-centre coordinates
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv")
 FRAME_SUFFIXES = (".png", ".jpg", ".jpeg")
 REAL_TRACK_COLUMNS = ["frame", "vehicle_id", "x_px", "y_px", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
@@ -466,9 +468,10 @@ def _scaled_size(w: int, h: int, scale: float) -> tuple[int, int]:
 
 
 def _edges_to_columns(L, T, R, B, sx: float, sy: float) -> dict:
-    """Edge-coordinate boxes ``[L, R] x [T, B]`` of the source -> the scaled centre and inclusive extent."""
-    x0, x1 = np.asarray(L, float) * sx, np.asarray(R, float) * sx - 1.0
-    y0, y1 = np.asarray(T, float) * sy, np.asarray(B, float) * sy - 1.0
+    """Edge-coordinate boxes ``[L, R] x [T, B]`` of the source -> the scaled centre and box in pixel-centre
+    coordinates."""
+    x0, x1 = np.asarray(L, float) * sx - 0.5, np.asarray(R, float) * sx - 0.5
+    y0, y1 = np.asarray(T, float) * sy - 0.5, np.asarray(B, float) * sy - 0.5
     return {"x_px": (x0 + x1) / 2, "y_px": (y0 + y1) / 2, "bbox_x0_px": x0, "bbox_y0_px": y0,
             "bbox_x1_px": x1, "bbox_y1_px": y1}
 
@@ -478,7 +481,7 @@ def _gt_tables(gt: pd.DataFrame, spec: FootageSpec, n: int, sx: float, sy: float
     g = gt.copy()
     g["frame"] = g["frame"] - 1 - spec.start
     g = g[(g["frame"] >= 0) & (g["frame"] < n)]
-    L, T = g["left"] - 1.0, g["top"] - 1.0
+    L, T = g["left"] - 1.0, g["top"] - 1.0  # the left and top edges, pixels numbered from 0
     cols = _edges_to_columns(L, T, L + g["width"], T + g["height"], sx, sy)
     full = pd.DataFrame({"frame": g["frame"].to_numpy(np.int64), "vehicle_id": g["id"].to_numpy(np.int64),
                          **{k: np.asarray(v) for k, v in cols.items()}, "visible": 1,
@@ -666,10 +669,10 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.
     neither (a parked car: a track on it is a false positive) are left out. So the real path
     scores the export as the synthetic path scores the sequence, whatever those rules say.
 
-    One line per row written: frame + 1, vehicle_id, ``bb_left = x0 + 1``, ``bb_top = y0 + 1``,
-    ``bb_width = x1 - x0 + 1``, ``bb_height = y1 - y0 + 1`` (the inverse of the reader's
+    One line per row written: frame + 1, vehicle_id, the box as :func:`scenes.formats.mot_box`
+    writes it (``bb_left = x0 + 1.5``, ``bb_width = x1 - x0``: the inverse of the reader's
     conversion, written with every digit of the float64, so the boxes come back to an ulp or two:
-    ``x0 + 1`` and the reader's ``- 1`` each round),
+    ``x0 + 1.5`` and the reader's ``- 1.5`` each round),
     the flag, the class id (car 3 for car, van, truck, bus; 5 motorbike; 4 cyclist; 1 pedestrian;
     3 without a class column), visibility (``visible_fraction``, 1 without it). A real reading
     takes the box centre as the vehicle's position, which for a rendered vehicle differs from
@@ -694,9 +697,8 @@ def export_mot_gt(tracks: pd.DataFrame, path: str | os.PathLike, *, counted: np.
     vis = t["visible_fraction"] if "visible_fraction" in t.columns else pd.Series(1.0, index=t.index)
     lines = []
     for r, c, v, fl in zip(t.itertuples(index=False), t["_cls"], vis, t["_flag"]):
-        x0, y0, x1, y1 = r.bbox_x0_px, r.bbox_y0_px, r.bbox_x1_px, r.bbox_y1_px
-        lines.append(",".join([str(int(r.frame) + 1), str(int(r.vehicle_id)), repr(float(x0 + 1.0)),
-                               repr(float(y0 + 1.0)), repr(float(x1 - x0 + 1.0)), repr(float(y1 - y0 + 1.0)),
+        box = mot_box(r.bbox_x0_px, r.bbox_y0_px, r.bbox_x1_px, r.bbox_y1_px)
+        lines.append(",".join([str(int(r.frame) + 1), str(int(r.vehicle_id)), *(repr(float(b)) for b in box),
                                str(int(fl)), str(_MOT_CLASS_IDS.get(str(c), 3)), repr(float(v))]))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -52,6 +52,9 @@ __all__ = [
     "read_kitti_flow",
     "write_kitti_flow",
     "MOT_LAYOUTS",
+    "MOT_ORIGIN_PX",
+    "mot_box",
+    "box_of_mot",
     "read_mot_gt",
     "read_mot_labels",
     "mot_label_class",
@@ -564,6 +567,26 @@ _LABEL_NAMES = {
 }
 
 MOT_LAYOUTS = ("mot", "visdrone", "uavdt")
+
+# Boxes. Ours (tracks.csv's bbox_*_px, a tracker's, the truth's) are continuous rectangles in pixel-centre
+# coordinates: pixel i is centred on i and spans [i - 0.5, i + 0.5], so a box over pixels 3..12 is
+# [2.5, 12.5], 10 px wide. MOTChallenge's bb_left, bb_top are the box's left and top edge with pixels
+# numbered from 1 (the first pixel spans [1, 2]; TrackEval and py-motmetrics take [bb_left, bb_left +
+# bb_width]), so that box is bb_left 4, bb_width 10: bb_left = x0 + MOT_ORIGIN_PX.
+MOT_ORIGIN_PX = 1.5
+
+
+def mot_box(x0, y0, x1, y1):
+    """``(bb_left, bb_top, bb_width, bb_height)`` of continuous pixel-centre boxes (scalars or arrays)."""
+    return x0 + MOT_ORIGIN_PX, y0 + MOT_ORIGIN_PX, x1 - x0, y1 - y0
+
+
+def box_of_mot(left, top, width, height):
+    """``(x0, y0, x1, y1)``, continuous in pixel-centre coordinates, of MOTChallenge boxes: :func:`mot_box`'s
+    inverse."""
+    x0, y0 = left - MOT_ORIGIN_PX, top - MOT_ORIGIN_PX
+    return x0, y0, x0 + width, y0 + height
+
 MOT_COLUMNS = ["frame", "id", "left", "top", "width", "height", "ignore", "class", "visible_fraction", "line"]
 
 

@@ -731,12 +731,15 @@ def test_a_car_leaving_through_the_border_is_boxed_as_the_image_shows_it():
         assert rows[t]["bbox_x1_px"] > w_img + 2.0, (t, rows[t])               # the track's whole car
         assert inside[t, 2] == w_img - 0.5                                      # the part in the image
         assert inside[t, 0] == pytest.approx(20.0 + 2 * t, abs=1.0), (t, inside[t])
+    # inside the image, the rows' inclusive pixel ranges half a pixel out on every side: as wide as the car
     np.testing.assert_array_equal(inside[:30], [[rows[t][k] for k in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
-                                                                        "bbox_y1_px")] for t in range(30)])
+                                                                        "bbox_y1_px")] for t in range(30)]
+                                  + np.array([-0.5, -0.5, 0.5, 0.5]))
+    assert (inside[:30, 2] - inside[:30, 0]).tolist() == [30.0] * 30 and (inside[:30, 3] - inside[:30, 1] == 12).all()
     # a box wholly outside the image has nothing to show; a row without a box stays without one
     out = boxes_in_image(np.array([[130.0, 10.0, 150.0, 20.0], [np.nan] * 4, [-10.0, -5.0, 5.0, 90.0]]), (80, w_img))
     assert np.isnan(out[:2]).all()
-    np.testing.assert_array_equal(out[2], [-0.5, -0.5, 5.0, 79.5])
+    np.testing.assert_array_equal(out[2], [-0.5, -0.5, 5.5, 79.5])
 
 
 def _box_det(x, y, w, h, u=0.0, v=0.0):

@@ -152,9 +152,10 @@ def test_the_export_is_motchallenge_text_and_reads_back(tmp_path):
                         "bbox_y1_px": [25.0, np.nan, 26.0, 1.0], "source": "multi"})
     (path,) = A.write_mot_tracks(tmp_path, est)
     lines = path.read_text().splitlines()
-    # frames 1-based, bb_left = x0 + 1; the row without a box gets the 4 px carrier; a NaN position is no row
-    assert lines == ["1,3,6.0,16.0,10.0,10.0,1.0,-1,-1,-1", "1,4,49.5,59.0,4.0,4.0,1.0,-1,-1,-1",
-                     "2,3,8.0,17.0,10.0,10.0,1.0,-1,-1,-1"]
+    # frames 1-based, bb_left = x0 + 1.5 (the box [5, 15] covers pixels 5.5 .. 14.5, 1-based 6.5 ..: its left
+    # edge is 6.5); the row without a box gets the 4 px carrier; a NaN position is no row
+    assert lines == ["1,3,6.5,16.5,10.0,10.0,1.0,-1,-1,-1", "1,4,50.0,59.5,4.0,4.0,1.0,-1,-1,-1",
+                     "2,3,8.5,17.5,10.0,10.0,1.0,-1,-1,-1"]
     back = A.read_mot(path)
     assert back["frame"].tolist() == [0, 0, 1] and back["id"].tolist() == [3, 4, 3]
     np.testing.assert_array_equal(back[list(M.BOX_COLUMNS)].to_numpy()[0], [5.0, 15.0, 15.0, 25.0])

@@ -175,9 +175,9 @@ def test_frames_sorted_naturally_range_scale_and_yolo_boxes(tmp_path):
     assert np.array_equal(seq.frame(3), expect)  # source frame 5 is the range's frame 3
     b = seq.boxes
     assert len(b) == 1 and b.loc[0, "frame"] == 1 and b.loc[0, "class"] == "van"
-    # edges scaled by 0.5: [8, 16] x [5, 15]; inclusive pixel-centre extent [8, 15] x [5, 14]
+    # edges scaled by 0.5: [8, 16] x [5, 15]; in pixel-centre coordinates [7.5, 15.5] x [4.5, 14.5] (pixels 8..15)
     assert [b.loc[0, c] for c in ("bbox_x0_px", "bbox_x1_px", "bbox_y0_px", "bbox_y1_px")] == pytest.approx(
-        [8.0, 15.0, 5.0, 14.0])
+        [7.5, 15.5, 4.5, 14.5])
     assert (b.loc[0, "x_px"], b.loc[0, "y_px"]) == pytest.approx((11.5, 9.5))
 
 
@@ -192,8 +192,9 @@ def test_mot_gt_range_scale_and_ids(tmp_path):
                                        tmp_path / "seq"))
     t = seq.tracks
     assert t["frame"].tolist() == [0, 2] and t["vehicle_id"].tolist() == [4, 4]
-    # edges [10, 20] x [20, 40] scaled by 2 -> [20, 40] x [40, 80]: extent [20, 39] x [40, 79]
-    assert t.loc[0, ["bbox_x0_px", "bbox_x1_px", "bbox_y0_px", "bbox_y1_px"]].tolist() == [20, 39, 40, 79]
+    # edges [10, 20] x [20, 40] scaled by 2 -> [20, 40] x [40, 80]: pixels 20..39 x 40..79, in pixel-centre
+    # coordinates [19.5, 39.5] x [39.5, 79.5]
+    assert t.loc[0, ["bbox_x0_px", "bbox_x1_px", "bbox_y0_px", "bbox_y1_px"]].tolist() == [19.5, 39.5, 39.5, 79.5]
     assert t.loc[0, "x_px"] == 29.5 and t.loc[0, "visible_fraction"] == 0.75
     ign = seq.ignore_regions
     assert len(ign) == 1 and ign.loc[0, "frame"] == 1

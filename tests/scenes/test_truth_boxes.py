@@ -122,3 +122,14 @@ def test_under_a_lens_the_visible_fraction_counts_the_image_not_the_canvas():
     inside = ((v["bbox_x0_px"] > 2) & (v["bbox_y0_px"] > 2) & (v["bbox_x1_px"] < W - 3) & (v["bbox_y1_px"] < H - 3))
     assert inside.sum() >= 10 and (v.loc[inside, "visible_fraction"] > 0.9).all()
     assert ((v["bbox_x0_px"] >= -0.5) & (v["bbox_y1_px"] <= H - 0.5)).all()
+
+
+def test_motchallenge_boxes_are_edges_from_pixel_1_and_ours_are_centred_on_pixels():
+    from scenes.formats import box_of_mot, mot_box
+
+    # a box over pixels 3..12 (0-based) is [2.5, 12.5] here, 10 px wide; MOTChallenge numbers that pixel 4 and puts
+    # bb_left on its left edge: 4, width 10
+    assert mot_box(2.5, 7.5, 12.5, 9.5) == (4.0, 9.0, 10.0, 2.0)
+    assert box_of_mot(4.0, 9.0, 10.0, 2.0) == (2.5, 7.5, 12.5, 9.5)
+    x = np.array([0.25, -0.5, 100.125])
+    np.testing.assert_array_equal(box_of_mot(*mot_box(x, x + 1, x + 20, x + 3)), (x, x + 1, x + 20, x + 3))
