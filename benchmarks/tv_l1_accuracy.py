@@ -26,7 +26,12 @@ Measured, mode 1 (6-frame renders of nominal, thesis, fast-vehicles, realistic; 
 total EPE background 0.052 / 0.067, 0.028 / 0.046, 0.042 / 0.064, 0.210 / 0.212 px;
 vehicles 1.27 / 1.73, 0.236 / 0.300, 10.9 / 11.5, 0.246 / 0.406 px; local background
 equal within 0.003 px (realistic 0.508 / 0.506); pipeline CPU 1.0-1.1 s / 19-21 s per
-sequence (ratio 0.05).
+sequence (ratio 0.05). That was scikit-image at its default ``attachment`` 15. At tv_l1's
+data weight (38.25, the ``tvl1`` pipeline since 2026-11-29; renders of that day's generator):
+background 0.057 / 0.094, 0.030 / 0.075, 0.053 / 0.108, 0.126 / 0.163 px; vehicles
+0.896 / 0.752, 0.246 / 0.305, 9.68 / 8.70, 0.128 / 0.163 px (scikit-image's is now the
+better on nominal's and fast-vehicles' vehicles, ours on every background); pipeline CPU
+0.229 / 2.33 s per pair (ratio 0.10).
 
 Mode 2, the pipeline's lighter setting (issue 13): see ``benchmarks/tv_l1_setting.md``.
 """
