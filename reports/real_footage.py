@@ -93,7 +93,8 @@ def draw_boxes_and_tracks(rgb: np.ndarray, truth: pd.DataFrame, tracks: pd.DataF
     """``rgb`` (H, W, 3) uint8 with the truth's boxes (white, 1 px) and the tracks (``color_rgb``, 2 px).
 
     Boxed tracks are drawn as rectangles labelled with their track id; tracks without a box as
-    crosses. Coordinates are pixel centres (``x0`` is the first column inside the box).
+    crosses. Boxes are continuous in pixel-centre coordinates (``x0`` is the left edge of the first column
+    inside the box, half a pixel left of its centre); a rectangle is drawn on the outermost pixels inside.
     """
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ValueError(f"draw_boxes_and_tracks: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
@@ -103,12 +104,12 @@ def draw_boxes_and_tracks(rgb: np.ndarray, truth: pd.DataFrame, tracks: pd.DataF
         return int(round(float(x))), int(round(float(y)))
 
     for b in truth.itertuples(index=False):
-        cv2.rectangle(out, pt(b.x0, b.y0), pt(b.x1, b.y1), TRUTH_RGB, 1, cv2.LINE_8)
+        cv2.rectangle(out, pt(b.x0 + 0.5, b.y0 + 0.5), pt(b.x1 - 0.5, b.y1 - 0.5), TRUTH_RGB, 1, cv2.LINE_8)
     color = tuple(int(c) for c in color_rgb)
     for t in tracks.itertuples(index=False):
         if np.isfinite([t.x0, t.y0, t.x1, t.y1]).all():
-            cv2.rectangle(out, pt(t.x0, t.y0), pt(t.x1, t.y1), color, 2, cv2.LINE_8)
-            cv2.putText(out, str(int(t.track_id)), pt(t.x0, t.y0 - 3), cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1,
+            cv2.rectangle(out, pt(t.x0 + 0.5, t.y0 + 0.5), pt(t.x1 - 0.5, t.y1 - 0.5), color, 2, cv2.LINE_8)
+            cv2.putText(out, str(int(t.track_id)), pt(t.x0 + 0.5, t.y0 - 2.5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1,
                         cv2.LINE_AA)
         elif np.isfinite([t.x, t.y]).all():
             cv2.drawMarker(out, pt(t.x, t.y), color, cv2.MARKER_CROSS, 9, 2, cv2.LINE_8)

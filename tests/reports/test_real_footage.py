@@ -37,12 +37,15 @@ def test_truth_boxes_fall_back_to_yolo_boxes_without_ids_and_are_empty_without_e
 
 def test_boxes_and_crosses_are_drawn_where_they_are_and_nowhere_else():
     rgb = np.zeros((60, 80, 3), np.uint8)
-    truth = pd.DataFrame({"x0": [5.0], "y0": [5.0], "x1": [25.0], "y1": [20.0], "id": [1]})
+    # boxes over pixels 5..25 x 5..20 and 40..58 x 32..48 (continuous: half a pixel out)
+    truth = pd.DataFrame({"x0": [4.5], "y0": [4.5], "x1": [25.5], "y1": [20.5], "id": [1]})
     tracks = pd.DataFrame({"source": ["multi", "point"], "track_id": [3, 0], "x": [50.0, 60.0], "y": [40.0, 12.0],
-                           "x0": [40.0, np.nan], "y0": [32.0, np.nan], "x1": [58.0, np.nan], "y1": [48.0, np.nan]})
+                           "x0": [39.5, np.nan], "y0": [31.5, np.nan], "x1": [58.5, np.nan], "y1": [48.5, np.nan]})
     out = draw_boxes_and_tracks(rgb, truth, tracks, color_rgb=(255, 0, 0))
     assert rgb.max() == 0  # the input is not drawn on
     assert tuple(out[5, 15]) == TRUTH_RGB and tuple(out[12, 5]) == TRUTH_RGB  # the truth box's edges
+    assert tuple(out[20, 15]) == TRUTH_RGB and tuple(out[12, 25]) == TRUTH_RGB
+    assert out[4, 15].max() == 0 and out[12, 26].max() == 0  # on its pixels, not beside them
     assert out[12, 15].max() == 0  # its inside stays as it was
     assert out[40, 40, 0] > 200 and out[40, 40, 1] < 60  # the track's box edge in its colour
     assert out[40, 49].max() == 0  # inside the track box
