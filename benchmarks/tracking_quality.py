@@ -75,6 +75,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 from algorithms.pipeline import PIPELINES, Pipeline, SequenceEstimate  # noqa: E402
 from harness.metrics import MOTCounts, mot_counts  # noqa: E402
+from harness.metrics.detection import detection_boxes  # noqa: E402
 from benchmarks._overrides import pipeline_with as _pipeline, scene_overrides  # noqa: E402
 
 SCENES = ("nominal", "realistic", "urban-parallax", "fast-vehicles")
@@ -93,11 +94,6 @@ def run_multi(pipeline: Pipeline, frames, *, gsd_m_per_px=None):
             dets.append(e.detections)
     tracks = est.tracks[est.tracks["source"] == "multi"]
     return tracks, dets, est, time.perf_counter() - t0
-
-
-def _det_boxes(dets) -> np.ndarray:
-    """(N, 4) continuous boxes of detections (their inclusive pixel boxes, half a pixel out on every side)."""
-    return np.array([[d.x0_px - 0.5, d.y0_px - 0.5, d.x1_px + 0.5, d.y1_px + 0.5] for d in dets]).reshape(-1, 4)
 
 
 def error_breakdown(tracks: pd.DataFrame, dets: list, truth: pd.DataFrame, *, frame_shape, gate_px: float = 20.0,
@@ -126,7 +122,7 @@ def error_breakdown(tracks: pd.DataFrame, dets: list, truth: pd.DataFrame, *, fr
     for f, vids, tids, _D, match, _sw, _ok in _mot_frames(tracks, truth, gate_px=gate_px):
         rows_f = truth["frame"].to_numpy() == f
         d_f = dets[f] if 0 <= f < len(dets) else []
-        db = _det_boxes(d_f)
+        db = detection_boxes(d_f)[1]
         e_f = est[est["frame"] == f]
         for a, vid in enumerate(vids):
             if a in match:
