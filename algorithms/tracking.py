@@ -773,7 +773,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
 
 
 def boxes_in_image(boxes_px: np.ndarray, shape_px: tuple[int, int]) -> np.ndarray:
-    """``(N, 4)`` float64: the tracker's boxes as a sequence holds them, clipped to the image as an annotator draws them.
+    """``(N, 4)`` float64: the tracker's boxes as a sequence holds them, clipped to the image as an annotator would.
 
     ``boxes_px``: ``x0, y0, x1, y1`` rows, inclusive pixel ranges (the tracker's rows: a box ``w`` px
     wide spans ``cx +- (w - 1) / 2``). Returned continuous in pixel-centre coordinates, as every box of

@@ -443,7 +443,8 @@ def synthetic_side(arg: str, frames: int | None = None, *, seed: int | None = No
             boxes.append(SceneBoxes(t[["x_px", "y_px"]].to_numpy(float), np.full((len(t), 2), np.nan)))
             continue
         x0, y0, x1, y1 = (t[c].to_numpy(float) for c in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"))
-        b = SceneBoxes(centres=t[["x_px", "y_px"]].to_numpy(float), sizes=np.column_stack([x1 - x0, y1 - y0]))  # continuous boxes
+        # boxes are continuous (pixel-centre coordinates): their size is x1 - x0
+        b = SceneBoxes(centres=t[["x_px", "y_px"]].to_numpy(float), sizes=np.column_stack([x1 - x0, y1 - y0]))
         if "speed_mps" in t:
             speed = t["speed_mps"].to_numpy(float)
             b.moving, b.moving_known = speed > MOVING_SPEED_MPS, np.isfinite(speed)

@@ -72,11 +72,11 @@ from scenes.formats import (
     encode_flo,
     encode_png,
     encode_png_fast,
+    mot_box,
     read_flo,
     read_kitti_flow,
     read_mot_gt,
     read_mot_labels,
-    mot_box,
     read_yolo_boxes,
 )
 from scenes.sequence import MASK_PNG, SEQUENCE_LAYOUT, _csv_bytes, _FolderWriter

@@ -587,6 +587,7 @@ def box_of_mot(left, top, width, height):
     x0, y0 = left - MOT_ORIGIN_PX, top - MOT_ORIGIN_PX
     return x0, y0, x0 + width, y0 + height
 
+
 MOT_COLUMNS = ["frame", "id", "left", "top", "width", "height", "ignore", "class", "visible_fraction", "line"]
 
 
