@@ -49,8 +49,8 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
-from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, ground_fit_at, image_yaw_rad,
-                                  shadow_lean, trim_toward, turn)
+from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, fill_lane, ground_fit_at,
+                                  image_yaw_rad, shadow_lean, trim_toward, turn)
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
@@ -639,6 +639,10 @@ class Pipeline:
                 # of the same vehicle (two boxes, a false positive)
                 bands, _ = shadow_lean(cur["compensated"][0], dets, **shadow_kw)
                 dets = trim_toward(dets, bands, shadow_at_t, diagonal_deg=det_params["shadow_diagonal_deg"])
+            if det_params["lane_fill_rel"] > 0 and dets:
+                # a uniform roof the flow could not see: the boxes grow along their lanes over it (detection.fill_lane)
+                dets = fill_lane(cur["gray"][0], dets, max_rel=det_params["lane_fill_rel"],
+                                 line_frac=det_params["lane_fill_line"], road_k=det_params["lane_fill_road_k"])
             if relative_sizes or gsd_from_movers:
                 # pedestrians, posts, roofs: far from the size of the sequence's vehicles (algorithms.sequence_size)
                 sizes.extend(((d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1), math.hypot(d.u_px, d.v_px))

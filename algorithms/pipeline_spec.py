@@ -372,6 +372,9 @@ class DetectionSpec(_Section):
     shadow_clip_min_votes: StrictInt = DETECTION_DEFAULTS["shadow_clip_min_votes"]
     shadow_lead_px: StrictInt = DETECTION_DEFAULTS["shadow_lead_px"]
     shadow_diagonal_deg: float = DETECTION_DEFAULTS["shadow_diagonal_deg"]
+    lane_fill_rel: float = DETECTION_DEFAULTS["lane_fill_rel"]
+    lane_fill_line: float = DETECTION_DEFAULTS["lane_fill_line"]
+    lane_fill_road_k: float = DETECTION_DEFAULTS["lane_fill_road_k"]
     gsd_m_per_px: Any = None
     long_baseline: LongBaselineSpec = Field(default_factory=LongBaselineSpec)
     sequence_size: SequenceSizeSpec = Field(default_factory=SequenceSizeSpec)

@@ -1,0 +1,123 @@
+"""A box that holds a uniform roof's edge grows along its lane over the body (algorithms.detection.fill_lane;
+the pipeline's detection.lane_fill_rel)."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from algorithms.detection import Detection, detect_vehicles, fill_lane
+from algorithms.pipeline import Pipeline, PipelineError
+
+H, W = 160, 240
+
+
+def _ground(seed=0):
+    rng = np.random.default_rng(seed)
+    return (90.0 + rng.normal(0.0, 3.0, size=(H, W))).astype(np.float32)
+
+
+def _paint(img, cx, cy, length, width, angle_deg, grey):
+    """A uniform body seen from above centred at (cx, cy), its length along ``angle_deg`` (image axes, y down)."""
+    a = math.radians(angle_deg)
+    along, across = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    corners = [np.array([cx, cy]) + s * length / 2 * along + t * width / 2 * across
+               for s, t in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    out = img.copy()
+    cv2.fillConvexPoly(out, np.round(np.array(corners) * 16).astype(np.int32), float(grey), shift=4)
+    return out
+
+
+def _extent(img, ground):
+    ys, xs = np.nonzero(np.abs(img - ground) > 20)
+    return xs.min(), ys.min(), xs.max(), ys.max()
+
+
+def _det(box, u, v):
+    x0, y0, x1, y1 = box
+    return Detection((x0 + x1) / 2, (y0 + y1) / 2, 100, float(x0), float(y0), float(x1), float(y1), u, v)
+
+
+def _iou(d, box):
+    x0, y0, x1, y1 = box
+    w = min(d.x1_px, x1) - max(d.x0_px, x0) + 1
+    h = min(d.y1_px, y1) - max(d.y0_px, y0) + 1
+    inter = max(0, w) * max(0, h)
+    area = (d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1) + (x1 - x0 + 1) * (y1 - y0 + 1) - inter
+    return inter / area
+
+
+@pytest.mark.parametrize("u, v", [(2.0, 0.0), (-1.5, 0.0), (0.0, 1.0)])
+def test_a_box_on_a_buss_front_edge_grows_over_its_uniform_roof_and_stops_at_the_road(u, v):
+    # a 60 x 16 px bus, its roof one grey: the flow and the frames' change saw its front edge alone (a 12 px box at the
+    # end it drives towards); a car of the same grey follows 8 px of road behind it in the lane
+    angle = math.degrees(math.atan2(v, u))
+    e = np.array([u, v]) / math.hypot(u, v)
+    g0 = _ground()
+    centre = np.array([120.0, 80.0])
+    bus_only = _paint(g0, *centre, 60, 16, angle, 200)
+    bus = _extent(bus_only, g0)
+    frame = _paint(bus_only, *(centre - e * (30 + 8 + 12)), 24, 14, angle, 200)
+    front = centre + e * 24
+    x0, y0 = np.floor(np.minimum(front - 6 * np.abs(e) - 8 * np.abs(e[::-1]), front)).astype(int)
+    x1, y1 = np.ceil(np.maximum(front + 6 * np.abs(e) + 8 * np.abs(e[::-1]), front)).astype(int)
+    edge = _det((x0, y0, x1, y1), u, v)
+    assert _iou(edge, bus) < 0.4
+    (grown,) = fill_lane(frame, [edge], max_rel=4.0)  # the edge is 16 px wide: up to 64 px long
+    assert _iou(grown, bus) >= 0.9, (grown, bus)
+    assert (grown.x_px, grown.y_px) == ((grown.x0_px + grown.x1_px) / 2, (grown.y0_px + grown.y1_px) / 2)
+    # however far it may grow, the road behind the bus ends it: the follower stays out
+    (far,) = fill_lane(frame, [edge], max_rel=8.0)
+    assert far == grown
+    # off, or no motion: the box as it was
+    assert fill_lane(frame, [edge], max_rel=0.0) == [edge]
+    assert fill_lane(frame, [_det((x0, y0, x1, y1), 0.0, 0.0)]) == [_det((x0, y0, x1, y1), 0.0, 0.0)]
+
+
+def test_a_diagonal_buss_edge_grows_within_its_lane():
+    # 56 x 16 px at 34 degrees: the lane is the body's extent across the motion, so the ground beside the bus, inside
+    # its axis-aligned box, is no reason to stop and none of a parked car beside the lane is taken in
+    angle = 34.0
+    e = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    g0 = _ground(1)
+    centre = np.array([110.0, 80.0])
+    frame = _paint(g0, *centre, 56, 16, angle, 60)
+    bus = _extent(frame, g0)
+    frame = _paint(frame, *(centre + np.array([-e[1], e[0]]) * 22), 24, 12, angle, 60)  # beside it, the next lane
+    front = _extent(_paint(g0, *(centre + e * 22), 12, 16, angle, 60), g0)
+    (grown,) = fill_lane(frame, [_det(front, *(1.5 * e))])
+    assert _iou(grown, bus) >= 0.85, (grown, bus)
+
+
+def test_a_box_that_holds_its_whole_car_stays_as_it_is():
+    g0 = _ground(2)
+    frame = _paint(g0, 120, 80, 30, 14, 0.0, 190)
+    car = _extent(frame, g0)
+    d = _det(car, 2.0, 0.0)
+    assert fill_lane(frame, [d]) == [d]
+
+
+def test_the_growth_is_at_most_max_rel_times_the_body():
+    # a wall of no-road grey runs on along the lane (a kerb of light stone, a building's edge): the box grows max_rel
+    # times the body's size at most, not along the whole wall
+    g0 = _ground(3)
+    frame = g0.copy()
+    frame[74:87, 20:230] = 200.0
+    d = _det((150, 74, 161, 86), 1.0, 0.0)  # 12 x 13 px of it
+    (grown,) = fill_lane(frame, [d], max_rel=2.0)
+    assert 12 < grown.x1_px - grown.x0_px + 1 <= 2 * 13 + 1, grown  # ahead first, then behind, 26 px in all
+    assert (grown.y0_px, grown.y1_px) == (74, 86)
+    (longer,) = fill_lane(frame, [d], max_rel=4.0)
+    assert 2 * 13 + 1 < longer.x1_px - longer.x0_px + 1 <= 4 * 13 + 1, longer
+
+
+def test_bad_inputs_are_rejected_naming_them():
+    with pytest.raises(ValueError, match=r"gray: expected an \(H, W\) frame, got shape \(4, 4, 3\)"):
+        fill_lane(np.zeros((4, 4, 3)), [])
+    with pytest.raises(ValueError, match=r"max_rel: expected a number >= 0, got -1"):
+        fill_lane(np.zeros((4, 4)), [], max_rel=-1)
+    with pytest.raises(ValueError, match=r"lane_fill_line: expected a fraction in \(0, 1\], got 1.5"):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), lane_fill_line=1.5)
+    with pytest.raises(PipelineError, match=r"detection\.lane_fill_rel"):
+        Pipeline.from_dict({"name": "t", "flow": {"method": "dis"}, "detection": {"lane_fill_rel": -2}})
