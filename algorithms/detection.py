@@ -67,7 +67,8 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
 9. **lane fill** (``lane_fill_rel``, off by default): a uniform roof moving along itself changes neither the
    flow nor the frames inside it, so the box of step 6 may hold its front or rear edge alone; :func:`fill_lane`
    (applied by :class:`algorithms.pipeline.Pipeline` to the pair's boxes merged with the long pair's, after
-   the shadow) grows each box along its motion over the lane's pixels that are no road.
+   the shadow) grows each box along its motion over the lane's pixels that are no road, to a new end that moves
+   with the vehicle.
 
 Parallax (plane + parallax, Irani and Anandan 1998; Sawhney 1994): after the
 ground's motion is compensated, a static point at height ``h`` above the ground
@@ -329,7 +330,9 @@ class Detection(NamedTuple):
 #   line across the motion within its lane (the across-extent of its own body pixels), while at least lane_fill_line
 #   of a line is no road (its grey more than lane_fill_road_k robust spreads from the ring of ground around the box, as
 #   _gap_split tells road), at most lane_fill_rel times the body's length or width, whichever is larger (0: off, the
-#   default). A band of road between two vehicles stops it; so does the road behind a car. Figures in dis.yaml.
+#   default). A band of road between two vehicles stops it; so does the road behind a car; and a new end that does not
+#   move with the vehicle is not taken (frame t+1 at the box's motion must explain the lines around it: a crosswalk or
+#   a stop line at a car's nose is no road either). Figures in dis.yaml.
 DETECTION_DEFAULTS = {
     "min_magnitude_px": 0.5, "open_px": 1, "close_px": 2, "min_area_px": 20, "max_area_px": None,
     "split_px": 1.0, "split_rel": 0.6, "merge_gap_px": 3.0, "merge_px": 1.0, "merge_rel": 0.3,
@@ -1684,8 +1687,9 @@ def turn(vectors, angle_rad: float) -> np.ndarray:
     return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-def fill_lane(gray: np.ndarray, detections: list[Detection], *, max_rel: float = 3.0, line_frac: float = 0.6,
-              road_k: float = 3.0, ring_px: int = GAP_SPLIT_RING_PX) -> list[Detection]:
+def fill_lane(gray: np.ndarray, detections: list[Detection], *, next_gray: np.ndarray | None = None,
+              max_rel: float = 3.0, line_frac: float = 0.6, road_k: float = 3.0, ring_px: int = GAP_SPLIT_RING_PX,
+              gain_grey: float = 2.0) -> list[Detection]:
     """``detections`` with each box grown along its motion over the body its flow could not see.
 
     A vehicle's uniform roof moving along itself changes neither the flow nor the frames inside it: the box of
@@ -1696,7 +1700,11 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, max_rel: float =
     in 1 px lines across the motion, and from each end of the body outwards the box takes in lines of which at
     least ``line_frac`` is body, up to a length of ``max_rel`` times the body's length or width, whichever is
     larger. Road between two vehicles ends it, and so does the road behind a car, whose box holds its whole body
-    already. A box without a motion, at the image's border, or with under 10 body pixels is left as it is.
+    already. With ``next_gray`` (frame t+1 compensated into frame t) the new end must be the vehicle's: around the
+    last lines taken in (2 px either side, the lane's width), frame t+1 sampled at the box's motion must match frame
+    t better than unmoved, by ``gain_grey`` grey levels on average (the far edge of a roof moves with it; a
+    crosswalk or a stop line painted ahead of a car, no road either, does not), else that side keeps its extent.
+    A box without a motion, at the image's border, or with under 10 body pixels is left as it is.
 
     Parameters
     ----------
@@ -1704,7 +1712,9 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, max_rel: float =
         Frame t, grey levels.
     detections : list of Detection
         Frame t's detections (inclusive boxes; ``u_px, v_px`` their motion).
-    max_rel, line_frac, road_k, ring_px
+    next_gray : ndarray, (H, W), optional
+        Frame t+1 compensated into frame t's pixels (without it the new ends are not checked).
+    max_rel, line_frac, road_k, ring_px, gain_grey
         As above (``lane_fill_rel``, ``lane_fill_line``, ``lane_fill_road_k``).
 
     Returns
@@ -1715,13 +1725,17 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, max_rel: float =
     g = np.asarray(gray)
     if g.ndim != 2:
         raise ValueError(f"gray: expected an (H, W) frame, got shape {g.shape}")
+    nxt = None if next_gray is None else np.asarray(next_gray)
+    if nxt is not None and nxt.shape != g.shape:
+        raise ValueError(f"next_gray: expected the shape of gray {g.shape}, got {nxt.shape}")
     if not max_rel >= 0:
         raise ValueError(f"max_rel: expected a number >= 0, got {max_rel!r}")
     h, w = g.shape
     out = []
     for d in detections:
-        grown = _lane_box(g, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), d.u_px, d.v_px, max_rel=max_rel,
-                          line_frac=line_frac, road_k=road_k, ring_px=ring_px) if max_rel > 0 else None
+        grown = _lane_box(g, nxt, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), d.u_px, d.v_px, max_rel=max_rel,
+                          line_frac=line_frac, road_k=road_k, ring_px=ring_px, gain_grey=gain_grey) \
+            if max_rel > 0 else None
         if grown is None:
             out.append(d)
             continue
@@ -1731,8 +1745,8 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, max_rel: float =
     return out
 
 
-def _lane_box(g: np.ndarray, box, u: float, v: float, *, max_rel: float, line_frac: float, road_k: float,
-              ring_px: int) -> tuple[int, int, int, int] | None:
+def _lane_box(g: np.ndarray, nxt: np.ndarray | None, box, u: float, v: float, *, max_rel: float, line_frac: float,
+              road_k: float, ring_px: int, gain_grey: float) -> tuple[int, int, int, int] | None:
     """:func:`fill_lane` of one box: the grown inclusive box, or None where it stays as it is."""
     h, w = g.shape
     speed = math.hypot(u, v)
@@ -1776,6 +1790,19 @@ def _lane_box(g: np.ndarray, box, u: float, v: float, *, max_rel: float, line_fr
     start = lo
     while start - 1 >= 0 and share[start - 1] >= line_frac and end - (start - 1) <= max_len:
         start -= 1
+    if nxt is not None:
+        # the new end must move with the vehicle: frame t+1 at the motion explains the lines around it better
+        lines = np.floor(s).astype(np.int64) - first
+        a = g[ya:yb + 1, xa:xb + 1].astype(np.float32)
+        b = nxt[ya:yb + 1, xa:xb + 1].astype(np.float32)
+        gain = np.abs(b - a) - np.abs(_shifted(b, u, v) - a)
+
+        def moves(at: int) -> bool:
+            near = lane & (np.abs(lines - at) <= 2)
+            return bool(near.any()) and float(gain[near].mean()) > gain_grey
+
+        end = end if end == hi or moves(end) else hi
+        start = start if start == lo or moves(start) else lo
     if start == lo and end == hi:
         return None
     taken = lane & body & (np.floor(s).astype(np.int64) - first >= start) & (np.floor(s).astype(np.int64) - first <= end)

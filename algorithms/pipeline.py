@@ -641,8 +641,9 @@ class Pipeline:
                 dets = trim_toward(dets, bands, shadow_at_t, diagonal_deg=det_params["shadow_diagonal_deg"])
             if det_params["lane_fill_rel"] > 0 and dets:
                 # a uniform roof the flow could not see: the boxes grow along their lanes over it (detection.fill_lane)
-                dets = fill_lane(cur["gray"][0], dets, max_rel=det_params["lane_fill_rel"],
-                                 line_frac=det_params["lane_fill_line"], road_k=det_params["lane_fill_road_k"])
+                dets = fill_lane(cur["compensated"][0], dets, next_gray=cur["compensated"][1],
+                                 max_rel=det_params["lane_fill_rel"], line_frac=det_params["lane_fill_line"],
+                                 road_k=det_params["lane_fill_road_k"])
             if relative_sizes or gsd_from_movers:
                 # pedestrians, posts, roofs: far from the size of the sequence's vehicles (algorithms.sequence_size)
                 sizes.extend(((d.x1_px - d.x0_px + 1) * (d.y1_px - d.y0_px + 1), math.hypot(d.u_px, d.v_px))

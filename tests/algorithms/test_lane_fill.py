@@ -90,6 +90,31 @@ def test_a_diagonal_buss_edge_grows_within_its_lane():
     assert _iou(grown, bus) >= 0.85, (grown, bus)
 
 
+def test_with_the_next_frame_the_new_end_must_move_with_the_vehicle():
+    # a 60 x 16 px bus found by its front edge grows over its roof: its rear edge moves with it. A 30 x 14 px car found
+    # but for its front 6 px, its nose on a white stop line (no road either, as a crosswalk's stripes blurred together
+    # are): the line's far edge does not move with the car, so the box does not grow over it; without the next frame
+    # nothing tells the line from a roof
+    u, v = 2.0, 0.0
+    g0 = _ground(4)
+    bus = [_paint(g0, 120 + k * u, 50, 60, 16, 0.0, 200) for k in range(2)]
+    line = g0.copy()
+    line[96:116, 156:162] = 230.0
+    car = [_paint(line, 140 + k * u, 106, 30, 14, 0.0, 200) for k in range(2)]
+    whole = _extent(bus[0], g0)
+    edge = _det((whole[2] - 11, whole[1], whole[2], whole[3]), u, v)
+    (grown,) = fill_lane(bus[0], [edge], next_gray=bus[1], max_rel=4.0)
+    assert _iou(grown, whole) >= 0.9, (grown, whole)
+    body = _extent(_paint(g0, 140, 106, 30, 14, 0.0, 200), g0)
+    rear = _det((body[0], body[1], body[2] - 6, body[3]), u, v)  # its front 6 px short, as a box can be
+    (blind,) = fill_lane(car[0], [rear])
+    assert blind.x1_px >= 161, blind  # over the car's front and on over the stop line
+    (checked,) = fill_lane(car[0], [rear], next_gray=car[1])
+    assert checked.x1_px <= body[2] + 1, (checked, body)
+    with pytest.raises(ValueError, match=r"next_gray: expected the shape of gray \(160, 240\), got \(4, 4\)"):
+        fill_lane(car[0], [rear], next_gray=np.zeros((4, 4)))
+
+
 def test_a_box_that_holds_its_whole_car_stays_as_it_is():
     g0 = _ground(2)
     frame = _paint(g0, 120, 80, 30, 14, 0.0, 190)
