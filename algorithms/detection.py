@@ -1730,7 +1730,6 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, next_gray: np.nd
         raise ValueError(f"next_gray: expected the shape of gray {g.shape}, got {nxt.shape}")
     if not max_rel >= 0:
         raise ValueError(f"max_rel: expected a number >= 0, got {max_rel!r}")
-    h, w = g.shape
     out = []
     for d in detections:
         grown = _lane_box(g, nxt, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), d.u_px, d.v_px, max_rel=max_rel,
@@ -1779,10 +1778,12 @@ def _lane_box(g: np.ndarray, nxt: np.ndarray | None, box, u: float, v: float, *,
     xb, yb = min(w - 1, int(math.ceil(x1 + reach * abs(du)))), min(h - 1, int(math.ceil(y1 + reach * abs(dv))))
     body, s, t, xs, ys = along_across(xa, ya, xb, yb)
     lane = (t >= t_lo) & (t <= t_hi)
-    line = np.floor(s[lane]).astype(np.int64)
-    first = int(line.min())
-    total = np.bincount(line - first)
-    share = np.bincount(line - first, weights=body[lane].astype(np.float64), minlength=len(total)) / np.maximum(total, 1)
+    lines = np.floor(s).astype(np.int64)
+    first = int(lines[lane].min())
+    lines -= first  # each pixel's line across the motion, 0 the lane's first
+    total = np.bincount(lines[lane])
+    share = np.bincount(lines[lane], weights=body[lane].astype(np.float64), minlength=len(total))
+    share /= np.maximum(total, 1)
     lo, hi = int(math.floor(s_lo)) - first, int(math.ceil(s_hi)) - first
     end = hi
     while end + 1 < len(share) and share[end + 1] >= line_frac and end + 1 - lo <= max_len:
@@ -1792,7 +1793,6 @@ def _lane_box(g: np.ndarray, nxt: np.ndarray | None, box, u: float, v: float, *,
         start -= 1
     if nxt is not None:
         # the new end must move with the vehicle: frame t+1 at the motion explains the lines around it better
-        lines = np.floor(s).astype(np.int64) - first
         a = g[ya:yb + 1, xa:xb + 1].astype(np.float32)
         b = nxt[ya:yb + 1, xa:xb + 1].astype(np.float32)
         gain = np.abs(b - a) - np.abs(_shifted(b, u, v) - a)
@@ -1805,7 +1805,7 @@ def _lane_box(g: np.ndarray, nxt: np.ndarray | None, box, u: float, v: float, *,
         start = start if start == lo or moves(start) else lo
     if start == lo and end == hi:
         return None
-    taken = lane & body & (np.floor(s).astype(np.int64) - first >= start) & (np.floor(s).astype(np.int64) - first <= end)
+    taken = lane & body & (lines >= start) & (lines <= end)
     return (min(x0, int(xs[taken].min())), min(y0, int(ys[taken].min())), max(x1, int(xs[taken].max())),
             max(y1, int(ys[taken].max())))
 
