@@ -1732,9 +1732,9 @@ def fill_lane(gray: np.ndarray, detections: list[Detection], *, next_gray: np.nd
         raise ValueError(f"max_rel: expected a number >= 0, got {max_rel!r}")
     out = []
     for d in detections:
-        grown = _lane_box(g, nxt, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), d.u_px, d.v_px, max_rel=max_rel,
-                          line_frac=line_frac, road_k=road_k, ring_px=ring_px, gain_grey=gain_grey) \
-            if max_rel > 0 else None
+        grown = None if max_rel == 0 else _lane_box(
+            g, nxt, (d.x0_px, d.y0_px, d.x1_px, d.y1_px), d.u_px, d.v_px, max_rel=max_rel, line_frac=line_frac,
+            road_k=road_k, ring_px=ring_px, gain_grey=gain_grey)
         if grown is None:
             out.append(d)
             continue
@@ -1791,6 +1791,8 @@ def _lane_box(g: np.ndarray, nxt: np.ndarray | None, box, u: float, v: float, *,
     start = lo
     while start - 1 >= 0 and share[start - 1] >= line_frac and end - (start - 1) <= max_len:
         start -= 1
+    if start == lo and end == hi:
+        return None
     if nxt is not None:
         # the new end must move with the vehicle: frame t+1 at the motion explains the lines around it better
         a = g[ya:yb + 1, xa:xb + 1].astype(np.float32)
