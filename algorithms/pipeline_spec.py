@@ -356,6 +356,7 @@ class DetectionSpec(_Section):
     change_enough: float = DETECTION_DEFAULTS["change_enough"]
     box_margin_rel: float = DETECTION_DEFAULTS["box_margin_rel"]
     box_split_rel: float = DETECTION_DEFAULTS["box_split_rel"]
+    leftover_rel: float = DETECTION_DEFAULTS["leftover_rel"]
     max_area_halo_rel: float = DETECTION_DEFAULTS["max_area_halo_rel"]
     min_box_m2: Any = DETECTION_DEFAULTS["min_box_m2"]
     gap_split_width_px: StrictInt = DETECTION_DEFAULTS["gap_split_width_px"]

@@ -930,3 +930,63 @@ def test_a_bad_wide_search_radius_is_rejected_naming_it():
         detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), frames=(z, z), refine_wide_px=4.5)
     with pytest.raises(PipelineError, match=r"detection.refine_wide_px"):
         Pipeline.from_dict({**BASE, "detection": {"refine_wide_px": -1}})
+
+
+def test_a_slow_car_close_behind_a_fast_one_is_found_by_leftover_rel_and_a_halo_is_not():
+    # a queue: a 24 x 12 px car 3 px a frame to the right and, 4 px behind it in its lane, one at 1 px a frame. The
+    # flow's smoothing joins them into one region; its 2-means does not split 1 from 3 px a frame (split_px +
+    # split_rel * 3 = 2.8), and core_rel leaves the slow car out as the fast one's halo
+    rng = np.random.default_rng(31)
+    g = _ground(rng)
+    roofs = [cv2.GaussianBlur(rng.uniform(0, 255, (12, 24)).astype(np.float32), (0, 0), 1.0) for _ in range(2)]
+
+    def scene(cars):
+        out = []
+        for k in range(3):  # frames t-1, t, t+1
+            f = g.copy()
+            for x, y, speed, roof in cars:
+                f[y:y + 12, x + speed * (k - 1):x + speed * (k - 1) + 24] = roof
+            out.append(f)
+        return dict(frames=(out[1], out[2]), prev_frame=out[0], parallax_min_fraction=0.0)
+
+    rear, front = (52, 54, 75, 65), (80, 54, 103, 65)
+    flow = _field(rng, [(54, 66, 52, 76, (1.0, 0.0)), (54, 66, 80, 104, (3.0, 0.0))], blur=2.0)
+    valid = np.ones((H, W), bool)
+    kw = scene([(52, 54, 1, roofs[0]), (80, 54, 3, roofs[1])])
+    (one,) = detect_vehicles(flow, valid, **kw)  # the default: the fast car alone
+    assert box_iou(one, front) >= 0.7, one
+    two = detect_vehicles(flow, valid, leftover_rel=0.2, **kw)
+    assert len(two) == 2, two
+    for car, speed in ((rear, 1.0), (front, 3.0)):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
+        assert (d.u_px, d.v_px) == pytest.approx((speed, 0.0), abs=0.5)
+    # the fast car alone, its motion spread by the flow over the ground behind it at 1 px a frame: that halo moved
+    # nothing, and stays no mover
+    alone = scene([(80, 54, 3, roofs[1])])
+    (d,) = detect_vehicles(flow, valid, leftover_rel=0.2, **alone)
+    assert box_iou(d, front) >= 0.7, d
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="leftover_rel"):
+            detect_vehicles(flow, valid, leftover_rel=bad)
+
+
+def test_left_over_keeps_the_parts_in_the_lane_of_the_mover_found():
+    from algorithms.detection import _left_over, _Region
+
+    def block(x0, y0, x1, y1):
+        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        return ys.ravel(), xs.ravel()
+
+    # a region: a mover's box (20..43 x 50..61, moving +x), 200 px behind it in its lane, 200 px beside it (no lane)
+    parts = [block(20, 50, 43, 61), block(0, 52, 15, 63), block(24, 70, 43, 79)]
+    ys, xs = (np.concatenate(a) for a in zip(*parts))
+    region = _Region(ys, xs, np.zeros((len(ys), 2), np.float32))
+    found = [(20, 50, 43, 61, 3.0, 0.0)]
+    (behind,) = _left_over(region, found, 0.1, 50)
+    assert (behind.box(), len(behind.ys)) == ((0, 52, 15, 63), 192)
+    # the same parts beside a mover that moves along y: now the one at x 24..43 lies in its lane
+    (below,) = _left_over(region, [(20, 50, 43, 61, 0.0, 2.0)], 0.1, 50)
+    assert below.box() == (24, 70, 43, 79)
+    # a part under the fraction of the region, or a region no box overlaps, gives none
+    assert _left_over(region, found, 0.5, 50) == []
+    assert _left_over(region, [(120, 50, 143, 61, 3.0, 0.0)], 0.1, 50) == []
