@@ -265,6 +265,18 @@ def _paint_car(img, x0, y0, length, width, *, roof=150.0, outline=30.0):
     return out
 
 
+def _textured(g, cars):
+    """Frames t-1, t, t+1 (``frames``, ``prev_frame``) of ground ``g`` with textured ``roof`` patches at ``(x, y)`` in
+    frame t, each moving ``speed`` (integer px) a frame to the right: ``cars`` ``(x, y, speed, roof)``."""
+    out = []
+    for k in (-1, 0, 1):
+        f = g.copy()
+        for x, y, speed, roof in cars:
+            f[y:y + roof.shape[0], x + speed * k:x + speed * k + roof.shape[1]] = roof
+        out.append(f)
+    return dict(frames=(out[1], out[2]), prev_frame=out[0])
+
+
 def test_a_slow_car_with_a_uniform_roof_gets_its_whole_box_not_one_edge():
     # 40 x 16 px, 1.5 px a frame to the right: only its front and rear edges change, the roof between does not
     rng = np.random.default_rng(6)
@@ -698,14 +710,7 @@ def test_two_cars_one_smoothed_flow_region_joined_are_split_by_box_split_rel():
     roofs = [cv2.GaussianBlur(rng.uniform(0, 255, (12, 20)).astype(np.float32), (0, 0), 1.0) for _ in range(2)]
 
     def scene(cars):
-        out = []
-        for k in range(3):  # frames t-1, t, t+1
-            f = g.copy()
-            for (x, y), roof in zip(cars, roofs):
-                h, w = min(12, roof.shape[0]), min(20, roof.shape[1])
-                f[y:y + h, x + 3 * k - 3:x + 3 * k - 3 + w] = roof[:h, :w]
-            out.append(f)
-        return dict(frames=(out[1], out[2]), prev_frame=out[0])
+        return _textured(g, [(x, y, 3, roof) for (x, y), roof in zip(cars, roofs)])
 
     flow = _field(rng, [(44, 72, 32, 102, (3.0, 0.0))], blur=1.5)
     valid = np.ones((H, W), bool)
@@ -941,13 +946,7 @@ def test_a_slow_car_close_behind_a_fast_one_is_found_by_leftover_rel_and_a_halo_
     roofs = [cv2.GaussianBlur(rng.uniform(0, 255, (12, 24)).astype(np.float32), (0, 0), 1.0) for _ in range(2)]
 
     def scene(cars):
-        out = []
-        for k in range(3):  # frames t-1, t, t+1
-            f = g.copy()
-            for x, y, speed, roof in cars:
-                f[y:y + 12, x + speed * (k - 1):x + speed * (k - 1) + 24] = roof
-            out.append(f)
-        return dict(frames=(out[1], out[2]), prev_frame=out[0], parallax_min_fraction=0.0)
+        return dict(parallax_min_fraction=0.0, **_textured(g, cars))
 
     rear, front = (52, 54, 75, 65), (80, 54, 103, 65)
     flow = _field(rng, [(54, 66, 52, 76, (1.0, 0.0)), (54, 66, 80, 104, (3.0, 0.0))], blur=2.0)
