@@ -395,15 +395,20 @@ class _Region:
             return [self]
         speed = np.hypot(self.w[:, 0], self.w[:, 1])
         keep = speed >= rel * np.percentile(speed, 90)
-        x0, y0, x1, y1 = self.box()
-        img = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
-        img[self.ys[keep] - y0, self.xs[keep] - x0] = 1
-        n, labels = cv2.connectedComponents(img, connectivity=8)
-        ys, xs, w = self.ys[keep], self.xs[keep], self.w[keep]
-        lab = labels[ys - y0, xs - x0]
-        parts = [_Region(ys[lab == j], xs[lab == j], w[lab == j]) for j in range(1, n)]
-        parts = [q for q in parts if len(q.ys) >= min_area_px]
-        return parts or [self]
+        return _parts(self.ys[keep], self.xs[keep], self.w[keep], min_area_px) or [self]
+
+
+def _parts(ys: np.ndarray, xs: np.ndarray, w: np.ndarray, min_px: float) -> list[_Region]:
+    """The 8-connected parts of the pixels ``(ys, xs)`` (flows ``w``) that hold at least ``min_px`` of them."""
+    if len(ys) == 0:
+        return []
+    x0, y0 = int(xs.min()), int(ys.min())
+    img = np.zeros((int(ys.max()) - y0 + 1, int(xs.max()) - x0 + 1), np.uint8)
+    img[ys - y0, xs - x0] = 1
+    n, labels = cv2.connectedComponents(img, connectivity=8)
+    lab = labels[ys - y0, xs - x0]
+    parts = [_Region(ys[lab == j], xs[lab == j], w[lab == j]) for j in range(1, n)]
+    return [q for q in parts if len(q.ys) >= min_px]
 
 
 def _left_over(region: _Region, found, rel: float, min_area_px: int) -> list[_Region]:
@@ -422,26 +427,19 @@ def _left_over(region: _Region, found, rel: float, min_area_px: int) -> list[_Re
     need = max(min_area_px, rel * len(region.ys))
     if out.sum() < need:
         return []
-    ys, xs, w = region.ys[out], region.xs[out], region.w[out]
-    x0, y0 = int(xs.min()), int(ys.min())
-    img = np.zeros((int(ys.max()) - y0 + 1, int(xs.max()) - x0 + 1), np.uint8)
-    img[ys - y0, xs - x0] = 1
-    n, labels = cv2.connectedComponents(img, connectivity=8)
-    lab = labels[ys - y0, xs - x0]
-    parts = [_Region(ys[lab == j], xs[lab == j], w[lab == j]) for j in range(1, n)]
 
     def in_lane(q: _Region) -> bool:
         for bx0, by0, bx1, by1, u, v in found:
-            speed = math.hypot(u, v)
-            if not speed > 0:
+            ext = box_extents(bx1 - bx0 + 1, by1 - by0 + 1, u, v)
+            if ext is None:
                 continue
-            nx, ny = -v / speed, u / speed  # across the motion
-            across = abs((q.xs.mean() - (bx0 + bx1) / 2) * nx + (q.ys.mean() - (by0 + by1) / 2) * ny)
-            if across <= ((bx1 - bx0 + 1) * abs(nx) + (by1 - by0 + 1) * abs(ny)) / 2:
+            speed = math.hypot(u, v)  # the part's centre from the box's, across the motion
+            across = abs(-(q.xs.mean() - (bx0 + bx1) / 2) * v + (q.ys.mean() - (by0 + by1) / 2) * u) / speed
+            if across <= ext[1] / 2:
                 return True
         return False
 
-    return [q for q in parts if len(q.ys) >= need and in_lane(q)]
+    return [q for q in _parts(region.ys[out], region.xs[out], region.w[out], need) if in_lane(q)]
 
 
 def _check_keys(params: dict) -> dict:
