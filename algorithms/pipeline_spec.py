@@ -463,6 +463,7 @@ class MultiSpec(_Section):
     min_trend_f: float = MULTI_DEFAULTS["min_trend_f"]
     partial_rel: float = MULTI_DEFAULTS["partial_rel"]
     partial_abreast: StrictBool = MULTI_DEFAULTS["partial_abreast"]
+    abreast_shared: StrictBool = MULTI_DEFAULTS["abreast_shared"]
     death_misses: StrictInt = MULTI_DEFAULTS["death_misses"]
     coast_gate_growth: float = MULTI_DEFAULTS["coast_gate_growth"]
     report_coasting: StrictBool = MULTI_DEFAULTS["report_coasting"]

@@ -856,3 +856,43 @@ def test_a_car_found_as_its_two_ends_then_whole_is_one_track_when_one_end_s_trac
     assert len({r["track_id"] for r in run(merge_covered=False)}) == 2
     with pytest.raises(ValueError, match="merge_covered: expected true/false"):
         MultiTargetTracker(merge_covered="yes")
+
+
+def test_two_slow_cars_abreast_that_the_detector_joins_now_and_then_keep_one_track_each():
+    # two 30 x 14 px cars in adjacent lanes, 17 px apart across their motion, creep at 0.5 px a frame (a queue
+    # pulling away from a light): the detector finds them apart but joins them into one 30 x 31 px box every 6th
+    # frame. A tentative track ends at its first miss (birth_gap 0), and a car needs 15 frames to travel the quarter
+    # of its length that confirms it: without abreast_shared the joined box goes to one car's track and the other's
+    # tentative track ends, again and again. With it the joined box holds both tracks' centres, abreast, and is
+    # neither's: both cars are tracked from the first frame, each under one identity
+    def run(**kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(40):
+            x = 60.0 + 0.5 * t
+            dets = ([_box_det(x, 48.5, 30, 31, 0.5)] if t % 6 == 5 else
+                    [_box_det(x, 40.0, 30, 14, 0.5), _box_det(x, 57.0, 30, 14, 0.5)])
+            trk.step(t, dets)
+        rows = [r for r in trk.rows() if not np.isnan(r["bbox_x0_px"])]
+        return {lane: {r["track_id"] for r in rows if abs((r["bbox_y0_px"] + r["bbox_y1_px"]) / 2 - lane) < 3}
+                for lane in (40.0, 57.0)}, rows
+
+    ids, rows = run()
+    assert not ids[40.0] and not ids[57.0] and not rows  # neither car ever confirmed
+    ids, rows = run(abreast_shared=True)
+    assert len(ids[40.0]) == 1 and len(ids[57.0]) == 1 and ids[40.0] != ids[57.0]
+    for lane in (40.0, 57.0):  # each car boxed in every frame it was found apart in, its rows from frame 0 on
+        frames = {r["frame"] for r in rows if r["track_id"] in ids[lane]}
+        assert {t for t in range(39) if t % 6 != 5} <= frames
+    # nose to tail the joined box holds two tracks one behind the other: not abreast, it goes to one of them as before
+    trk_rows = []
+    for shared in (False, True):
+        trk = MultiTargetTracker(abreast_shared=shared)
+        for t in range(40):
+            x = 60.0 + 1.5 * t
+            dets = ([_box_det(x + 18, 40.0, 66, 14, 1.5)] if t in (15, 25) else
+                    [_box_det(x, 40.0, 30, 14, 1.5), _box_det(x + 36, 40.0, 30, 14, 1.5)])
+            trk.step(t, dets)
+        trk_rows.append(trk.rows())
+    assert trk_rows[0] == trk_rows[1]
+    with pytest.raises(ValueError, match="abreast_shared: expected true/false"):
+        MultiTargetTracker(abreast_shared="yes")
