@@ -667,13 +667,15 @@ class _Track:
 #   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
 #   the default; on in dis (figures there);
 # abreast_shared: a detection whose box holds the predicted centres of two tracks that lie abreast (side by side
-#   across their motion, _abreast) is two vehicles in adjacent lanes that the detector joined in that frame (a queue
+#   across their motion, _abreast; their boxes long along the same image axis) is two vehicles in adjacent lanes that the detector joined in that frame (a queue
 #   creeping away from a light: their flows agree and the road between them is narrower than a car); it is neither
 #   track's and starts none, and the two tracks miss nothing in that frame (a confirmed one is held or coasts; a
 #   tentative one, which birth_gap 0 ends at its first miss, lives on). Without it the joined box went to one car's
 #   track and the other car's tentative track ended, again each time it was joined (the world at seed 3: two cars
-#   abreast at 0.5 px a frame, the upper one's tentative tracks ended at 14, 2, 2 and 11 hits). False: off, the
-#   default; on in dis (figures there);
+#   abreast at 0.5 px a frame, the upper one's tentative tracks ended at 14, 2, 2 and 11 hits). The boxes' axis keeps
+#   a truck's whole box from being taken for two vehicles where a part of it, split off crosswise, had a tentative
+#   track beside a car's (pyramidal-lk on the world at seed 1: that part then followed the truck for 98 frames, each a
+#   false positive). False: off, the default; on in dis, pyramidal-hs and pyramidal-lk (figures there);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -852,6 +854,12 @@ def _abreast(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> bool:
     dx, dy = float(b[0] - a[0]), float(b[1] - a[1])
     along, across = abs(dx * mu + dy * mv) / speed, abs(dy * mu - dx * mv) / speed
     return across >= 0.5 * ext[1] and along < 0.5 * ext[0]
+
+
+def _lengthwise_alike(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the boxes ``a`` and ``b`` ``(cx, cy, w, h)`` are long along the same image axis: two vehicles driving
+    side by side are (a car beside the box of a truck's part that its flow split off crosswise is not)."""
+    return bool((a[2] >= a[3]) == (b[2] >= b[3]))
 
 
 def _completes_over_abreast(box: np.ndarray, full: np.ndarray, v: np.ndarray, boxes: np.ndarray, own: int) -> bool:
@@ -1156,8 +1164,8 @@ class MultiTargetTracker:
         """The detections that hold two tracks side by side, and those tracks (``abreast_shared``).
 
         A detection holds a track when the track's predicted centre lies in its box; two tracks it holds that lie
-        abreast (:func:`_abreast`, across their mean motion) are two vehicles in adjacent lanes that the detector
-        joined in this frame (a queue at a light: their flows agree, and the road between them is narrower than a
+        abreast (:func:`_abreast`, across their mean motion), their boxes long along the same image axis
+        (:func:`_lengthwise_alike`), are two vehicles in adjacent lanes that the detector joined in this frame (a queue at a light: their flows agree, and the road between them is narrower than a
         car). Such a detection is neither track's, nor a new one's; the tracks it holds are not detected in the
         frame and miss nothing (a tentative one lives on)."""
         shared, excused = set(), set()
@@ -1167,7 +1175,7 @@ class MultiTargetTracker:
         for c, d in enumerate(boxes):
             held = np.flatnonzero((np.abs(preds[:, 0] - d[0]) <= d[2] / 2) & (np.abs(preds[:, 1] - d[1]) <= d[3] / 2))
             pairs = [(a, b) for k, a in enumerate(held) for b in held[k + 1:]
-                     if _abreast(preds[a], preds[b], (vel[a] + vel[b]) / 2)]
+                     if _lengthwise_alike(preds[a], preds[b]) and _abreast(preds[a], preds[b], (vel[a] + vel[b]) / 2)]
             if pairs:
                 shared.add(c)
                 excused.update(int(i) for pair in pairs for i in pair)

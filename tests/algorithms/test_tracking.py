@@ -883,16 +883,19 @@ def test_two_slow_cars_abreast_that_the_detector_joins_now_and_then_keep_one_tra
     for lane in (40.0, 57.0):  # each car boxed in every frame it was found apart in, its rows from frame 0 on
         frames = {r["frame"] for r in rows if r["track_id"] in ids[lane]}
         assert {t for t in range(39) if t % 6 != 5} <= frames
-    # nose to tail the joined box holds two tracks one behind the other: not abreast, it goes to one of them as before
-    trk_rows = []
-    for shared in (False, True):
+    # nose to tail the joined box holds two tracks one behind the other: not abreast, it goes to one of them as before;
+    # nor is a box long across the lanes beside a car's (a truck's part split off crosswise) a second vehicle abreast
+    def rows_with(shared, apart, joined, t_joined):
         trk = MultiTargetTracker(abreast_shared=shared)
         for t in range(40):
             x = 60.0 + 1.5 * t
-            dets = ([_box_det(x + 18, 40.0, 66, 14, 1.5)] if t in (15, 25) else
-                    [_box_det(x, 40.0, 30, 14, 1.5), _box_det(x + 36, 40.0, 30, 14, 1.5)])
-            trk.step(t, dets)
-        trk_rows.append(trk.rows())
-    assert trk_rows[0] == trk_rows[1]
+            trk.step(t, [_box_det(*b(x), 1.5) for b in (joined if t in t_joined else apart)])
+        return trk.rows()
+
+    nose_to_tail = ([lambda x: (x, 40.0, 30, 14), lambda x: (x + 36, 40.0, 30, 14)], [lambda x: (x + 18, 40.0, 66, 14)])
+    crosswise = ([lambda x: (x, 40.0, 30, 14), lambda x: (x, 57.0, 12, 22)], [lambda x: (x, 49.0, 30, 32)])
+    for apart, joined in (nose_to_tail, crosswise):
+        assert rows_with(False, apart, joined, (15, 25)) == rows_with(True, apart, joined, (15, 25))
+    assert rows_with(False, *crosswise, range(5, 40, 6)) == rows_with(True, *crosswise, range(5, 40, 6))
     with pytest.raises(ValueError, match="abreast_shared: expected true/false"):
         MultiTargetTracker(abreast_shared="yes")
