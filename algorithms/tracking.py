@@ -666,16 +666,17 @@ class _Track:
 #   track's size then starts again from the detection's (BoxKalman.restart_size; filtered, a 47 px size took 30
 #   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
 #   the default; on in dis (figures there);
-# abreast_shared: a detection whose box holds the predicted centres of two tracks that lie abreast (side by side
-#   across their motion, _abreast; their boxes long along the same image axis) is two vehicles in adjacent lanes that the detector joined in that frame (a queue
-#   creeping away from a light: their flows agree and the road between them is narrower than a car); it is neither
-#   track's and starts none, and the two tracks miss nothing in that frame (a confirmed one is held or coasts; a
-#   tentative one, which birth_gap 0 ends at its first miss, lives on). Without it the joined box went to one car's
-#   track and the other car's tentative track ended, again each time it was joined (the world at seed 3: two cars
-#   abreast at 0.5 px a frame, the upper one's tentative tracks ended at 14, 2, 2 and 11 hits). The boxes' axis keeps
-#   a truck's whole box from being taken for two vehicles where a part of it, split off crosswise, had a tentative
-#   track beside a car's (pyramidal-lk on the world at seed 1: that part then followed the truck for 98 frames, each a
-#   false positive). False: off, the default; on in dis, pyramidal-hs and pyramidal-lk (figures there);
+# abreast_shared: a detection whose box holds the predicted centres of two tracks that lie abreast (side by side across
+#   their motion, _abreast; their boxes long along the same image axis) is two vehicles in adjacent lanes that the
+#   detector joined in that frame (a queue creeping away from a light: their flows agree and the road between them is
+#   narrower than a car); it is neither track's and starts none, and the two tracks miss nothing in that frame (a
+#   confirmed one is held or coasts; a tentative one, which birth_gap 0 ends at its first miss, lives on). Without it
+#   the joined box went to one car's track and the other car's tentative track ended, again each time it was joined (the
+#   world at seed 3: two cars abreast at 0.5 px a frame, the upper one's tentative tracks ended at 14, 2, 2 and 11
+#   hits). The boxes' axis keeps a truck's whole box from being taken for two vehicles where a part of it, split off
+#   crosswise, had a tentative track beside a car's (pyramidal-lk on the world at seed 1: that part then followed the
+#   truck for 98 frames, each a false positive). False: off, the default; on in dis, pyramidal-hs and pyramidal-lk
+#   (figures there);
 # death_misses: consecutive frames without a detection after which a confirmed track ends; it coasts on its
 #   prediction meanwhile (tree crowns, an overpass: 10 frames are 1 s at 10 fps, 0.33 s at 30 fps);
 # coast_gate_growth: the gate grows by this fraction of gate_px per frame of coasting;
@@ -1165,9 +1166,10 @@ class MultiTargetTracker:
 
         A detection holds a track when the track's predicted centre lies in its box; two tracks it holds that lie
         abreast (:func:`_abreast`, across their mean motion), their boxes long along the same image axis
-        (:func:`_lengthwise_alike`), are two vehicles in adjacent lanes that the detector joined in this frame (a queue at a light: their flows agree, and the road between them is narrower than a
-        car). Such a detection is neither track's, nor a new one's; the tracks it holds are not detected in the
-        frame and miss nothing (a tentative one lives on)."""
+        (:func:`_lengthwise_alike`), are two vehicles in adjacent lanes that the detector joined in this frame (a queue
+        at a light: their flows agree, and the road between them is narrower than a car). Such a detection is neither
+        track's, nor a new one's; the tracks it holds are not detected in the frame and miss nothing (a tentative one
+        lives on)."""
         shared, excused = set(), set()
         if len(preds) < 2 or not len(boxes):
             return shared, excused
