@@ -865,33 +865,30 @@ def test_two_slow_cars_abreast_that_the_detector_joins_now_and_then_keep_one_tra
     # of its length that confirms it: without abreast_shared the joined box goes to one car's track and the other's
     # tentative track ends, again and again. With it the joined box holds both tracks' centres, abreast, and is
     # neither's: both cars are tracked from the first frame, each under one identity
-    def run(**kw):
-        trk = MultiTargetTracker(**kw)
+    def rows_with(shared, apart, joined, t_joined, speed=1.5):
+        """Rows of 40 frames of boxes (cx, cy, w, h of the leading edge x) moving at ``speed`` px a frame."""
+        trk = MultiTargetTracker(abreast_shared=shared)
         for t in range(40):
-            x = 60.0 + 0.5 * t
-            dets = ([_box_det(x, 48.5, 30, 31, 0.5)] if t % 6 == 5 else
-                    [_box_det(x, 40.0, 30, 14, 0.5), _box_det(x, 57.0, 30, 14, 0.5)])
-            trk.step(t, dets)
-        rows = [r for r in trk.rows() if not np.isnan(r["bbox_x0_px"])]
-        return {lane: {r["track_id"] for r in rows if abs((r["bbox_y0_px"] + r["bbox_y1_px"]) / 2 - lane) < 3}
-                for lane in (40.0, 57.0)}, rows
+            x = 60.0 + speed * t
+            trk.step(t, [_box_det(*b(x), speed) for b in (joined if t in t_joined else apart)])
+        return trk.rows()
 
-    ids, rows = run()
+    def ids_by_lane(rows):
+        return {lane: {r["track_id"] for r in rows if abs((r["bbox_y0_px"] + r["bbox_y1_px"]) / 2 - lane) < 3}
+                for lane in (40.0, 57.0)}
+
+    abreast = ([lambda x: (x, 40.0, 30, 14), lambda x: (x, 57.0, 30, 14)], [lambda x: (x, 48.5, 30, 31)])
+    rows = [r for r in rows_with(False, *abreast, range(5, 40, 6), speed=0.5) if not np.isnan(r["bbox_x0_px"])]
+    ids = ids_by_lane(rows)
     assert not ids[40.0] and not ids[57.0] and not rows  # neither car ever confirmed
-    ids, rows = run(abreast_shared=True)
+    rows = [r for r in rows_with(True, *abreast, range(5, 40, 6), speed=0.5) if not np.isnan(r["bbox_x0_px"])]
+    ids = ids_by_lane(rows)
     assert len(ids[40.0]) == 1 and len(ids[57.0]) == 1 and ids[40.0] != ids[57.0]
     for lane in (40.0, 57.0):  # each car boxed in every frame it was found apart in, its rows from frame 0 on
         frames = {r["frame"] for r in rows if r["track_id"] in ids[lane]}
         assert {t for t in range(39) if t % 6 != 5} <= frames
     # nose to tail the joined box holds two tracks one behind the other: not abreast, it goes to one of them as before;
     # nor is a box long across the lanes beside a car's (a truck's part split off crosswise) a second vehicle abreast
-    def rows_with(shared, apart, joined, t_joined):
-        trk = MultiTargetTracker(abreast_shared=shared)
-        for t in range(40):
-            x = 60.0 + 1.5 * t
-            trk.step(t, [_box_det(*b(x), 1.5) for b in (joined if t in t_joined else apart)])
-        return trk.rows()
-
     nose_to_tail = ([lambda x: (x, 40.0, 30, 14), lambda x: (x + 36, 40.0, 30, 14)], [lambda x: (x + 18, 40.0, 66, 14)])
     crosswise = ([lambda x: (x, 40.0, 30, 14), lambda x: (x, 57.0, 12, 22)], [lambda x: (x, 49.0, 30, 32)])
     for apart, joined in (nose_to_tail, crosswise):
