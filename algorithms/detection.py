@@ -104,7 +104,7 @@ from algorithms.registry import register_stage
 
 __all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "explained_in_box",
            "shadow_bands", "trim_cast_shadows", "shadow_lean", "clip_shadow_direction", "trim_toward",
-           "image_yaw_rad", "turn", "box_extents", "moves_lengthwise", "fill_lane"]
+           "image_yaw_rad", "turn", "box_extents", "moves_lengthwise", "fill_lane", "drop_parts_inside"]
 
 
 class Detection(NamedTuple):
@@ -197,6 +197,12 @@ class Detection(NamedTuple):
 #   method follows leaves parts of different speeds, and a region where the flow failed): with the frames
 #   their union is judged on the motion of each part that explains the change best, without them the largest
 #   stays; and of two detections whose boxes overlap this much the better-explained one stays (1 keeps all);
+# nms_inside: in the pipeline, last (after the long pair's boxes are merged in, the shadows trimmed, the lanes filled
+#   and the sizes judged), a detection whose box lies this share or more inside a larger detection's box, moving with
+#   it (merge_px, merge_rel), is a part of that mover and is dropped (drop_parts_inside): a small box inside a large
+#   one overlaps it by little IoU (a bus's rear edge, 27 x 17 px, 70 % inside its 62 x 85 px box: IoU 0.04, under
+#   nms_iou), and two parts of a uniform roof grown along their lane (lane_fill_rel) end as one box twice. 0: off, the
+#   default; figures in dis.yaml;
 # box_from_frames: the box is that of the pixels the region's motion explains better than the ground's
 #   (_moved_box: the vehicle without the flow's halo; needs the frames; a region with fewer than min_area_px
 #   such pixels is no mover: flow noise, an edge the registration left), else of the region's fast core;
@@ -354,7 +360,7 @@ DETECTION_DEFAULTS = {
     "parallax_min_fraction": 0.05, "parallax_angle_deg": 20.0, "parallax_speed_rel": 1.5,
     "min_explained": 0.2, "min_area_m2": 3.0, "max_area_m2": 120.0, "core_rel": 0.5, "ground_model": "affine", "noise_k": 3.0, "border_px": 8, "refine_px": 12, "nms_iou": 0.1, "box_from_frames": True,
     "box_join": 0.5, "box_three_frames": True, "box_reach_px": 48, "box_reach_join": 0.2, "box_reach_parts": False,
-    "box_reach_road_k": 1.0,
+    "box_reach_road_k": 1.0, "nms_inside": 0.0,
     "change_noise_k": 5.0, "change_enough": 0.5, "box_margin_rel": 1.0, "box_split_rel": 0.0, "leftover_rel": 0.0,
     "max_area_halo_rel": 4.0, "min_box_m2": 4.0, "refine_wide_px": 0,
     "gap_split_width_px": 0, "gap_split_length_px": 0, "gap_split_road_k": 3.0, "gap_split_valley": 0.12,
@@ -466,7 +472,7 @@ def _check_keys(params: dict) -> dict:
     if not p["max_area_halo_rel"] >= 1:
         raise ValueError(f"max_area_halo_rel: expected a number >= 1, got {p['max_area_halo_rel']!r}")
     for k in ("min_explained", "box_join", "box_reach_join", "change_enough", "gap_split_valley", "shadow_vote",
-              "shadow_ratio_hi", "leftover_rel"):
+              "shadow_ratio_hi", "leftover_rel", "nms_inside"):
         if not p[k] <= 1:
             raise ValueError(f"{k}: expected a fraction in [0, 1], got {p[k]!r}")
     if not p["shadow_trim_rel"] < 0.5:
@@ -1412,6 +1418,32 @@ def _too_small_box(box, p: dict, gsd_m_per_px: float | None, h: int, w: int) -> 
 def _box_iou(a: Detection, b: Detection) -> float:
     """IoU of two detections' inclusive pixel boxes."""
     return _iou_xyxy((a.x0_px, a.y0_px, a.x1_px, a.y1_px), (b.x0_px, b.y0_px, b.x1_px, b.y1_px))
+
+
+def drop_parts_inside(detections: list[Detection], share: float, *, merge_px: float = DETECTION_DEFAULTS["merge_px"],
+                      merge_rel: float = DETECTION_DEFAULTS["merge_rel"]) -> list[Detection]:
+    """``detections`` without those whose box lies ``share`` or more inside a larger detection's box and whose motion
+    agrees with that one's as the regions of one mover agree (within ``merge_px + merge_rel`` times the faster
+    speed): a part of that mover (``nms_inside``). A box inside a larger one of another motion (a car in a region a
+    wrong flow joined to it) stays.
+
+    Of two boxes of one area (two parts of a roof grown over it by the lane fill end as the same box), the later
+    goes. A box inside a larger one that was itself dropped still goes. Order is kept.
+    """
+    boxes = [(d.x0_px, d.y0_px, d.x1_px, d.y1_px) for d in detections]
+    area = [(x1 - x0 + 1) * (y1 - y0 + 1) for x0, y0, x1, y1 in boxes]
+
+    def part_of(i: int, j: int) -> bool:  # i's box lies share or more inside j's, and i moves with j
+        if not (area[j] > area[i] or (area[j] == area[i] and j < i)):
+            return False
+        iw = min(boxes[i][2], boxes[j][2]) - max(boxes[i][0], boxes[j][0]) + 1
+        ih = min(boxes[i][3], boxes[j][3]) - max(boxes[i][1], boxes[j][1]) + 1
+        a, b = detections[i], detections[j]
+        speed = max(math.hypot(a.u_px, a.v_px), math.hypot(b.u_px, b.v_px))
+        return (iw > 0 and ih > 0 and iw * ih >= share * area[i]
+                and math.hypot(a.u_px - b.u_px, a.v_px - b.v_px) <= merge_px + merge_rel * speed)
+
+    return [d for i, d in enumerate(detections) if not any(part_of(i, j) for j in range(len(detections)))]
 
 
 def _along(d: Detection, gv, bound: float, p: dict) -> bool:

@@ -49,8 +49,8 @@ from algorithms.pipeline_spec import (COMPENSATION_MODELS, PipelineError, builti
                                       resolve_pipeline)
 from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
-from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, fill_lane, ground_fit_at,
-                                  image_yaw_rad, shadow_lean, trim_toward, turn)
+from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, drop_parts_inside, fill_lane,
+                                  ground_fit_at, image_yaw_rad, shadow_lean, trim_toward, turn)
 from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
 from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
@@ -653,6 +653,10 @@ class Pipeline:
                     keep = relative_size_keep(dets, area, speed, small_rel=size_cfg["small_rel"],
                                               slow_rel=size_cfg["slow_rel"], large_rel=size_cfg["large_rel"])
                     dets = [d for d, k in zip(dets, keep) if k]
+            if det_params["nms_inside"] > 0 and dets:
+                # a part inside its mover's box: NMS by IoU keeps it, the lane fill may grow two parts into one
+                dets = drop_parts_inside(dets, det_params["nms_inside"], merge_px=det_params["merge_px"],
+                                         merge_rel=det_params["merge_rel"])
             ms["detection"] = _ms(t0)
             t0 = time.perf_counter()
             for p in points:

@@ -345,6 +345,7 @@ class DetectionSpec(_Section):
     border_px: StrictInt = DETECTION_DEFAULTS["border_px"]
     refine_px: StrictInt = DETECTION_DEFAULTS["refine_px"]
     nms_iou: float = DETECTION_DEFAULTS["nms_iou"]
+    nms_inside: float = DETECTION_DEFAULTS["nms_inside"]
     box_from_frames: StrictBool = DETECTION_DEFAULTS["box_from_frames"]
     box_join: float = DETECTION_DEFAULTS["box_join"]
     box_three_frames: StrictBool = DETECTION_DEFAULTS["box_three_frames"]

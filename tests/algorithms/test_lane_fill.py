@@ -1,5 +1,5 @@
 """A box that holds a uniform roof's edge grows along its lane over the body (algorithms.detection.fill_lane;
-the pipeline's detection.lane_fill_rel)."""
+the pipeline's detection.lane_fill_rel), and a part that ends inside another box is dropped (detection.nms_inside)."""
 
 import math
 
@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from algorithms.detection import Detection, detect_vehicles, fill_lane
+from algorithms.detection import DETECTION_DEFAULTS, Detection, detect_vehicles, drop_parts_inside, fill_lane
 from algorithms.pipeline import Pipeline, PipelineError
 
 H, W = 160, 240
@@ -146,3 +146,41 @@ def test_bad_inputs_are_rejected_naming_them():
         detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), lane_fill_line=1.5)
     with pytest.raises(PipelineError, match=r"detection\.lane_fill_rel"):
         Pipeline.from_dict({"name": "t", "flow": {"method": "dis"}, "detection": {"lane_fill_rel": -2}})
+
+
+def test_two_edges_of_one_roof_grown_into_one_box_are_one_detection_with_nms_inside():
+    # a 60 x 16 px bus whose uniform roof showed the flow its front and its rear edge, two boxes that share no pixel;
+    # each grows over the roof (fill_lane) and they end as one box twice: the smaller goes, the car behind stays
+    g0 = _ground(2)
+    frame = _paint(g0, 120.0, 80.0, 60, 16, 0.0, 200)
+    bus = _extent(frame, g0)
+    frame = _paint(frame, 120.0 - 30 - 8 - 12, 80.0, 24, 14, 0.0, 200)  # 8 px of road behind
+    car = _extent(_paint(g0, 120.0 - 30 - 8 - 12, 80.0, 24, 14, 0.0, 200), g0)
+    front, rear = (_det((bus[2] - 11, bus[1], bus[2], bus[3]), 2.0, 0.0),
+                   _det((bus[0], bus[1], bus[0] + 11, bus[3]), 2.0, 0.0))
+    grown = fill_lane(frame, [front, rear, _det(car, 2.0, 0.0)], max_rel=4.0)
+    assert [round(_iou(d, bus), 1) >= 0.9 for d in grown] == [True, True, False], grown
+    assert grown[0][3:7] == grown[1][3:7]                   # one box twice, though nms_iou in the detector saw two
+    kept = drop_parts_inside(grown, 0.5)
+    assert len(kept) == 2 and _iou(kept[1], car) >= 0.9 and _iou(kept[0], bus) >= 0.9, kept
+
+
+def test_a_part_inside_a_larger_box_goes_and_a_neighbour_overlapping_it_less_stays():
+    bus = _det((466, 635, 527, 719), 0.0, 1.0)                 # 62 x 85 px
+    rear = _det((509, 630, 527, 646), 0.0, 1.0)                # its rear edge: 12 of its 17 rows inside, IoU 0.04
+    car = _det((520, 700, 552, 738), 0.0, 1.0)                 # the car behind: under a fifth inside
+    assert _iou(rear, bus[3:7]) < DETECTION_DEFAULTS["nms_iou"]
+    assert drop_parts_inside([bus, rear, car], 0.5) == [bus, car]
+    assert drop_parts_inside([rear, car, bus], 0.7) == [car, bus]         # 71 % inside, in any order
+    assert drop_parts_inside([bus, rear, car], 0.75) == [bus, rear, car]
+    twin = bus._replace(x_px=bus.x_px + 1, x0_px=bus.x0_px + 1, x1_px=bus.x1_px + 1)
+    assert drop_parts_inside([bus, twin], 0.5) == [bus]                   # the same size: the later goes
+    assert drop_parts_inside([twin, bus], 0.5) == [twin]
+    assert drop_parts_inside([], 0.5) == []
+    # inside a larger box of another motion it is another mover (merge_px + merge_rel * speed: 1.3 px here)
+    assert drop_parts_inside([bus, rear._replace(v_px=-1.0)], 0.5) == [bus, rear._replace(v_px=-1.0)]
+    assert drop_parts_inside([bus, rear._replace(u_px=1.2)], 0.5) == [bus]
+    with pytest.raises(ValueError, match=r"nms_inside: expected a fraction in \[0, 1\], got 1.5"):
+        detect_vehicles(np.zeros((4, 4, 2), np.float32), np.ones((4, 4), bool), nms_inside=1.5)
+    with pytest.raises(PipelineError, match=r"detection\.nms_inside"):
+        Pipeline.from_dict({"name": "t", "flow": {"method": "dis"}, "detection": {"nms_inside": -1}})
