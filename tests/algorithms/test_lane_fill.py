@@ -177,7 +177,7 @@ def test_a_part_inside_a_larger_box_goes_and_a_neighbour_overlapping_it_less_sta
     assert drop_parts_inside([bus, twin], 0.5) == [bus]                   # the same size: the later goes
     assert drop_parts_inside([twin, bus], 0.5) == [twin]
     assert drop_parts_inside([], 0.5) == []
-    # inside a larger box of another motion it is another mover (merge_px + merge_rel * speed: 1.3 px here)
+    # inside a larger box of another motion it is another mover (merge_px + merge_rel x the faster speed: 1.3-1.5 px)
     assert drop_parts_inside([bus, rear._replace(v_px=-1.0)], 0.5) == [bus, rear._replace(v_px=-1.0)]
     assert drop_parts_inside([bus, rear._replace(u_px=1.2)], 0.5) == [bus]
     with pytest.raises(ValueError, match=r"nms_inside: expected a fraction in \[0, 1\], got 1.5"):
