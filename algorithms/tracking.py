@@ -697,8 +697,8 @@ class _Track:
 #   limits of the detection; 0: off; 0.15, the default, is those areas' ratios; a detected box holds its object's
 #   cast shadow and a pixel or two of blur on each side, which add far more to a small box than to a car's (on
 #   the 1080p city-wide worlds a cyclist's 10 x 12 px truth was tracked as 16 x 18 px, 0.22-0.26 of the median
-#   track, a motorbike's 0.2; the cars' tracks 0.39 and up): 0.3 in dis and the pyramidal pair (figures in
-#   dis.yaml), which leaves motorbikes out too;
+#   track, a motorbike's 0.2; the cars' tracks 0.39 and up): 0.3 in dis, farneback and the pyramidal pair
+#   (figures in dis.yaml), which leaves motorbikes out too;
 # use_velocity: a detection's mean flow (its ground-fixed motion) is a velocity measurement and starts a
 #   new track at the vehicle's speed;
 # hold_min_ncc: a confirmed track without a detection is placed where its template (the image inside its box
