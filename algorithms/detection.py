@@ -539,6 +539,14 @@ def _split(region: _Region, p: dict, depth: int = 0) -> list[_Region]:
     return [q for part in parts for q in _split(part, p, depth + 1)]
 
 
+def _one_motion(vels: np.ndarray, vel, merge_px: float, merge_rel: float) -> np.ndarray:
+    """``(n,)`` bool: which of the velocities ``vels`` ``(n, 2)`` agree with ``vel`` ``(u, v)`` as the regions of one
+    mover do (``merge_px``, ``merge_rel``): they differ by at most ``merge_px + merge_rel`` times the faster speed."""
+    dv = np.hypot(*(vels - vel).T)
+    speed = np.maximum(np.hypot(*vels.T), math.hypot(*vel))
+    return dv <= merge_px + merge_rel * speed
+
+
 def _merge(regions: list[_Region], p: dict) -> list[_Region]:
     """Join regions whose boxes lie within merge_gap_px and whose velocities agree (union-find)."""
     n = len(regions)
@@ -558,9 +566,8 @@ def _merge(regions: list[_Region], p: dict) -> list[_Region]:
     for i in range(n):
         gx = np.maximum(boxes[i + 1:, 0] - boxes[i, 2], boxes[i, 0] - boxes[i + 1:, 2]) - 1
         gy = np.maximum(boxes[i + 1:, 1] - boxes[i, 3], boxes[i, 1] - boxes[i + 1:, 3]) - 1
-        dv = np.hypot(*(vel[i + 1:] - vel[i]).T)
-        speed = np.maximum(np.hypot(*vel[i + 1:].T), math.hypot(*vel[i]))
-        for j in np.flatnonzero((np.maximum(gx, gy) <= gap) & (dv <= p["merge_px"] + p["merge_rel"] * speed)):
+        alike = _one_motion(vel[i + 1:], vel[i], p["merge_px"], p["merge_rel"])
+        for j in np.flatnonzero((np.maximum(gx, gy) <= gap) & alike):
             parent[root(i + 1 + int(j))] = root(i)
     groups: dict[int, list[_Region]] = {}
     for i in range(n):
@@ -1424,26 +1431,26 @@ def drop_parts_inside(detections: list[Detection], share: float, *, merge_px: fl
                       merge_rel: float = DETECTION_DEFAULTS["merge_rel"]) -> list[Detection]:
     """``detections`` without those whose box lies ``share`` or more inside a larger detection's box and whose motion
     agrees with that one's as the regions of one mover agree (within ``merge_px + merge_rel`` times the faster
-    speed): a part of that mover (``nms_inside``). A box inside a larger one of another motion (a car in a region a
-    wrong flow joined to it) stays.
+    speed, :func:`_one_motion`): a part of that mover (``nms_inside``). A box inside a larger one of another motion
+    (a car in a region a wrong flow joined to it) stays.
 
     Of two boxes of one area (two parts of a roof grown over it by the lane fill end as the same box), the later
     goes. A box inside a larger one that was itself dropped still goes. Order is kept.
     """
-    boxes = [(d.x0_px, d.y0_px, d.x1_px, d.y1_px) for d in detections]
-    area = [(x1 - x0 + 1) * (y1 - y0 + 1) for x0, y0, x1, y1 in boxes]
-
-    def part_of(i: int, j: int) -> bool:  # i's box lies share or more inside j's, and i moves with j
-        if not (area[j] > area[i] or (area[j] == area[i] and j < i)):
-            return False
-        iw = min(boxes[i][2], boxes[j][2]) - max(boxes[i][0], boxes[j][0]) + 1
-        ih = min(boxes[i][3], boxes[j][3]) - max(boxes[i][1], boxes[j][1]) + 1
-        a, b = detections[i], detections[j]
-        speed = max(math.hypot(a.u_px, a.v_px), math.hypot(b.u_px, b.v_px))
-        return (iw > 0 and ih > 0 and iw * ih >= share * area[i]
-                and math.hypot(a.u_px - b.u_px, a.v_px - b.v_px) <= merge_px + merge_rel * speed)
-
-    return [d for i, d in enumerate(detections) if not any(part_of(i, j) for j in range(len(detections)))]
+    if not detections:
+        return []
+    b = np.array([(d.x0_px, d.y0_px, d.x1_px, d.y1_px) for d in detections], dtype=np.float64)
+    vel = np.array([(d.u_px, d.v_px) for d in detections], dtype=np.float64)
+    area = (b[:, 2] - b[:, 0] + 1) * (b[:, 3] - b[:, 1] + 1)
+    order = np.arange(len(b))
+    keep = []
+    for i, d in enumerate(detections):
+        iw = np.minimum(b[:, 2], b[i, 2]) - np.maximum(b[:, 0], b[i, 0]) + 1
+        ih = np.minimum(b[:, 3], b[i, 3]) - np.maximum(b[:, 1], b[i, 1]) + 1
+        larger = (area > area[i]) | ((area == area[i]) & (order < i))
+        inside = (iw > 0) & (ih > 0) & (iw * ih >= share * area[i])
+        keep.append(not (larger & inside & _one_motion(vel, vel[i], merge_px, merge_rel)).any())
+    return [d for d, k in zip(detections, keep) if k]
 
 
 def _along(d: Detection, gv, bound: float, p: dict) -> bool:
