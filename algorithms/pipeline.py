@@ -277,7 +277,15 @@ PX_REFERENCE_SIDE = 480
 # Within SIZE_SAME_REL of the frame's factor the frame's factor stays: the median of a few pairs' boxes scatters by
 # 10-20 % (vehicles' parts, two joined), no evidence that the frame's assumption is wrong (the 960x540 `city`, right
 # at its 1.125, was given 1.0-1.1 by it: MOTA -0.02 to +0.01 by pipeline).
+# The factor goes below 1 down to VEHICLE_SCALE_MIN: the 1080p city-wide worlds (cars 41 px in the sample, factor
+# 1.17) shrunk to 960x540 (JPEG 85; cars 20-22 px in the sample) scored dis MOTA 0.17 pooled at their frame's
+# 1.125 and 0.23 / 0.35 / 0.41 / 0.38 / 0.34 at 1.0 / 0.88 / 0.75 / 0.55 / 0.4 (a car creeping 0.5 px a frame at
+# 1080p creeps 0.25 px there, and the detections went from 1,808 in 100 frames to 478 at 1.125). The sample gives
+# them 0.57-0.63: pooled MOTA dis 0.17 -> 0.37, pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback
+# 0.28 -> 0.32. Frames no larger than the reference keep 1 (Pipeline.run samples only larger ones): the presets'
+# cars, on which the sizes were tuned at 1, sample 23-33 px, under SIZE_SAME_REL of the reference.
 VEHICLE_REFERENCE_PX = 35.0
+VEHICLE_SCALE_MIN = 0.5
 SIZE_SAMPLE_PAIRS = 8
 SIZE_SAMPLE_MIN = 10
 SIZE_SAME_REL = 0.8
@@ -288,7 +296,8 @@ def px_scale_factor(setting, frame_shape) -> float:
     ``"frame"``, the shorter side over :data:`PX_REFERENCE_SIDE` (1 at 640x480, 2.25 at 1920x1080), never below
     1 (a smaller frame is more often a crop than a wider view, and the flow's noise in px, which the sizes as
     given are set against, does not shrink with it); a number, itself. :meth:`Pipeline.run` lowers ``"auto"``
-    further where the sequence's vehicles are smaller than that assumes (:func:`vehicle_scale`)."""
+    on a larger frame where the sequence's vehicles are smaller than that assumes (:func:`vehicle_scale`),
+    below 1 too where they are smaller than the reference's."""
     if setting in ("auto", "frame"):
         return max(1.0, min(int(frame_shape[0]), int(frame_shape[1])) / PX_REFERENCE_SIDE)
     return float(setting)
@@ -296,20 +305,24 @@ def px_scale_factor(setting, frame_shape) -> float:
 
 def vehicle_scale(long_sides_px, frame_factor: float) -> float:
     """The factor ``px_scale: auto`` takes from the longer sides (px) of detections found at ``frame_factor``: their
-    median over :data:`VEHICLE_REFERENCE_PX`, at least 1, where it is under :data:`SIZE_SAME_REL` times
-    ``frame_factor``; else (and with fewer than :data:`SIZE_SAMPLE_MIN` sides) ``frame_factor`` itself.
+    median over :data:`VEHICLE_REFERENCE_PX`, at least :data:`VEHICLE_SCALE_MIN`, where it is under
+    :data:`SIZE_SAME_REL` times ``frame_factor``; else (and with fewer than :data:`SIZE_SAMPLE_MIN` sides)
+    ``frame_factor`` itself.
 
     A frame of 1920x1080 is not always the view of 640x480 at a higher resolution: a real clip of a junction
     from higher up holds more vehicles, each fewer pixels long (at 0.13 m a pixel a car is 35-40 px, half what
     the frame's factor expects), and the factor's size limits then reject them (a car's box under the long
-    baseline's ``min_box_px``) while its reach joins neighbours. Never above the frame's factor: a detection of
-    a vehicle's part, or of two joined, must not raise the sizes beyond what the frame already allows.
+    baseline's ``min_box_px``) while its reach joins neighbours. Cars under the reference's 35 px (a clip at
+    half that resolution) also move fewer pixels a frame, and a slow one stays under the motion thresholds of
+    factor 1: the factor follows them below 1, down to :data:`VEHICLE_SCALE_MIN`. Never above the frame's factor:
+    a detection of a vehicle's part, or of two joined, must not raise the sizes beyond what the frame already
+    allows.
     """
     sides = np.asarray(long_sides_px, dtype=np.float64)
     if sides.size < SIZE_SAMPLE_MIN:
         return float(frame_factor)
     factor = float(np.median(sides)) / VEHICLE_REFERENCE_PX
-    return float(max(1.0, factor)) if factor < SIZE_SAME_REL * frame_factor else float(frame_factor)
+    return float(max(VEHICLE_SCALE_MIN, factor)) if factor < SIZE_SAME_REL * frame_factor else float(frame_factor)
 
 
 def scale_px(params: Mapping, kinds: Mapping[str, str], factor: float) -> dict:
@@ -507,7 +520,7 @@ class Pipeline:
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
         px = px_scale_factor(det_cfg["px_scale"], shared.gray(0).shape)
-        if det_cfg["px_scale"] == "auto" and SIZE_SAME_REL * px > 1.0:  # else vehicle_scale keeps px
+        if det_cfg["px_scale"] == "auto" and px > 1.0:  # the reference's size keeps 1 (VEHICLE_SCALE_MIN)
             px = self._vehicle_scale(shared, n, px, gsd_m_per_px)
         det_params = scale_px({k: det_cfg[k] for k in DETECTION_DEFAULTS}, PX_SCALED_KEYS["detection"], px)
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
