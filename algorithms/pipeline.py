@@ -277,13 +277,15 @@ PX_REFERENCE_SIDE = 480
 # Within SIZE_SAME_REL of the frame's factor the frame's factor stays: the median of a few pairs' boxes scatters by
 # 10-20 % (vehicles' parts, two joined), no evidence that the frame's assumption is wrong (the 960x540 `city`, right
 # at its 1.125, was given 1.0-1.1 by it: MOTA -0.02 to +0.01 by pipeline).
-# The factor goes below 1 down to VEHICLE_SCALE_MIN: the 1080p city-wide worlds (cars 41 px in the sample, factor
-# 1.17) shrunk to 960x540 (JPEG 85; cars 20-22 px in the sample) scored dis MOTA 0.17 pooled at their frame's
-# 1.125 and 0.23 / 0.35 / 0.41 / 0.38 / 0.34 at 1.0 / 0.88 / 0.75 / 0.55 / 0.4 (a car creeping 0.5 px a frame at
-# 1080p creeps 0.25 px there, and the detections went from 1,808 in 100 frames to 478 at 1.125). The sample gives
-# them 0.57-0.63: pooled MOTA dis 0.17 -> 0.37, pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback
-# 0.28 -> 0.32. Frames no larger than the reference keep 1 (Pipeline.run samples only larger ones): the presets'
-# cars, on which the sizes were tuned at 1, sample 23-33 px, under SIZE_SAME_REL of the reference.
+# Cars under SIZE_SAME_REL of the reference take the factor below 1: the square root of the sample's factor, at least
+# VEHICLE_SCALE_MIN. The 1080p city-wide worlds (cars 41 px in the sample, factor 1.17) shrunk to 960x540 (JPEG 85;
+# cars 20-22 px in the sample, 0.57-0.63) scored dis MOTA 0.17 pooled at their frame's 1.125, and 0.22 / 0.35 /
+# 0.41 / 0.38 / 0.34 at 1.0 / 0.88 / 0.75 / 0.55 / 0.4 (a car creeping 0.5 px a frame at 1080p creeps 0.25 px
+# there, and the detections went from 1,808 in 100 frames to 478 at 1.125); the sample's factor itself gave 0.37
+# (pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback 0.28 -> 0.32), its square root 0.41. Shrunk to
+# 1344x756 (samples 26-29 px, 0.74-0.83) they scored 0.477 at 1 (the old floor), 0.452 at the sample's factor,
+# 0.469 at its root, 0.485 as here (the one at 0.83 keeps 1). Frames no larger than the reference keep 1
+# (Pipeline.run samples only larger ones): the presets' cars, on which the sizes were tuned at 1, sample 23-33 px.
 VEHICLE_REFERENCE_PX = 35.0
 VEHICLE_SCALE_MIN = 0.5
 SIZE_SAMPLE_PAIRS = 8
@@ -305,16 +307,19 @@ def px_scale_factor(setting, frame_shape) -> float:
 
 def vehicle_scale(long_sides_px, frame_factor: float) -> float:
     """The factor ``px_scale: auto`` takes from the longer sides (px) of detections found at ``frame_factor``: their
-    median over :data:`VEHICLE_REFERENCE_PX`, at least :data:`VEHICLE_SCALE_MIN`, where it is under
-    :data:`SIZE_SAME_REL` times ``frame_factor``; else (and with fewer than :data:`SIZE_SAMPLE_MIN` sides)
-    ``frame_factor`` itself.
+    median over :data:`VEHICLE_REFERENCE_PX`, where it is under :data:`SIZE_SAME_REL` times ``frame_factor``; else
+    (and with fewer than :data:`SIZE_SAMPLE_MIN` sides) ``frame_factor`` itself. A median under the reference
+    gives 1 within :data:`SIZE_SAME_REL` of it, and below that its factor's square root, at least
+    :data:`VEHICLE_SCALE_MIN`.
 
     A frame of 1920x1080 is not always the view of 640x480 at a higher resolution: a real clip of a junction
     from higher up holds more vehicles, each fewer pixels long (at 0.13 m a pixel a car is 35-40 px, half what
     the frame's factor expects), and the factor's size limits then reject them (a car's box under the long
     baseline's ``min_box_px``) while its reach joins neighbours. Cars under the reference's 35 px (a clip at
     half that resolution) also move fewer pixels a frame, and a slow one stays under the motion thresholds of
-    factor 1: the factor follows them below 1, down to :data:`VEHICLE_SCALE_MIN`. Never above the frame's factor:
+    factor 1: the factor follows them below 1, but only half the way on a log scale, since the flow's noise in
+    px, which the motion thresholds are also set against, does not shrink with the cars. Never above the frame's
+    factor:
     a detection of a vehicle's part, or of two joined, must not raise the sizes beyond what the frame already
     allows.
     """
@@ -322,7 +327,12 @@ def vehicle_scale(long_sides_px, frame_factor: float) -> float:
     if sides.size < SIZE_SAMPLE_MIN:
         return float(frame_factor)
     factor = float(np.median(sides)) / VEHICLE_REFERENCE_PX
-    return float(max(VEHICLE_SCALE_MIN, factor)) if factor < SIZE_SAME_REL * frame_factor else float(frame_factor)
+    if factor >= SIZE_SAME_REL * frame_factor:
+        return float(frame_factor)
+    if factor >= SIZE_SAME_REL:  # within the scatter of 1 too: the sizes as tuned
+        return float(max(1.0, factor))
+    # below: between the vehicles' factor (the sizes') and the flow noise's 1 (their geometric mean)
+    return float(max(VEHICLE_SCALE_MIN, np.sqrt(factor)))
 
 
 def scale_px(params: Mapping, kinds: Mapping[str, str], factor: float) -> dict:

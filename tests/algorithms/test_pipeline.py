@@ -423,8 +423,12 @@ def test_vehicle_scale_is_the_median_side_over_the_reference_between_its_floor_a
     assert P.vehicle_scale([1.5 * ref] * (few - 1), 2.25) == 2.25  # too few to judge: the frame's factor
     assert P.vehicle_scale([4 * ref] * few, 2.25) == 2.25  # never above the frame's factor
     assert P.vehicle_scale([0.85 * 2.25 * ref] * few, 2.25) == 2.25  # nor a little below it: the boxes' scatter
-    assert P.vehicle_scale([0.6 * ref] * few, 1.125) == pytest.approx(0.6)  # cars smaller than the reference's
-    assert P.vehicle_scale([0.3 * ref] * few, 2.25) == P.VEHICLE_SCALE_MIN == 0.5  # but not below the floor
+    # cars a little smaller than the reference's: within the boxes' scatter of 1, the sizes as tuned
+    assert P.vehicle_scale([0.85 * ref] * few, 2.25) == 1.0
+    # smaller still: the geometric mean of their size's factor and 1, down to the floor
+    assert P.vehicle_scale([0.64 * ref] * few, 1.125) == pytest.approx(0.8)
+    assert P.vehicle_scale([0.64 * ref] * few, 2.25) == pytest.approx(0.8)
+    assert P.vehicle_scale([0.2 * ref] * few, 2.25) == P.VEHICLE_SCALE_MIN == 0.5
     sides = [ref] * few + [10 * ref] * (few - 1)  # a minority of joined or oversized boxes does not move it
     assert P.vehicle_scale(sides, 2.25) == pytest.approx(1.0)
 
@@ -461,9 +465,9 @@ def test_px_scale_auto_follows_the_size_of_the_vehicles_not_only_the_frame():
 def test_px_scale_auto_goes_below_one_for_cars_smaller_than_the_reference_on_a_larger_frame_only():
     d = get_pipeline("dis").to_dict()
     d["tracking"] = {"point": False, "multi": None}
-    # 18 px cars on a 960 px frame: half the reference's 35 px, so the sizes and motion limits at about half
+    # 18 px cars on a 960 px frame: about half the reference's 35 px (boxes of 18-21 px), so sqrt(0.5-0.6)
     _, seq = _run(Pipeline.from_dict(d), _small_movers(3, car=(18, 9)))
-    assert 0.5 <= seq.px_scale <= 0.7
+    assert 0.68 <= seq.px_scale <= 0.8
     # the same cars on a frame of the reference's size keep the sizes as tuned there (no sample is taken)
     _, seq = _run(Pipeline.from_dict(d), [f[:480, :480] for f in _small_movers(3, car=(18, 9))])
     assert seq.px_scale == 1.0
