@@ -282,7 +282,8 @@ PX_REFERENCE_SIDE = 480
 # cars 20-22 px in the sample, 0.57-0.63) scored dis MOTA 0.17 pooled at their frame's 1.125, and 0.22 / 0.35 /
 # 0.41 / 0.38 / 0.34 at 1.0 / 0.88 / 0.75 / 0.55 / 0.4 (a car creeping 0.5 px a frame at 1080p creeps 0.25 px
 # there, and the detections went from 1,808 in 100 frames to 478 at 1.125); the sample's factor itself gave 0.37
-# (pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback 0.28 -> 0.32), its square root 0.41. Shrunk to
+# (pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback 0.28 -> 0.32), its square root 0.41 (0.31, 0.32,
+# 0.29: the best pipeline gains most with the root, the others less than with the factor itself). Shrunk to
 # 1344x756 (samples 26-29 px, 0.74-0.83) they scored 0.477 at 1 (the old floor), 0.452 at the sample's factor,
 # 0.469 at its root, 0.485 as here (the one at 0.83 keeps 1). Frames no larger than the reference keep 1
 # (Pipeline.run samples only larger ones): the presets' cars, on which the sizes were tuned at 1, sample 23-33 px.
