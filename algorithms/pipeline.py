@@ -320,9 +320,8 @@ def vehicle_scale(long_sides_px, frame_factor: float) -> float:
     half that resolution) also move fewer pixels a frame, and a slow one stays under the motion thresholds of
     factor 1: the factor follows them below 1, but only half the way on a log scale, since the flow's noise in
     px, which the motion thresholds are also set against, does not shrink with the cars. Never above the frame's
-    factor:
-    a detection of a vehicle's part, or of two joined, must not raise the sizes beyond what the frame already
-    allows.
+    factor: a detection of a vehicle's part, or of two joined, must not raise the sizes beyond what the frame
+    already allows.
     """
     sides = np.asarray(long_sides_px, dtype=np.float64)
     if sides.size < SIZE_SAMPLE_MIN:
@@ -531,7 +530,7 @@ class Pipeline:
         comp = cfg["compensation"]
         thr, det_cfg, track_cfg = cfg["threshold"], cfg["detection"], cfg["tracking"]
         px = px_scale_factor(det_cfg["px_scale"], shared.gray(0).shape)
-        if det_cfg["px_scale"] == "auto" and px > 1.0:  # the reference's size keeps 1 (VEHICLE_SCALE_MIN)
+        if det_cfg["px_scale"] == "auto" and px > 1.0:  # a frame of the reference's size keeps 1: no sample
             px = self._vehicle_scale(shared, n, px, gsd_m_per_px)
         det_params = scale_px({k: det_cfg[k] for k in DETECTION_DEFAULTS}, PX_SCALED_KEYS["detection"], px)
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
