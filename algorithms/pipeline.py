@@ -285,8 +285,10 @@ PX_REFERENCE_SIDE = 480
 # (pyramidal-hs 0.29 -> 0.36, pyramidal-lk 0.30 -> 0.36, farneback 0.28 -> 0.32), its square root 0.41 (0.31, 0.32,
 # 0.29: the best pipeline gains most with the root, the others less than with the factor itself). Shrunk to
 # 1344x756 (samples 26-29 px, 0.74-0.83) they scored 0.477 at 1 (the old floor), 0.452 at the sample's factor,
-# 0.469 at its root, 0.485 as here (the one at 0.83 keeps 1). Frames no larger than the reference keep 1
-# (Pipeline.run samples only larger ones): the presets' cars, on which the sizes were tuned at 1, sample 23-33 px.
+# 0.469 at its root, 0.485 as here (the one at 0.83 keeps 1); pyramidal-hs there 0.381 at 1 and 0.355 as here (its
+# world 3 samples under 0.8 and loses 0.06), a cost this rule has at that size. Frames no larger than the reference
+# keep 1 (Pipeline.run samples only larger ones): the presets' cars, on which the sizes were tuned at 1, sample
+# 23-33 px.
 VEHICLE_REFERENCE_PX = 35.0
 VEHICLE_SCALE_MIN = 0.5
 SIZE_SAMPLE_PAIRS = 8
