@@ -637,7 +637,9 @@ class _Track:
 # min_travel_px, min_travel_rel: a track is confirmed only once its ground-fixed centre has moved this far from
 #   its first detection, and this many times its box's larger side (flow noise, compression artefacts, flicker
 #   and a tree crown's sway make regions that recur in place; a vehicle leaves its own box; the rows of the
-#   frames before confirmation are output when it comes, so a slow car loses nothing by the wait);
+#   frames before confirmation are output when it comes, so a slow car loses nothing by the wait); min_travel_rel
+#   0.08 in dis: a car creeping in a queue is detected in short runs that never cover a quarter of its side (figures
+#   there);
 # travel_lengthwise_rel: a track whose box reaches at least this many times as far along its fitted motion as across
 #   it (a vehicle driving along its length) is judged by min_travel_rel on its extent across the motion, its width,
 #   and not its larger side (_travel_side): it leaves its place sideways by its width, while a bus creeping at 0.2-0.4
