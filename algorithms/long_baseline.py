@@ -41,8 +41,11 @@ The keys are those of :data:`LONG_BASELINE_DEFAULTS` (the pipeline's ``detection
 section; ``frames: 0``, the default, turns the stage off; every non-thesis built-in pipeline turns it on
 with 6, the thesis ones leave it off: what it gains and loses on the synthetic scenes, the 1080p held-out stand-ins and
 KIT AIS is measured there and in those pipelines' files).
-The pipeline keeps the last ``k`` gray frames and pair models, and runs its own flow method once
-more a pair: dis with it costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
+A second, longer baseline (``slow_frames``, ``k2``) runs the same stage over ``k2`` frames for movers slower
+still, added where neither the pair nor the first long pair found anything (:func:`merge_detections`
+without replacing).
+The pipeline keeps the last ``max(k, k2)`` gray frames and pair models, and runs its own flow method once
+more a pair for each baseline: dis with one costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
 640x480: 75.0 against 37.5 ms a pair).
 """
 
@@ -81,6 +84,11 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #       trail the mid frame still holds part of);
 #   it does not help everywhere (tv-l1 and pyramidal-lk on the stand-in, dis's precision on KIT AIS), hence off by
 #   default;
+# slow_frames: a second, longer baseline k2 > frames (0, the default: none), run once k2 frames lie behind frame t: its
+#   slow movers (the same keys, min_displacement_px over the k2 frames) join where none of the pair's or the first
+#   long pair's detections lies, nor the path one swept over the k2 frames, and never replace one (replace_rel does
+#   not apply). A queue creeping at 0.1-0.25 px a frame moves 0.6-1.5 px over six frames, under the floor, and 2.4-6 px
+#   over 24. It costs one more flow a pair (dis's long flow from full resolution). 24 in dis; the figures there.
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6; the detector's noise_k times the long pair's median residual
 #   raises it where the flow is noisier. 1.0 in dis (algorithms/pipelines/dis.yaml: the 1080p city-wide worlds' long
@@ -112,7 +120,7 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   serve it (DIS's flow from full resolution, finest_scale 0: the medium preset's half-resolution patches average a
 #   small car with the ground around it; the long pair's parallax test judges the frames, and rejects the roofs and
 #   crowns the finer flow resolves, which the one-pair detector passes: dis.yaml has the figures).
-LONG_BASELINE_DEFAULTS = {"frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
+LONG_BASELINE_DEFAULTS = {"frames": 0, "slow_frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
                           "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
                           "mid_check": True, "flow_params": {}}
 
@@ -126,6 +134,9 @@ def check_long_baseline(params: Mapping) -> dict:
     k = p["frames"]
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0 or k == 1:
         raise ValueError(f"frames: expected 0 (off) or an integer >= 2, got {k!r}")
+    k2 = p["slow_frames"]
+    if isinstance(k2, bool) or not isinstance(k2, (int, np.integer)) or k2 < 0 or (k2 and (not k or k2 <= k)):
+        raise ValueError(f"slow_frames: expected 0 (off) or an integer over frames ({k}, which must be on), got {k2!r}")
     for key in ("min_displacement_px", "max_speed_px"):
         s = p[key]
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or not s > 0:

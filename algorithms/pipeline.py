@@ -458,7 +458,7 @@ class Pipeline:
         and the trackers) on the first :data:`SIZE_SAMPLE_PAIRS` pairs."""
         d = self.to_dict()
         d["detection"]["px_scale"] = float(frame_factor)
-        d["detection"]["long_baseline"]["frames"] = 0
+        d["detection"]["long_baseline"].update(frames=0, slow_frames=0)
         d["tracking"] = {"point": False, "multi": None}
         first = _FirstFrames(shared, min(n, SIZE_SAMPLE_PAIRS + 1))
         sides = [max(det.x1_px - det.x0_px, det.y1_px - det.y0_px) + 1.0
@@ -538,7 +538,7 @@ class Pipeline:
         gsd = det_cfg["gsd_m_per_px"] if gsd_m_per_px is None else float(gsd_m_per_px)
         long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
         # frames t-k .. t-1 (gray, the pair's model), oldest first: the long baseline's frame t-k and models
-        history: deque = deque(maxlen=max(1, long_cfg["frames"]))
+        history: deque = deque(maxlen=max(1, long_cfg["frames"], long_cfg["slow_frames"]))
         # (box area px^2, speed px/frame) of the detections so far: the typical mover (detection.sequence_size)
         size_cfg = det_cfg["sequence_size"]
         sizes: deque = deque(maxlen=size_cfg["history"])
@@ -639,25 +639,34 @@ class Pipeline:
             # the clip's direction in frame t's axes
             shadow_at_t = turn(shadow["direction"], yaw["rad"])
             yaw["rad"] += image_yaw_rad(cur["matrix"])
-            if long_cfg["frames"] >= 2 and len(history) >= 2:
-                # slow movers: frame t against frame t-k registered into it (algorithms.long_baseline)
-                C = compose_models([m for _, m in history])
-                g_old, inside = register_into(history[0][0], C, margin_px=det_params["border_px"])
+            def slow_movers(k: int) -> list:
+                # frame t against frame t-k registered into it (algorithms.long_baseline); frame t-m, m = k // 2:
+                # the consistency of the creep (long_baseline_detections' mid_frame)
+                models = [m for _, m in list(history)[-k:]]
+                C = compose_models(models)
+                g_old, inside = register_into(history[-k][0], C, margin_px=det_params["border_px"])
                 g_t = cur["gray"][0]
-                # frame t-m, m = k // 2: the consistency of the creep (long_baseline_detections' mid_frame)
-                m_mid = len(history) // 2 if long_cfg["mid_check"] else 0
-                mid = ((register_into(history[-m_mid][0], compose_models([m for _, m in list(history)[-m_mid:]]))[0],
-                        m_mid) if m_mid >= 1 else None)
+                m_mid = k // 2 if long_cfg["mid_check"] else 0
+                mid = (register_into(history[-m_mid][0], compose_models(models[-m_mid:]))[0], m_mid) if m_mid else None
                 w_long, v_long = flow_fn(g_t, g_old, **{**flow_params, **long_cfg["flow_params"]})
-                slow = long_baseline_detections(
-                    w_long, np.asarray(v_long, bool) & inside, baseline_frames=len(history), frames=(g_t, g_old),
+                return long_baseline_detections(
+                    w_long, np.asarray(v_long, bool) & inside, baseline_frames=k, frames=(g_t, g_old),
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
                     gsd_m_per_px=gsd_pair, detection_params=det_params, pair_flow=cur["flow_local"],
                     pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"],
                     parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
-                dets = merge_detections(dets, slow, baseline_frames=len(history), nms_iou=det_params["nms_iou"],
+
+            if long_cfg["frames"] >= 2 and len(history) >= 2:
+                # slow movers over the first baseline (the frames there are at the sequence's start)
+                k = min(len(history), long_cfg["frames"])
+                dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
+            if long_cfg["slow_frames"] and len(history) >= long_cfg["slow_frames"]:
+                # slower ones over the second, longer baseline, where none of the above lies
+                k = long_cfg["slow_frames"]
+                dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
+                                        max_speed_px=long_cfg["max_speed_px"], replace_rel=0)
             if clip_shadow and dets and np.any(shadow_at_t):
                 # the merged boxes lose their shadow: a slow mover's box from the long pair holds it as the pair's
                 # does, and trimmed before the merge the pair's box no longer replaced or suppressed the long pair's

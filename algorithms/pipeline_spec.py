@@ -283,6 +283,7 @@ class LongBaselineSpec(_Section):
     """The keys of :data:`algorithms.long_baseline.LONG_BASELINE_DEFAULTS` (defaults and meaning there)."""
 
     frames: StrictInt = LONG_BASELINE_DEFAULTS["frames"]
+    slow_frames: StrictInt = LONG_BASELINE_DEFAULTS["slow_frames"]
     min_displacement_px: float = LONG_BASELINE_DEFAULTS["min_displacement_px"]
     max_speed_px: float = LONG_BASELINE_DEFAULTS["max_speed_px"]
     ground_model: StrictStr = LONG_BASELINE_DEFAULTS["ground_model"]

@@ -178,6 +178,30 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
 
 
 @pytest.mark.parametrize("seed", [0, 1])
+def test_a_car_creeping_at_0_1_px_a_frame_is_found_over_the_slow_baseline_alone(seed):
+    """slow_frames: 0.6 px over six frames stays under dis's 1.0 px floor; over 18 frames the car moved 1.8 px and is
+    found in every pair from the 18th on, once (the six-frame stage finds nothing to join it), and a still scene gives
+    nothing over either baseline."""
+    speed, k, k2 = 0.1, 6, 18
+    frames = _sequence(k2 + 5, speed_px=speed, seed=seed)
+
+    def found(pipeline, seq):
+        return [e.detections for e in pipeline.run(seq) if hasattr(e, "detections")]
+
+    six = found(_pipeline(frames=k, min_displacement_px=1.0), frames)
+    both = found(_pipeline(frames=k, slow_frames=k2, min_displacement_px=1.0), frames)
+    assert all(ds == [] for ds in six)
+    hit = {t for t, ds in enumerate(both) if any(box_iou(d, _car_box(t, speed)) >= 0.7 for d in ds)}
+    assert hit == set(range(k2, len(both))), hit
+    assert all(len(ds) <= 1 for ds in both)
+    (d,) = both[-1]
+    assert (d.u_px, d.v_px) == pytest.approx((speed, 0.0), abs=0.04)  # the per-frame velocity, not the 18-frame one
+    rng = np.random.default_rng(seed)
+    still = [f + rng.normal(0, 2.0, f.shape).astype(np.float32) for f in _sequence(k2 + 5, speed_px=0.0, seed=seed)]
+    assert all(ds == [] for ds in found(_pipeline(frames=k, slow_frames=k2, min_displacement_px=1.0), still))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
 def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
     """flow_params: DIS from full resolution on the long pair alone; a 26 x 14 px car at 0.8 px a frame is found in
     every pair from the first long one (pair 2) on, which the medium preset's half-resolution flow misses."""
@@ -216,6 +240,10 @@ def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
     ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
     ({"parallax_max_ratio": -1.0}, r"detection.long_baseline.parallax_max_ratio: expected a finite number >= 0"),
     ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
+    ({"frames": 6, "slow_frames": 6}, r"detection.long_baseline.slow_frames: expected 0 \(off\) or an integer over "
+                                      r"frames \(6, which must be on\), got 6"),
+    ({"slow_frames": 18}, r"slow_frames: expected 0 \(off\) or an integer over frames \(0, which must be on\)"),
+    ({"frames": 6, "slow_frames": True}, r"detection.long_baseline.slow_frames: expected an integer"),
 ])
 def test_bad_long_baseline_keys_are_rejected_naming_them(section, match):
     with pytest.raises(PipelineError, match=match):
