@@ -120,8 +120,8 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   serve it (DIS's flow from full resolution, finest_scale 0: the medium preset's half-resolution patches average a
 #   small car with the ground around it; the long pair's parallax test judges the frames, and rejects the roofs and
 #   crowns the finer flow resolves, which the one-pair detector passes: dis.yaml has the figures).
-LONG_BASELINE_DEFAULTS = {"frames": 0, "slow_frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5, "ground_model": "quadratic",
-                          "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
+LONG_BASELINE_DEFAULTS = {"frames": 0, "slow_frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5,
+                          "ground_model": "quadratic", "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
                           "mid_check": True, "flow_params": {}}
 
 
@@ -136,7 +136,8 @@ def check_long_baseline(params: Mapping) -> dict:
         raise ValueError(f"frames: expected 0 (off) or an integer >= 2, got {k!r}")
     k2 = p["slow_frames"]
     if isinstance(k2, bool) or not isinstance(k2, (int, np.integer)) or k2 < 0 or (k2 and (not k or k2 <= k)):
-        raise ValueError(f"slow_frames: expected 0 (off) or an integer over frames ({k}, which must be on), got {k2!r}")
+        raise ValueError(f"slow_frames: expected 0 (off) or an integer over frames ({k}, which must be on), "
+                         f"got {k2!r}")
     for key in ("min_displacement_px", "max_speed_px"):
         s = p[key]
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or not s > 0:

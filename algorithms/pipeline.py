@@ -658,7 +658,7 @@ class Pipeline:
                     parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
 
             if long_cfg["frames"] >= 2 and len(history) >= 2:
-                # slow movers over the first baseline (the frames there are at the sequence's start)
+                # slow movers over the first baseline (over the frames there are, at the sequence's start)
                 k = min(len(history), long_cfg["frames"])
                 dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
