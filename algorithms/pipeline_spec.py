@@ -487,6 +487,7 @@ class MultiSpec(_Section):
     merge_inside: float = MULTI_DEFAULTS["merge_inside"]
     merge_covered: StrictBool = MULTI_DEFAULTS["merge_covered"]
     smooth_size_frames: StrictInt = MULTI_DEFAULTS["smooth_size_frames"]
+    part_inside: float = MULTI_DEFAULTS["part_inside"]
     sigma_accel_px: float = MULTI_DEFAULTS["sigma_accel_px"]
     sigma_size_accel_px: float = MULTI_DEFAULTS["sigma_size_accel_px"]
     sigma_meas_px: float = MULTI_DEFAULTS["sigma_meas_px"]

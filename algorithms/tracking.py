@@ -795,6 +795,12 @@ class _Track:
 #   worlds 0.468 / 0.504 / 0.599 -> 0.470 / 0.514 / 0.640 (pooled 0.535 -> 0.556); KIT AIS (2-3 fps, 20-25
 #   frames: the window is the whole sequence) pseudo-MOT MOTA dis -0.255 -> -0.250, pyramidal-hs -0.829 -> -0.860,
 #   tv-l1 -0.607 -> -0.531, pyramidal-lk -0.480 -> -0.490, dis tracks precision / recall 0.647 / 0.567 -> 0.641 / 0.562;
+# part_inside: offline, after smooth_size_frames: a row whose box lies this share or more inside the larger box of
+#   another track's row of the same frame, the two moving alike (velocities, from the robust line through each
+#   track's ground-fixed centres, within a pixel a frame or a quarter of the larger speed), is a part of that vehicle
+#   and is left out: a truck's cast shadow or one end of its uniform roof tracked beside the truck, which merge_hits
+#   does not join while both are detected in every frame. A car crossing a truck's box moves otherwise and stays.
+#   0: off, the default; 0.5 in dis (figures there);
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 0, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "travel_lengthwise_rel": 0.0, "min_trend_f": 10.0, "partial_rel": 0.25, "partial_abreast": False,
@@ -806,7 +812,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True,
-                  "smooth_size_frames": 40, "sigma_accel_px": 0.5,
+                  "smooth_size_frames": 40, "part_inside": 0.0, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
@@ -999,6 +1005,13 @@ SMOOTH_SLOW_PX = 0.3
 SMOOTH_LINE_FRAMES = 8
 
 
+def _alike(va, vb) -> bool:
+    """Whether two vehicles move alike: velocities (px a frame) within a pixel a frame or a quarter of the larger
+    speed of each other (the parts of one vehicle, ``merge_hits``, ``merge_covered``, ``part_inside``)."""
+    va, vb = np.asarray(va, np.float64), np.asarray(vb, np.float64)
+    return float(np.hypot(*(va - vb))) <= max(1.0, 0.25 * max(float(np.hypot(*va)), float(np.hypot(*vb))))
+
+
 def _window_median(f: np.ndarray, values: np.ndarray, k: int, heading: np.ndarray, *, min_n: int = 3) -> np.ndarray:
     """``values`` ``(n, d)`` at frames ``f`` ``(n,)``, each replaced by the median of those within ``k`` frames of it
     (itself included) that share its heading (``heading``: ``(n,)`` radians, NaN where the track moved too slowly to
@@ -1092,6 +1105,9 @@ class MultiTargetTracker:
         v = p["smooth_size_frames"]
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise ValueError(f"smooth_size_frames: expected an integer >= 0 frames (0: off), got {v!r}")
+        v = p["part_inside"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise ValueError(f"part_inside: expected a number in [0, 1] (0: off), got {v!r}")
         for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -1312,9 +1328,7 @@ class MultiTargetTracker:
             for a in range(len(inside)):
                 for b in range(a + 1, len(inside)):
                     ta_, tb_ = conf[inside[a]], conf[inside[b]]
-                    va, vb = ta_.kf.x[4:6], tb_.kf.x[4:6]
-                    speed = max(float(np.hypot(*va)), float(np.hypot(*vb)))
-                    if float(np.hypot(*(va - vb))) > max(1.0, 0.25 * speed):
+                    if not _alike(ta_.kf.x[4:6], tb_.kf.x[4:6]):
                         continue
                     key = (min(ta_.id, tb_.id), max(ta_.id, tb_.id))
                     self._joint[key] = self._joint.get(key, 0) + 1
@@ -1366,8 +1380,7 @@ class MultiTargetTracker:
                 ih = max(0.0, min(b[1] + b[3] / 2, d[1] + d[3] / 2) - max(b[1] - b[3] / 2, d[1] - d[3] / 2))
                 if iw * ih < p["merge_inside"] * b[2] * b[3] or b[2] * b[3] >= d[2] * d[3]:
                     continue
-                va, vb = big.kf.x[4:6], t.kf.x[4:6]
-                if float(np.hypot(*(va - vb))) > max(1.0, 0.25 * max(float(np.hypot(*va)), float(np.hypot(*vb)))):
+                if not _alike(big.kf.x[4:6], t.kf.x[4:6]):
                     continue
                 key = (min(big.id, t.id), max(big.id, t.id))
                 self._joint[key] = self._joint.get(key, 0) + 1
@@ -1696,44 +1709,80 @@ class MultiTargetTracker:
                         x_filt_px=(x0 + x1) / 2, y_filt_px=(y0 + y1) / 2)
         return [out[k] for k in order]
 
-    def _smoothed(self, rows: list[dict]) -> list[dict]:
+    def _motion(self, rows: list[dict]) -> dict[int, tuple]:
+        """Per track, its rows with a box: their indices into ``rows``, frames, boxes ``(n, 4)``, the camera path
+        ``(n, 2)``, and the robust line through the ground-fixed centres (:func:`_robust_line` over
+        :data:`SMOOTH_LINE_FRAMES`): its centres and velocities ``(n, 2)`` (NaN where too few rows)."""
+        at: dict[int, list[int]] = {}
+        for i, r in enumerate(rows):
+            if not math.isnan(r["bbox_x0_px"]):
+                at.setdefault(r["track_id"], []).append(i)
+        zero, out = np.zeros(2), {}
+        for tid, idx in at.items():
+            b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
+                          for i in idx])
+            f = np.array([rows[i]["frame"] for i in idx], dtype=np.float64)
+            path = np.array([self._path.get(int(t), zero) for t in f])  # lines over the ground, not the image
+            line, vel = _robust_line(f, (b[:, 2:] + b[:, :2]) / 2 - path, SMOOTH_LINE_FRAMES)
+            out[tid] = (idx, f, b, path, line, vel)
+        return out
+
+    def _smoothed(self, rows: list[dict], motion: dict[int, tuple]) -> list[dict]:
         """``rows`` with each box's size the median over its track's nearby boxes of its heading, placed by the robust
         line through the track's centres within the box it replaces (``smooth_size_frames``); rows without a box as
         they are."""
         k = int(self.params["smooth_size_frames"])
         if k == 0:
             return rows
-        at: dict[int, list[int]] = {}
-        for i, r in enumerate(rows):
-            if not math.isnan(r["bbox_x0_px"]):
-                at.setdefault(r["track_id"], []).append(i)
         out = list(rows)
-        zero = np.zeros(2)
-        for idx in at.values():
-            b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
-                          for i in idx])
-            f = np.array([rows[i]["frame"] for i in idx], dtype=np.float64)
+        for idx, f, b, path, line, vel in motion.values():
             size, centre = b[:, 2:] - b[:, :2], (b[:, 2:] + b[:, :2]) / 2
-            path = np.array([self._path.get(int(t), zero) for t in f])  # lines over the ground, not the image
-            line, vel = _robust_line(f, centre - path, SMOOTH_LINE_FRAMES)
             heading = np.where(np.hypot(vel[:, 0], vel[:, 1]) >= SMOOTH_SLOW_PX, np.arctan2(vel[:, 1], vel[:, 0]),
                                np.nan)
             half = _window_median(f, size, k, heading) / 2
             # the box goes where the line puts it, as far as it can while it stays within a larger box of the row (a
             # joined one) or holds a smaller one (a partial view); a box of the vehicle's size stays where it was
             lo, hi = b[:, :2] + half, b[:, 2:] - half
-            line = np.where(np.isnan(line), centre - path, line) + path
-            centre = np.clip(line, np.minimum(lo, hi), np.maximum(lo, hi))
+            placed = np.where(np.isnan(line), centre - path, line) + path
+            centre = np.clip(placed, np.minimum(lo, hi), np.maximum(lo, hi))
             for n, i in enumerate(idx):
                 (cx, cy), (w, h) = centre[n], half[n]
                 out[i] = dict(rows[i], bbox_x0_px=float(cx - w), bbox_y0_px=float(cy - h), bbox_x1_px=float(cx + w),
                               bbox_y1_px=float(cy + h), x_filt_px=float(cx), y_filt_px=float(cy))
         return out
 
+    def _without_parts(self, rows: list[dict], motion: dict[int, tuple]) -> list[dict]:
+        """``rows`` without those whose box lies ``part_inside`` or more inside the larger box of another track's row
+        of the same frame, the two moving alike (:func:`_alike`; a row without a velocity is kept)."""
+        share = float(self.params["part_inside"])
+        if share <= 0:
+            return rows
+        vel_of = {i: v for idx, *_, vel in motion.values() for i, v in zip(idx, vel)}
+        by_frame: dict[int, list[int]] = {}
+        for i in vel_of:
+            by_frame.setdefault(rows[i]["frame"], []).append(i)
+        drop = set()
+        for idx in by_frame.values():
+            if len(idx) < 2:
+                continue
+            b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
+                          for i in idx])
+            area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+            iw = np.clip(np.minimum(b[:, None, 2], b[None, :, 2]) - np.maximum(b[:, None, 0], b[None, :, 0]), 0, None)
+            ih = np.clip(np.minimum(b[:, None, 3], b[None, :, 3]) - np.maximum(b[:, None, 1], b[None, :, 1]), 0, None)
+            inside = (iw * ih >= share * area[:, None]) & (area[None, :] > area[:, None])  # [part, whole]
+            for p_, w_ in zip(*np.nonzero(inside)):
+                va, vb = vel_of[idx[p_]], vel_of[idx[w_]]
+                if np.isfinite(va).all() and np.isfinite(vb).all() and _alike(va, vb):
+                    drop.add(idx[p_])
+        return [r for i, r in enumerate(rows) if i not in drop]
+
     def rows(self) -> list[dict]:
         """Rows of confirmed tracks, in the order produced (frame-major), but those of tracks much smaller than the
         sequence's vehicles (``min_area_rel``)."""
-        rows = self._smoothed(self._joined(self._rows))
+        rows = self._joined(self._rows)
+        motion = self._motion(rows) if self.params["smooth_size_frames"] or self.params["part_inside"] else {}
+        rows = self._without_parts(self._smoothed(rows, motion), motion)
         rel = self.params["min_area_rel"]
         if rel > 0:
             areas: dict[int, list[float]] = {}

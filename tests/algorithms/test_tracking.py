@@ -999,3 +999,31 @@ def test_smoothing_keeps_a_steady_car_s_boxes_and_refuses_bad_window_lengths():
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match=r"smooth_size_frames: expected an integer >= 0 frames \(0: off\), got"):
             MultiTargetTracker(smooth_size_frames=bad)
+
+
+def test_a_track_on_part_of_a_tracked_truck_is_left_out_with_part_inside_and_a_car_crossing_it_is_not():
+    # an 80 x 30 px truck at 1.5 px a frame, and in every frame a second detection on its rear (its cast shadow or
+    # a roof end found apart: 24 x 20 px, wholly inside the truck's box, moving with it), and a car crossing the
+    # truck's path at 3 px a frame downwards, inside the truck's box in some frames. The part's track is output
+    # with part_inside 0 and left out with 0.5; the truck's and the car's rows stay whole
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(40):
+            x = 60.0 + 1.5 * t
+            trk.step(t, [_box_det(x, 50.0, 80, 30, 1.5), _box_det(x - 25.0, 52.0, 24, 20, 1.5),
+                         _box_det(120.0, 2.0 + 3.0 * t, 14, 24, 0.0, 3.0)])
+        tracks = {}
+        for r in trk.rows():
+            tracks.setdefault(r["track_id"], []).append(r)
+        return tracks
+
+    def kind(rows):   # by the mean box width: 80 the truck, 24 the part, 14 the car
+        w = np.mean([r["bbox_x1_px"] - r["bbox_x0_px"] + 1 for r in rows])
+        return "truck" if w > 60 else "part" if w > 18 else "car"
+
+    kept = {kind(r): len(r) for r in run(part_inside=0.0).values()}
+    dropped = {kind(r): len(r) for r in run(part_inside=0.5).values()}
+    assert kept == {"truck": 40, "part": 40, "car": 40}
+    assert dropped == {"truck": 40, "car": 40}
+    with pytest.raises(ValueError, match=r"part_inside: expected a number in \[0, 1\] \(0: off\), got 1.5"):
+        MultiTargetTracker(part_inside=1.5)
