@@ -1778,8 +1778,9 @@ class MultiTargetTracker:
         return [r for i, r in enumerate(rows) if i not in drop]
 
     def rows(self) -> list[dict]:
-        """Rows of confirmed tracks, in the order produced (frame-major), but those of tracks much smaller than the
-        sequence's vehicles (``min_area_rel``)."""
+        """Rows of confirmed tracks, in the order produced (frame-major), parts joined (``merge_hits``), boxes smoothed
+        (``smooth_size_frames``), parts of a tracked vehicle left out (``part_inside``), and those of tracks much
+        smaller than the sequence's vehicles too (``min_area_rel``)."""
         rows = self._joined(self._rows)
         motion = self._motion(rows) if self.params["smooth_size_frames"] or self.params["part_inside"] else {}
         rows = self._without_parts(self._smoothed(rows, motion), motion)
