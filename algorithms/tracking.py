@@ -1087,27 +1087,17 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        v = p["merge_hits"]
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ValueError(f"merge_hits: expected an integer >= 0 (0: off), got {v!r}")
+        for name in ("merge_hits", "end_min_hits", "smooth_size_frames"):
+            v = p[name]
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{name}: expected an integer >= 0 (0: off), got {v!r}")
         v = p["merge_inside"]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 1:
             raise ValueError(f"merge_inside: expected a number in (0, 1], got {v!r}")
-        v = p["end_min_hits"]
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ValueError(f"end_min_hits: expected an integer >= 0 (0: off), got {v!r}")
-        v = p["steady_flow_rel"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            raise ValueError(f"steady_flow_rel: expected a number in [0, 1] (0: off), got {v!r}")
-        v = p["back_stop_inside"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            raise ValueError(f"back_stop_inside: expected a number in [0, 1] (0: off), got {v!r}")
-        v = p["smooth_size_frames"]
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ValueError(f"smooth_size_frames: expected an integer >= 0 frames (0: off), got {v!r}")
-        v = p["part_inside"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            raise ValueError(f"part_inside: expected a number in [0, 1] (0: off), got {v!r}")
+        for name in ("steady_flow_rel", "back_stop_inside", "part_inside"):
+            v = p[name]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+                raise ValueError(f"{name}: expected a number in [0, 1] (0: off), got {v!r}")
         for name in ("birth_hits", "death_misses", "hold_frames", "hold_history"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:

@@ -997,7 +997,7 @@ def test_smoothing_keeps_a_steady_car_s_boxes_and_refuses_bad_window_lengths():
         x, y = 40.0 + 1.25 * t + camera(t)[0], 30.0 + 0.5 * t + camera(t)[1]
         np.testing.assert_allclose(smooth[t], [x - 10, y - 5, x + 10, y + 5], atol=0.05, err_msg=str(t))
     for bad in (-1, 2.5, True):
-        with pytest.raises(ValueError, match=r"smooth_size_frames: expected an integer >= 0 frames \(0: off\), got"):
+        with pytest.raises(ValueError, match=r"smooth_size_frames: expected an integer >= 0 \(0: off\), got"):
             MultiTargetTracker(smooth_size_frames=bad)
 
 
