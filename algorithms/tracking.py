@@ -958,13 +958,18 @@ def _inside_share(box: np.ndarray, others: np.ndarray) -> float:
     return float((iw * ih).max() / (box[2] * box[3])) if len(others) else 0.0
 
 
+def _intersections(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Areas of intersection of boxes (x0, y0, x1, y1) a (N, 4) with b (M, 4): (N, M)."""
+    iw = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
+    ih = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
+    return iw * ih
+
+
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
-    ax0, ay0, ax1, ay1 = a[:, 0] - a[:, 2] / 2, a[:, 1] - a[:, 3] / 2, a[:, 0] + a[:, 2] / 2, a[:, 1] + a[:, 3] / 2
-    bx0, by0, bx1, by1 = b[:, 0] - b[:, 2] / 2, b[:, 1] - b[:, 3] / 2, b[:, 0] + b[:, 2] / 2, b[:, 1] + b[:, 3] / 2
-    iw = np.clip(np.minimum(ax1[:, None], bx1[None]) - np.maximum(ax0[:, None], bx0[None]), 0, None)
-    ih = np.clip(np.minimum(ay1[:, None], by1[None]) - np.maximum(ay0[:, None], by0[None]), 0, None)
-    inter = iw * ih
+    corners = [np.stack([q[:, 0] - q[:, 2] / 2, q[:, 1] - q[:, 3] / 2, q[:, 0] + q[:, 2] / 2, q[:, 1] + q[:, 3] / 2],
+                        axis=1) for q in (a, b)]
+    inter = _intersections(*corners)
     union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None] - inter
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
@@ -1758,9 +1763,7 @@ class MultiTargetTracker:
             b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
                           for i in idx])
             area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-            iw = np.clip(np.minimum(b[:, None, 2], b[None, :, 2]) - np.maximum(b[:, None, 0], b[None, :, 0]), 0, None)
-            ih = np.clip(np.minimum(b[:, None, 3], b[None, :, 3]) - np.maximum(b[:, None, 1], b[None, :, 1]), 0, None)
-            inside = (iw * ih >= share * area[:, None]) & (area[None, :] > area[:, None])  # [part, whole]
+            inside = (_intersections(b, b) >= share * area[:, None]) & (area[None, :] > area[:, None])  # [part, whole]
             for p_, w_ in zip(*np.nonzero(inside)):
                 va, vb = vel_of[idx[p_]], vel_of[idx[w_]]
                 if np.isfinite(va).all() and np.isfinite(vb).all() and _alike(va, vb):
