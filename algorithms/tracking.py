@@ -713,7 +713,10 @@ class _Track:
 #   holds ground, match the ground it left);
 # hold_min_travel_rel: only a track whose ground-fixed centre has travelled this many times its box's larger
 #   side is held (a vehicle that drove; a region that recurs in place, flicker on a tree crown or a roof edge,
-#   would otherwise be held for ever);
+#   would otherwise be held for ever). Under 1, a car that crept up a queue by less than its length and stopped
+#   is held too: no kept frame shows its place without it, so the test that its template is no ground's
+#   (hold_history) asks instead that the template match what the track held in its oldest kept frame
+#   (_of_ground). 0.1 in dis (the figures there);
 # back_min_travel_rel: a confirmed track is followed back from its first detection (a vehicle that waited at a light
 #   when the clip began stood where it was first found: once it has left that place, which then looks different, the
 #   kept frames before are searched for its first template, :meth:`MultiTargetTracker._extend_back`) once its
@@ -746,7 +749,8 @@ class _Track:
 #   it first holds a track, that the place looked
 #   different before the vehicle came: in the latest kept frame in which the track was a box side or more away,
 #   the template must not match that place (at hold_min_ncc); a template of ground, a roof edge or a tree crown
-#   (a false track, or a box that slid off its vehicle) matches it then too, and is not held;
+#   (a false track, or a box that slid off its vehicle) matches it then too, and is not held (a track never a side
+#   away: see hold_min_travel_rel);
 # steady_flow_rel: steady: the mean of the detections' flow vectors is at least this fraction of their mean speed
 #   (flow noise turns about from frame to frame and averages out; 1: every detection moved alike);
 # end_min_hits: offline, as MOTChallenge scores: a tentative track detected in its last frames when the clip ends,
@@ -807,7 +811,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "abreast_shared": False, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 1.0, "back_min_travel_rel": 1.0, "back_track_size": False,
+                  "hold_min_travel_rel": 0.1, "back_min_travel_rel": 1.0, "back_track_size": False,
                   "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
@@ -1008,6 +1012,12 @@ def _travel_side(w: float, h: float, vel, lengthwise_rel: float) -> float:
 SMOOTH_HEADING_DEG = 20.0
 SMOOTH_SLOW_PX = 0.3
 SMOOTH_LINE_FRAMES = 8
+
+# _of_ground: a track that never was a box side from where it is to be held must have its template match its place
+# in its oldest kept frame within this, px (its Kalman centre then, not its template's; dis on the worlds, pooled
+# with hold_min_travel_rel 0.1: 2 px 0.586 / 0.558, 4 px 0.586 / 0.563, 7 px, the hold's search, 0.580 / 0.564 on the
+# two sets of renders)
+HOLD_SAME_SEARCH_PX = 4.0
 
 
 def _alike(va, vb) -> bool:
@@ -1507,7 +1517,8 @@ class MultiTargetTracker:
         Only a confirmed track that has travelled ``hold_min_travel_rel`` box sides, for at most
         ``hold_frames`` frames in a row; the search covers ``hold_search_px`` around the
         prediction (at least half the box's larger side); a
-        place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice.
+        place a track with a detection in this frame covers (IoU >= 0.5) is not taken twice, and a template of
+        the ground (:meth:`_of_ground`, tested once after each detection) is not held.
         """
         p = self.params
         if (not p["hold_min_ncc"] > 0 or trk.template is None or not trk.confirmed or trk.held >= p["hold_frames"]
@@ -1522,7 +1533,7 @@ class MultiTargetTracker:
         if others and (_iou(box[None], np.asarray(others)) >= 0.5).any():
             return None
         if not trk.ground_checked:
-            if self._looked_alike_before(trk, box):
+            if self._of_ground(trk, box):
                 trk.template = None  # not a vehicle's: never held
                 return None
             trk.ground_checked = True
@@ -1589,18 +1600,33 @@ class MultiTargetTracker:
         n = self.params["end_min_hits"]
         return n > 0 and trk.hits >= n and self._steady_flow(trk, 0.0)
 
-    def _looked_alike_before(self, trk: _Track, box: np.ndarray) -> bool:
-        """Whether the template matched the ground-fixed ``box``'s place before the track came near it (or no kept
-        frame shows the place without the track: the test cannot be made, and the hold is refused too)."""
+    def _of_ground(self, trk: _Track, box: np.ndarray) -> bool:
+        """Whether ``trk``'s template, about to be held at the ground-fixed ``box``, is not a vehicle's (the hold is
+        refused then; so it is where no kept frame can tell).
+
+        A track that has been a box side or more away from ``box``: the template matched that place in the
+        latest kept frame in which it was, before the vehicle came (a template of ground, a roof edge or a
+        tree crown: a false track, or a box that slid off its vehicle). A track that never was, a car that
+        crept up a queue by less than its length: no frame shows the place without it. Its template must then
+        match the track's place in its oldest kept frame (before the template's), within ``HOLD_SAME_SEARCH_PX``:
+        what it holds now is what it was found on; a box that slid off a car onto the crossing the car had stood on does not match
+        the car it held then.
+        """
         th, tw = trk.template.shape
         side = max(th, tw)
+        ncc = self.params["hold_min_ncc"]
         where = dict(trk.hist)
         for frame, img, off in reversed(self._seen):
             c = where.get(frame)
             if c is None or float(np.hypot(*(c - box[:2]))) < side:
                 continue
             then = _ncc_at(img, trk.template, box[:2], off)
-            return then is None or then >= self.params["hold_min_ncc"]
+            return then is None or then >= ncc
+        for frame, img, off in self._seen:
+            c = where.get(frame)
+            if c is not None and frame < trk.hist[-1][0]:  # before the detection the template was taken at
+                found = _best_match(img, trk.template, c + off, HOLD_SAME_SEARCH_PX)
+                return found is None or not found[0] >= ncc
         return True
 
     def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:

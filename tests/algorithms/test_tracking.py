@@ -209,6 +209,34 @@ def test_a_track_on_static_texture_is_not_held_because_the_place_looked_the_same
     assert last(blind) == 11
 
 
+def test_a_car_that_crept_less_than_its_length_is_held_where_it_stops_unless_its_box_slid_onto_the_ground():
+    # a queue at a light: the car creeps at 0.5 px a frame for 20 frames (10 px, under its 14 px length), then stands
+    # for 20. No kept frame shows its place without it, so its template is checked against what the track held in
+    # its oldest kept frame: the car, which it still is
+    xs = [30.0 + 0.5 * t for t in range(20)] + [39.5] * 20
+
+    def run(rel, swap=False):
+        import cv2
+
+        trk = MultiTargetTracker(death_misses=3, hold_min_travel_rel=rel)
+        for t, x in enumerate(xs):
+            img = _car_scene(80, 160, x, 40.0)
+            if swap and t >= 19:  # the car left at once; its last box holds a crossing painted on the road there
+                img = cv2.GaussianBlur(np.random.default_rng(1).uniform(60, 140, (80, 160)).astype(np.float32),
+                                       (0, 0), 1.5)
+                img[34:46, 32:48:4] = 230.0
+            trk.step(t, [_car_det(x, 40.0, 0.5)] if t < 20 else [], image=img)
+        return trk.rows()
+
+    last = lambda rows: max(r["frame"] for r in rows if not np.isnan(r["x_filt_px"]))  # noqa: E731
+    held = run(0.1)
+    assert {r["track_id"] for r in held} == {0} and last(held) == 39          # held to the clip's end
+    stood = np.array([[r["x_filt_px"], r["y_filt_px"]] for r in held if r["frame"] >= 25])
+    assert np.abs(stood - [39.5, 40.0]).max() < 1.0
+    assert last(run(1.0)) == 19                                   # asked to travel a length: not held
+    assert last(run(0.1, swap=True)) == 19                        # the crossing never held the car: not held
+
+
 def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
     # it waits 10 frames (the motion detector cannot see it), then drives off, 1.5 px/frame when first found
     xs = [30.0] * 10 + [30.0 + 1.5 * k + 0.1 * k * k for k in range(1, 16)]
