@@ -716,7 +716,18 @@ class _Track:
 #   would otherwise be held for ever). Under 1, a car that crept up a queue by less than its length and stopped
 #   is held too: no kept frame shows its place without it, so the test that its template is no ground's
 #   (hold_history) asks instead that the template match what the track held in its oldest kept frame
-#   (_of_ground). 0.1 in dis (the figures there);
+#   (_of_ground). 0.1, the default (1 until 30 November): on the three 1080p city-wide worlds six cars that crept
+#   and stopped lost their tracks where they stopped (about 260 rows); dis, one suite run of the three exported
+#   clips, 1 -> 0.1: 0.480 / 0.522 / 0.646 -> 0.499 / 0.542 / 0.673 (pooled 0.563 -> 0.586, FP 648 -> 572, FN 4627
+#   -> 4428); on the worlds' first renders (the tracker replayed on dis's captured detections) 0.550 -> 0.563; the
+#   1080p city and realistic stand-ins unchanged (0.325, 0.638). 0 held a passing truck's track on the parked car it
+#   slid onto (2 px of travel, 76 rows): 0.586 and 0.563; 0.05 0.592 and 0.563, 0.15 0.581 and 0.555, 0.25 0.581 and
+#   0.546. Synthetic, 30 frames (benchmarks/tracking_quality.py --scene nominal realistic urban-parallax
+#   fast-vehicles city --frames 30), MOTA 1 -> 0.1: pyramidal-hs realistic 0.888 -> 0.944, fast-vehicles 0.885 ->
+#   0.893; thesis-lk urban-parallax 0.664 -> 0.812, realistic 0.758 -> 0.747; thesis-hs realistic 0.697 -> 0.685;
+#   farneback realistic 0.775 -> 0.803, city 0.636 -> 0.655; dis city 0.723 -> 0.733; the other 26 cells
+#   unchanged. KIT AIS (--kit-ais) pseudo-MOT MOTA dis -0.250 -> -0.247 (tracks recall 0.562 -> 0.570),
+#   pyramidal-lk -0.490 -> -0.495, tv-l1 -0.531 -> -0.533, pyramidal-hs unchanged;
 # back_min_travel_rel: a confirmed track is followed back from its first detection (a vehicle that waited at a light
 #   when the clip began stood where it was first found: once it has left that place, which then looks different, the
 #   kept frames before are searched for its first template, :meth:`MultiTargetTracker._extend_back`) once its
