@@ -1618,10 +1618,12 @@ class MultiTargetTracker:
         A track that has been a box side or more away from ``box``: the template matched that place in the
         latest kept frame in which it was, before the vehicle came (a template of ground, a roof edge or a
         tree crown: a false track, or a box that slid off its vehicle). A track that never was, a car that
-        crept up a queue by less than its length: no frame shows the place without it. Its template must then
+        crept up a queue by less than its length: no frame shows the place without it. It must then have been
+        detected twice ``birth_hits`` times (a track confirmed on its first few detections and lost at once is as
+        often a roof that parallax moved, or a passing truck's box left on a parked car), and its template must
         match the track's place in its oldest kept frame (before the template's), within ``HOLD_SAME_SEARCH_PX``:
-        what it holds now is what it was found on; a box that slid off a car onto the crossing the car had stood on does not match
-        the car it held then.
+        what it holds now is what it was found on; a box that slid off a car onto the crossing the car had stood on
+        does not match the car it held then.
         """
         th, tw = trk.template.shape
         side = max(th, tw)
@@ -1633,6 +1635,8 @@ class MultiTargetTracker:
                 continue
             then = _ncc_at(img, trk.template, box[:2], off)
             return then is None or then >= ncc
+        if trk.hits < 2 * self.birth_hits:
+            return True
         for frame, img, off in self._seen:
             c = where.get(frame)
             if c is not None and frame < trk.hist[-1][0]:  # before the detection the template was taken at

@@ -236,6 +236,17 @@ def test_a_car_that_crept_less_than_its_length_is_held_where_it_stops_unless_its
     assert last(run(1.0)) == 19                                   # asked to travel a length: not held
     assert last(run(0.1, swap=True)) == 19                        # the crossing never held the car: not held
 
+    # a track confirmed on its first few detections and lost at once (birth_hits 3: under 6 detections) is not held
+    # on so little (a roof that parallax moved, a passing truck's box left on a parked car); with 8 it is
+    def lost_after(n):
+        xs = [30.0 + 1.5 * min(t, n - 1) for t in range(n + 12)]  # 1.5 px a frame: under its 14 px length in 8
+        trk = MultiTargetTracker(death_misses=3, hold_min_travel_rel=0.1)
+        for t, x in enumerate(xs):
+            trk.step(t, [_car_det(x, 40.0, 1.5)] if t < n else [], image=_car_scene(80, 160, x, 40.0))
+        return last(trk.rows())
+
+    assert (lost_after(4), lost_after(8)) == (3, 19)
+
 
 def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
     # it waits 10 frames (the motion detector cannot see it), then drives off, 1.5 px/frame when first found
