@@ -964,6 +964,12 @@ def _ncc_at(img: np.ndarray, tpl: np.ndarray, centre_ground, off: np.ndarray) ->
     return None if here is None else float(cv2.matchTemplate(here, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
 
 
+def _row_boxes(rows: list[dict], idx) -> np.ndarray:
+    """The boxes of ``rows[i]`` for ``i`` in ``idx``: ``(n, 4)`` float64 inclusive ``x0, y0, x1, y1`` in the image."""
+    return np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
+                     for i in idx], dtype=np.float64).reshape(-1, 4)
+
+
 def _inside_share(box: np.ndarray, others: np.ndarray) -> float:
     """The largest share of ``box`` (``cx, cy, w, h``, its rows' inclusive extent ``cx +- (w - 1) / 2``) that lies
     within one of ``others`` (``(n, 4)`` inclusive ``x0, y0, x1, y1``, the same frame of reference)."""
@@ -1756,8 +1762,7 @@ class MultiTargetTracker:
                 at.setdefault(r["track_id"], []).append(i)
         zero, out = np.zeros(2), {}
         for tid, idx in at.items():
-            b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
-                          for i in idx])
+            b = _row_boxes(rows, idx)
             f = np.array([rows[i]["frame"] for i in idx], dtype=np.float64)
             path = np.array([self._path.get(int(t), zero) for t in f])  # lines over the ground, not the image
             line, vel = _robust_line(f, (b[:, 2:] + b[:, :2]) / 2 - path, SMOOTH_LINE_FRAMES)
@@ -1802,8 +1807,7 @@ class MultiTargetTracker:
         for idx in by_frame.values():
             if len(idx) < 2:
                 continue
-            b = np.array([[rows[i]["bbox_x0_px"], rows[i]["bbox_y0_px"], rows[i]["bbox_x1_px"], rows[i]["bbox_y1_px"]]
-                          for i in idx])
+            b = _row_boxes(rows, idx)
             area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
             inside = (_intersections(b, b) >= share * area[:, None]) & (area[None, :] > area[:, None])  # [part, whole]
             for p_, w_ in zip(*np.nonzero(inside)):
