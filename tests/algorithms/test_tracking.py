@@ -861,6 +861,36 @@ def test_two_cars_nose_to_tail_that_the_detector_joins_twice_stay_two_tracks():
     assert len({r["track_id"] for r in run((15, 20, 25, 30))}) == 2
 
 
+def test_a_car_that_closes_up_on_the_one_ahead_and_is_joined_with_it_is_not_merged_into_it():
+    # two 30 x 14 px cars in one lane, the rear one gaining (2.7 px a frame against 1.5) from 40 px behind: once the
+    # gap is under 6 px (frame 29 on) the detector finds them as one box. Each moved 36 px along the other since
+    # they were found apart; a truck's parts keep their place (the test above). merge_rigid_rel 0 merges them: one
+    # track, the two cars' union from the first frame, each row a false positive and two misses
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(40):
+            front, rear = 100.0 + 1.5 * t, 30.0 + 2.7 * t
+            if front - rear - 30 < 6:
+                dets = [_box_det((front + rear) / 2, 40.0, front - rear + 30, 14, 2.1)]
+            else:
+                dets = [_box_det(front, 40.0, 30, 14, 1.5), _box_det(rear, 40.0, 30, 14, 2.7)]
+            trk.step(t, dets)
+        return trk.rows()
+
+    rows = run()
+    assert len({r["track_id"] for r in rows}) == 2
+    for r in rows:   # a car's box wherever a box is given, on one of the cars while they were apart
+        if r["frame"] < 29 and np.isfinite(r["bbox_x0_px"]):
+            assert r["bbox_x1_px"] - r["bbox_x0_px"] == pytest.approx(29, abs=1.5), r
+            cars = (100.0 + 1.5 * r["frame"], 30.0 + 2.7 * r["frame"])
+            assert min(abs(r["x_filt_px"] - c) for c in cars) < 2.0, r
+    merged = run(merge_rigid_rel=0.0)
+    assert len({r["track_id"] for r in merged}) == 1
+    assert merged[5]["bbox_x1_px"] - merged[5]["bbox_x0_px"] > 70   # both cars and the road between, at frame 5
+    with pytest.raises(ValueError, match=r"merge_rigid_rel: expected a finite number >= 0, got -0.1"):
+        MultiTargetTracker(merge_rigid_rel=-0.1)
+
+
 def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_there_is_not():
     # 30 frames (pairs 0-28, the last frame extrapolated): a 30 x 14 px car at 0.4 px a frame found in pairs 26-28
     # (too short a drive for the travel rule); a region flickering in place there, its flow turning about
