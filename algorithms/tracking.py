@@ -803,7 +803,8 @@ class _Track:
 #   at seed 2, first renders: 0.495 -> 0.409), 0.2 and 0.25 kept them, 0.4 still parted the drift pair, 0.6 did not.
 #   standard (3 seeds pooled): drift +0.154 to +0.160 for dis, farneback, pyramidal-hs and tv-l1, thesis-hs realistic
 #   -0.021, nothing else moved by more than 0.0005; the 40 cells of five scenes x eight pipelines at 30 frames and
-#   KIT AIS unchanged. 0: off;
+#   KIT AIS unchanged. A pair found apart in few frames moves little between its halves: pyramidal-lk, which found
+#   the drift pair's rear car apart in 18 frames before the join, still merges it (0.1 parts them there). 0: off;
 # smooth_size_frames: offline, as MOTChallenge scores: each output box takes the median width and height of the
 #   boxes of its track within this many frames either side that share its heading (at least 3 of them; within
 #   SMOOTH_HEADING_DEG, or where the track moved under SMOOTH_SLOW_PX a frame), placed where a robust line through the
