@@ -791,20 +791,18 @@ class _Track:
 #   992 / 726 / 1184); both keys leave all 35 cells of the five synthetic scenes x seven pipelines (30 frames)
 #   unchanged, and dis on the 1080p city stand-in (0.564), the city-wide stand-in (0.364, older generator: cars and
 #   motorbikes only) and KIT AIS (dis / pyramidal-hs track precision 0.429 / 0.319, recall 0.438 / 0.382);
-# merge_rigid_rel: ... and a frame is counted for a pair (either way) only while the two tracks have kept their place
-#   to each other (_kept_their_place): over the frames both were detected in, the median offset between their
-#   centres (ground-fixed) in the later half lies within this many times the smaller track's larger side of the
-#   earlier half's (at least MERGE_RIGID_MIN_FRAMES such frames; fewer: no test). The parts of a truck or a bus are
-#   rigid; two cars nose to tail are not, and the detector joins them when the gap closes: drift at seed 3 (60
-#   frames, dis), a car gaining on the one ahead from 26 px to 8 px behind it was joined with it in its last frames,
-#   the pair merged, and the union of the two boxes replaced both tracks' rows from their first frame (41 false
-#   positives, 60 misses; MOTA 0.502). Off -> 0.3: drift seed 3 0.502 -> 0.897; the worlds (dis's captured
-#   detections replayed) 0.587 / 0.569 -> 0.587 / 0.570 on the two sets of renders; 0.15 lost a bus's parts (a world
-#   at seed 2, first renders: 0.495 -> 0.409), 0.2 and 0.25 kept them, 0.4 still parted the drift pair, 0.6 did not.
-#   standard (3 seeds pooled): drift +0.154 to +0.160 for dis, farneback, pyramidal-hs and tv-l1, thesis-hs realistic
-#   -0.021, nothing else moved by more than 0.0005; the 40 cells of five scenes x eight pipelines at 30 frames and
-#   KIT AIS unchanged. A pair found apart in few frames moves little between its halves: pyramidal-lk, which found
-#   the drift pair's rear car apart in 18 frames before the join, still merges it (0.1 parts them there). 0: off;
+# merge_rigid_rel: ... and a frame is counted for a pair (either way) only while the two tracks have kept their
+#   distance (_kept_their_place): over the frames both were detected in, the median distance between their centres
+#   (ground-fixed) in the later half lies within this many times the smaller track's larger side of the earlier half's
+#   (at least MERGE_RIGID_MIN_FRAMES such frames; fewer: no test). The parts of a truck or a bus keep their distance,
+#   also where it turns; two cars nose to tail do not, and the detector joins them when the gap closes: drift at seed 3
+#   (60 frames), a car gaining on the one ahead from 26 px to 8 px behind it was joined with it in its last frames, the
+#   pair merged, and the union of the two boxes replaced both tracks' rows from their first frame (41 false
+#   positives, 60 misses; dis 0.502, pyramidal-lk 0.474). Off -> 0.2: drift seed 3 dis 0.502 -> 0.897, pyramidal-lk
+#   0.474 -> 0.870; the worlds (dis's captured detections replayed) 0.587 / 0.569 -> 0.587 / 0.570 on the two sets of
+#   renders. 0.1 lost a bus's parts (a world at seed 2, first renders: 0.495 -> 0.409), 0.15 kept them; 0.3 parted the
+#   pair for dis but not for pyramidal-lk, which found the rear car apart in 18 frames only (the distance moved less
+#   between their halves). A first form that compared the offset (a vector) lost the bus at 0.15 already. 0: off;
 # smooth_size_frames: offline, as MOTChallenge scores: each output box takes the median width and height of the
 #   boxes of its track within this many frames either side that share its heading (at least 3 of them; within
 #   SMOOTH_HEADING_DEG, or where the track moved under SMOOTH_SLOW_PX a frame), placed where a robust line through the
@@ -841,7 +839,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
-                  "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "merge_rigid_rel": 0.3,
+                  "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "merge_rigid_rel": 0.2,
                   "smooth_size_frames": 40, "part_inside": 0.0, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -1057,20 +1055,20 @@ MERGE_RIGID_MIN_FRAMES = 6
 
 
 def _kept_their_place(a, b, rel: float) -> bool:
-    """Whether the tracks ``a`` and ``b`` kept their place to each other (``merge_rigid_rel``): over the frames both
-    were detected in (their ``hist``), the median offset between their centres in the later half within ``rel`` times
-    the smaller track's larger side of the earlier half's; True under :data:`MERGE_RIGID_MIN_FRAMES` such frames and
-    with ``rel`` 0 (no test)."""
+    """Whether the tracks ``a`` and ``b`` kept their distance (``merge_rigid_rel``): over the frames both were detected
+    in (their ``hist``), the median distance between their centres in the later half within ``rel`` times the smaller
+    track's larger side of the earlier half's (a distance, not an offset: a bus's parts turn with it at a junction);
+    True under :data:`MERGE_RIGID_MIN_FRAMES` such frames and with ``rel`` 0 (no test)."""
     if not rel > 0:
         return True
     at = dict(a.hist)
     offsets = np.array([at[f] - c for f, c in b.hist if f in at]).reshape(-1, 2)
     if len(offsets) < MERGE_RIGID_MIN_FRAMES:
         return True
-    half = len(offsets) // 2
-    moved = np.median(offsets[half:], axis=0) - np.median(offsets[:half], axis=0)
+    dist = np.hypot(offsets[:, 0], offsets[:, 1])
+    half = len(dist) // 2
     side = min(max(float(a.kf.x[2]), float(a.kf.x[3])), max(float(b.kf.x[2]), float(b.kf.x[3])))
-    return float(np.hypot(*moved)) <= rel * side
+    return abs(float(np.median(dist[half:]) - np.median(dist[:half]))) <= rel * side
 
 
 def _alike(va, vb) -> bool:

@@ -891,6 +891,34 @@ def test_a_car_that_closes_up_on_the_one_ahead_and_is_joined_with_it_is_not_merg
         MultiTargetTracker(merge_rigid_rel=-0.1)
 
 
+def test_the_parts_of_a_turning_bus_keep_their_place_and_a_car_closing_up_does_not():
+    # the test merge_rigid_rel asks of a pair (_kept_their_place): a bus's front and rear parts 40 px apart turning
+    # through 90 degrees over 30 frames (their offset turns, their distance stays, within 1 px of box jitter) keep
+    # it; a car closing from 40 px to 24 px behind another (16 px, half its 30 px side) does not
+    from types import SimpleNamespace
+
+    from algorithms.tracking import _kept_their_place
+
+    rng = np.random.default_rng(5)
+
+    def track(centres):
+        return SimpleNamespace(hist=[(t, np.asarray(c, float)) for t, c in enumerate(centres)],
+                               kf=SimpleNamespace(x=np.array([0.0, 0.0, 30.0, 14.0])))
+
+    heading = np.linspace(0.0, np.pi / 2, 30)
+    mid = np.stack([100 + 60 * np.sin(heading), 100 + 60 * (1 - np.cos(heading))], axis=1)
+    along = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    front = track(mid + 20 * along + rng.normal(0, 1, (30, 2)))
+    rear = track(mid - 20 * along + rng.normal(0, 1, (30, 2)))
+    assert _kept_their_place(front, rear, 0.2)
+    x = 100 + 2.0 * np.arange(30)
+    ahead = track(np.stack([x + 40, np.full(30, 50.0)], axis=1))
+    closing = track(np.stack([x + 16 * np.arange(30) / 29, np.full(30, 50.0)], axis=1))
+    assert not _kept_their_place(ahead, closing, 0.2)
+    assert _kept_their_place(ahead, closing, 0.0)          # 0: no test
+    assert _kept_their_place(ahead, track([c for _, c in closing.hist[:5]]), 0.2)   # 5 common frames: too few
+
+
 def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_there_is_not():
     # 30 frames (pairs 0-28, the last frame extrapolated): a 30 x 14 px car at 0.4 px a frame found in pairs 26-28
     # (too short a drive for the travel rule); a region flickering in place there, its flow turning about
