@@ -802,7 +802,10 @@ class _Track:
 #   0.474 -> 0.870; the worlds (dis's captured detections replayed) 0.587 / 0.569 -> 0.587 / 0.570 on the two sets of
 #   renders. 0.1 lost a bus's parts (a world at seed 2, first renders: 0.495 -> 0.409), 0.15 kept them; 0.3 parted the
 #   pair for dis but not for pyramidal-lk, which found the rear car apart in 18 frames only (the distance moved less
-#   between their halves). A first form that compared the offset (a vector) lost the bus at 0.15 already. 0: off;
+#   between their halves). A first form that compared the offset (a vector) lost the bus at 0.15 already. standard (3
+#   seeds pooled, a63dbb8 -> 0.2): drift +0.154 to +0.160 for dis, farneback, pyramidal-hs, pyramidal-lk and tv-l1 (dis
+#   0.768 -> 0.925), thesis-hs realistic -0.021, no other cell by more than 0.0005; the 40 cells of five scenes x eight
+#   pipelines at 30 frames and KIT AIS unchanged. 0: off;
 # smooth_size_frames: offline, as MOTChallenge scores: each output box takes the median width and height of the
 #   boxes of its track within this many frames either side that share its heading (at least 3 of them; within
 #   SMOOTH_HEADING_DEG, or where the track moved under SMOOTH_SLOW_PX a frame), placed where a robust line through the
