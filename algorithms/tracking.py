@@ -792,7 +792,7 @@ class _Track:
 #   unchanged, and dis on the 1080p city stand-in (0.564), the city-wide stand-in (0.364, older generator: cars and
 #   motorbikes only) and KIT AIS (dis / pyramidal-hs track precision 0.429 / 0.319, recall 0.438 / 0.382);
 # merge_rigid_rel: ... and a frame is counted for a pair (either way) only while the two tracks have kept their
-#   distance (_kept_their_place): over the frames both were detected in, the median distance between their centres
+#   distance (_kept_their_distance): over the frames both were detected in, the median distance between their centres
 #   (ground-fixed) in the later half lies within this many times the smaller track's larger side of the earlier half's
 #   (at least MERGE_RIGID_MIN_FRAMES such frames; fewer: no test). The parts of a truck or a bus keep their distance,
 #   also where it turns; two cars nose to tail do not, and the detector joins them when the gap closes: drift at seed 3
@@ -1052,12 +1052,12 @@ SMOOTH_LINE_FRAMES = 8
 # two sets of renders)
 HOLD_SAME_SEARCH_PX = 4.0
 
-# _kept_their_place: the frames both tracks of a pair must have been detected in for their offset to be judged
+# _kept_their_distance: the frames both tracks of a pair must have been detected in for their distance to be judged
 # (merge_rigid_rel); half of them make each median
 MERGE_RIGID_MIN_FRAMES = 6
 
 
-def _kept_their_place(a, b, rel: float) -> bool:
+def _kept_their_distance(a, b, rel: float) -> bool:
     """Whether the tracks ``a`` and ``b`` kept their distance (``merge_rigid_rel``): over the frames both were detected
     in (their ``hist``), the median distance between their centres in the later half within ``rel`` times the smaller
     track's larger side of the earlier half's (a distance, not an offset: a bus's parts turn with it at a junction);
@@ -1389,7 +1389,7 @@ class MultiTargetTracker:
                 for b in range(a + 1, len(inside)):
                     ta_, tb_ = conf[inside[a]], conf[inside[b]]
                     if not (_alike(ta_.kf.x[4:6], tb_.kf.x[4:6])
-                            and _kept_their_place(ta_, tb_, p["merge_rigid_rel"])):
+                            and _kept_their_distance(ta_, tb_, p["merge_rigid_rel"])):
                         continue
                     key = (min(ta_.id, tb_.id), max(ta_.id, tb_.id))
                     self._joint[key] = self._joint.get(key, 0) + 1
@@ -1441,7 +1441,7 @@ class MultiTargetTracker:
                 ih = max(0.0, min(b[1] + b[3] / 2, d[1] + d[3] / 2) - max(b[1] - b[3] / 2, d[1] - d[3] / 2))
                 if iw * ih < p["merge_inside"] * b[2] * b[3] or b[2] * b[3] >= d[2] * d[3]:
                     continue
-                if not (_alike(big.kf.x[4:6], t.kf.x[4:6]) and _kept_their_place(big, t, p["merge_rigid_rel"])):
+                if not (_alike(big.kf.x[4:6], t.kf.x[4:6]) and _kept_their_distance(big, t, p["merge_rigid_rel"])):
                     continue
                 key = (min(big.id, t.id), max(big.id, t.id))
                 self._joint[key] = self._joint.get(key, 0) + 1

@@ -891,13 +891,13 @@ def test_a_car_that_closes_up_on_the_one_ahead_and_is_joined_with_it_is_not_merg
         MultiTargetTracker(merge_rigid_rel=-0.1)
 
 
-def test_the_parts_of_a_turning_bus_keep_their_place_and_a_car_closing_up_does_not():
-    # the test merge_rigid_rel asks of a pair (_kept_their_place): a bus's front and rear parts 40 px apart turning
+def test_the_parts_of_a_turning_bus_keep_their_distance_and_a_car_closing_up_does_not():
+    # the test merge_rigid_rel asks of a pair (_kept_their_distance): a bus's front and rear parts 40 px apart turning
     # through 90 degrees over 30 frames (their offset turns, their distance stays, within 1 px of box jitter) keep
     # it; a car closing from 40 px to 24 px behind another (16 px, half its 30 px side) does not
     from types import SimpleNamespace
 
-    from algorithms.tracking import _kept_their_place
+    from algorithms.tracking import _kept_their_distance
 
     rng = np.random.default_rng(5)
 
@@ -910,13 +910,13 @@ def test_the_parts_of_a_turning_bus_keep_their_place_and_a_car_closing_up_does_n
     along = np.stack([np.cos(heading), np.sin(heading)], axis=1)
     front = track(mid + 20 * along + rng.normal(0, 1, (30, 2)))
     rear = track(mid - 20 * along + rng.normal(0, 1, (30, 2)))
-    assert _kept_their_place(front, rear, 0.2)
+    assert _kept_their_distance(front, rear, 0.2)
     x = 100 + 2.0 * np.arange(30)
     ahead = track(np.stack([x + 40, np.full(30, 50.0)], axis=1))
     closing = track(np.stack([x + 16 * np.arange(30) / 29, np.full(30, 50.0)], axis=1))
-    assert not _kept_their_place(ahead, closing, 0.2)
-    assert _kept_their_place(ahead, closing, 0.0)          # 0: no test
-    assert _kept_their_place(ahead, track([c for _, c in closing.hist[:5]]), 0.2)   # 5 common frames: too few
+    assert not _kept_their_distance(ahead, closing, 0.2)
+    assert _kept_their_distance(ahead, closing, 0.0)          # 0: no test
+    assert _kept_their_distance(ahead, track([c for _, c in closing.hist[:5]]), 0.2)   # 5 common frames: too few
 
 
 def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_there_is_not():
