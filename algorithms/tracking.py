@@ -842,8 +842,8 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
-                  "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True, "merge_rigid_rel": 0.2,
-                  "smooth_size_frames": 40, "part_inside": 0.0, "sigma_accel_px": 0.5,
+                  "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True,
+                  "merge_rigid_rel": 0.2, "smooth_size_frames": 40, "part_inside": 0.0, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
 
