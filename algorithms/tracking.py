@@ -1388,8 +1388,7 @@ class MultiTargetTracker:
             for a in range(len(inside)):
                 for b in range(a + 1, len(inside)):
                     ta_, tb_ = conf[inside[a]], conf[inside[b]]
-                    if not (_alike(ta_.kf.x[4:6], tb_.kf.x[4:6])
-                            and _kept_their_distance(ta_, tb_, p["merge_rigid_rel"])):
+                    if not self._may_be_parts(ta_, tb_):
                         continue
                     key = (min(ta_.id, tb_.id), max(ta_.id, tb_.id))
                     self._joint[key] = self._joint.get(key, 0) + 1
@@ -1421,6 +1420,11 @@ class MultiTargetTracker:
             self._merge_covered(tracks, frame, off)
         return took
 
+    def _may_be_parts(self, a: _Track, b: _Track) -> bool:
+        """Whether two confirmed tracks may be parts of one vehicle (``merge_hits``, ``merge_covered``): they move alike
+        (:func:`_alike`) and have kept their distance (``merge_rigid_rel``, :func:`_kept_their_distance`)."""
+        return _alike(a.kf.x[4:6], b.kf.x[4:6]) and _kept_their_distance(a, b, self.params["merge_rigid_rel"])
+
     def _merge_covered(self, tracks: list, frame, off) -> None:
         """Join confirmed tracks whose box a confirmed track detected in this frame covers (``merge_inside``),
         moving alike, without a detection of their own in the frame, in ``merge_hits`` frames (``merge_covered``):
@@ -1441,7 +1445,7 @@ class MultiTargetTracker:
                 ih = max(0.0, min(b[1] + b[3] / 2, d[1] + d[3] / 2) - max(b[1] - b[3] / 2, d[1] - d[3] / 2))
                 if iw * ih < p["merge_inside"] * b[2] * b[3] or b[2] * b[3] >= d[2] * d[3]:
                     continue
-                if not (_alike(big.kf.x[4:6], t.kf.x[4:6]) and _kept_their_distance(big, t, p["merge_rigid_rel"])):
+                if not self._may_be_parts(big, t):
                     continue
                 key = (min(big.id, t.id), max(big.id, t.id))
                 self._joint[key] = self._joint.get(key, 0) + 1
