@@ -102,8 +102,8 @@ import numpy as np
 
 from algorithms.registry import register_stage
 
-__all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "explained_in_box",
-           "shadow_bands", "trim_cast_shadows", "shadow_lean", "clip_shadow_direction", "trim_toward",
+__all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "ground_fit_map",
+           "explained_in_box", "shadow_bands", "trim_cast_shadows", "shadow_lean", "clip_shadow_direction", "trim_toward",
            "image_yaw_rad", "turn", "box_extents", "moves_lengthwise", "fill_lane", "drop_parts_inside"]
 
 
@@ -1264,6 +1264,22 @@ def ground_fit_at(flow: np.ndarray, valid: np.ndarray, points_px, *, model: str 
     coef = _ground_fit(flow, np.asarray(valid, bool), model=model)
     return np.array([_fit_at(coef, float(x), float(y), h, w) for x, y in np.reshape(points_px, (-1, 2))],
                     dtype=np.float64).reshape(-1, 2)
+
+
+def ground_fit_map(flow: np.ndarray, valid: np.ndarray) -> np.ndarray | None:
+    """The robust affine ground fit of :func:`ground_residual` as a map, ``(3, 3)``: ``x -> x + F(x)``.
+
+    ``F`` is the fitted flow (``u = a0 + a1 xn + a2 yn`` in the fit's coordinates ``xn = (x - W/2) / W``,
+    ``yn = (y - H/2) / H``) written in pixels; None where the fit has too few grid pixels.
+    """
+    h, w = np.shape(flow)[:2]
+    coef = _ground_fit(flow, np.asarray(valid, bool), model="affine")
+    if coef is None:
+        return None
+    (a0, b0), (a1, b1), (a2, b2) = coef
+    return np.array([[1.0 + a1 / w, a2 / h, a0 - a1 / 2 - a2 / 2],
+                     [b1 / w, 1.0 + b2 / h, b0 - b1 / 2 - b2 / 2],
+                     [0.0, 0.0, 1.0]])
 
 
 def _difference_variance(a: np.ndarray, b: np.ndarray, *, step_px: int = 2, border_px: int = 8) -> float:

@@ -51,7 +51,8 @@ from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
 from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, drop_parts_inside, fill_lane,
                                   ground_fit_at, image_yaw_rad, shadow_lean, trim_toward, turn)
-from algorithms.long_baseline import compose_models, long_baseline_detections, merge_detections, register_into
+from algorithms.long_baseline import (compose_models, long_baseline_detections, merge_detections, register_into,
+                                      registration_fix)
 from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
 
@@ -647,8 +648,18 @@ class Pipeline:
                 g_old, inside = register_into(history[-k][0], C, margin_px=det_params["border_px"])
                 g_t = cur["gray"][0]
                 m_mid = k // 2 if long_cfg["mid_check"] else 0
-                mid = (register_into(history[-m_mid][0], compose_models(models[-m_mid:]))[0], m_mid) if m_mid else None
+                C_mid = compose_models(models[-m_mid:]) if m_mid else None
                 w_long, v_long = flow_fn(g_t, g_old, **{**flow_params, **long_cfg["flow_params"]})
+                fix = (registration_fix(w_long, np.asarray(v_long, bool) & inside, tol_px=long_cfg["reregister_px"])
+                       if long_cfg["reregister_px"] > 0 else None)
+                if fix is not None:
+                    # a camera that turns: frame t-k (and t-m, by m / k of the fix) registered again, the flow again
+                    C = np.linalg.inv(fix) @ C
+                    g_old, inside = register_into(history[-k][0], C, margin_px=det_params["border_px"])
+                    if m_mid:
+                        C_mid = np.linalg.inv(np.eye(3) + (fix - np.eye(3)) * (m_mid / k)) @ C_mid
+                    w_long, v_long = flow_fn(g_t, g_old, **{**flow_params, **long_cfg["flow_params"]})
+                mid = (register_into(history[-m_mid][0], C_mid)[0], m_mid) if m_mid else None
                 return long_baseline_detections(
                     w_long, np.asarray(v_long, bool) & inside, baseline_frames=k, frames=(g_t, g_old),
                     composed=C, min_displacement_px=long_cfg["min_displacement_px"],

@@ -291,6 +291,7 @@ class LongBaselineSpec(_Section):
     min_box_px: StrictInt = LONG_BASELINE_DEFAULTS["min_box_px"]
     parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
     mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
+    reregister_px: float = LONG_BASELINE_DEFAULTS["reregister_px"]
     flow_params: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")

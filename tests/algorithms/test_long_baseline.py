@@ -9,7 +9,7 @@ import pytest
 
 from algorithms.detection import Detection, detect_vehicles, explained_in_box, ground_fit_at
 from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baseline, compose_models,
-                                      long_baseline_detections, merge_detections, register_into)
+                                      long_baseline_detections, merge_detections, register_into, registration_fix)
 from algorithms.pipeline import Pipeline, PipelineError
 from algorithms.reference import dis
 from tests.algorithms.synthetic import box_iou
@@ -38,23 +38,24 @@ def _car_layer(rng):
     return img, alpha
 
 
-def _sequence(n, *, speed_px=SPEED_PX, seed=0):
-    """``n`` gray frames (float32, 0..255) of a still camera over textured ground and one car at ``speed_px``."""
+def _sequence(n, *, speed_px=SPEED_PX, seed=0, at=(X0, Y0)):
+    """``n`` gray frames (float32, 0..255) of a still camera over textured ground and one car at ``speed_px``, its
+    top-left at ``at`` in frame 0."""
     rng = np.random.default_rng(seed)
     g = _ground(rng)
     car, alpha = _car_layer(rng)
     frames = []
     for t in range(n):
-        M = np.float32([[1, 0, X0 + speed_px * t], [0, 1, Y0]])
+        M = np.float32([[1, 0, at[0] + speed_px * t], [0, 1, at[1]]])
         c = cv2.warpAffine(car, M, (W, H), flags=cv2.INTER_LINEAR)
         a = cv2.warpAffine(alpha, M, (W, H), flags=cv2.INTER_LINEAR)
         frames.append((g * (1 - a) + c).astype(np.float32))
     return frames
 
 
-def _car_box(t, speed_px=SPEED_PX):
-    x = X0 + speed_px * t
-    return x, Y0, x + CAR[0] - 1, Y0 + CAR[1] - 1
+def _car_box(t, speed_px=SPEED_PX, at=(X0, Y0)):
+    x = at[0] + speed_px * t
+    return x, at[1], x + CAR[0] - 1, at[1] + CAR[1] - 1
 
 
 def _u8(a):
@@ -201,6 +202,58 @@ def test_a_car_creeping_at_0_1_px_a_frame_is_found_over_the_slow_baseline_alone(
     assert all(ds == [] for ds in found(_pipeline(frames=k, slow_frames=k2, min_displacement_px=1.0), still))
 
 
+def _turn(deg):
+    """The map of a camera turned by ``deg`` about the image centre, (3, 3): frame-0 points to the turned frame's."""
+    return np.vstack([cv2.getRotationMatrix2D(((W - 1) / 2, (H - 1) / 2), deg, 1.0), [0.0, 0.0, 1.0]])
+
+
+def test_registration_fix_is_the_ground_fit_of_a_turn_and_nothing_within_the_tolerance():
+    """The long pair's flow of ground turned by 4 degrees (up to 7 px at the corners) with a car's patch moving
+    otherwise: the fix maps each corner where the turn does, within 0.05 px; a turn of 0.5 degree (under 1 px) is
+    no fix at 3 px."""
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    corners = np.array([[0.0, 0.0, 1.0], [W - 1.0, 0.0, 1.0], [0.0, H - 1.0, 1.0], [W - 1.0, H - 1.0, 1.0]])
+    valid = np.ones((H, W), bool)
+    for deg, expect_fix in ((4.0, True), (0.5, False)):
+        T = _turn(deg)
+        flow = np.stack([T[0, 0] * xs + T[0, 1] * ys + T[0, 2] - xs, T[1, 0] * xs + T[1, 1] * ys + T[1, 2] - ys], -1)
+        flow[50:64, 60:86] = (5.0, -2.0)  # a vehicle
+        fix = registration_fix(flow.astype(np.float32), valid, tol_px=3.0)
+        assert (fix is not None) == expect_fix, deg
+        if expect_fix:
+            np.testing.assert_allclose(corners @ fix.T, corners @ T.T, atol=0.05)
+    with pytest.raises(ValueError, match=r"tol_px: expected a number > 0, got 0"):
+        registration_fix(np.zeros((H, W, 2), np.float32), valid, tol_px=0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_slow_car_under_a_turning_camera_is_found_once_the_long_pair_is_registered_again(seed):
+    """A camera turning 0.6 degree a frame, under a shift model: over the 18-frame pair the ground near the car moves
+    6 px and the corners 16 px. A car creeping at 0.1 px a frame near the left edge is found in three or more of
+    the five pairs from the 18th on with the pair registered again (reregister_px, the default 3 px), and nothing
+    else; without it the car is found in none, and the ground the turn moved is taken for movers."""
+    speed, k, k2, deg, at = 0.1, 6, 18, 0.6, (30.0, 53.0)
+    frames, boxes = [], []
+    for t, f in enumerate(_sequence(k2 + 5, speed_px=speed, seed=seed, at=at)):
+        T = _turn(deg * t)
+        frames.append(cv2.warpAffine(f, T[:2], (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT101))
+        x0, y0, x1, y1 = _car_box(t, speed, at=at)
+        c = np.array([[x0, y0, 1.0], [x1, y0, 1.0], [x0, y1, 1.0], [x1, y1, 1.0]]) @ T[:2].T
+        boxes.append((c[:, 0].min(), c[:, 1].min(), c[:, 0].max(), c[:, 1].max()))
+
+    def found(**keys):  # the pairs that find the car, and the detections elsewhere
+        dets = [e.detections for e in _pipeline(frames=k, slow_frames=k2, min_displacement_px=1.0, **keys).run(frames)
+                if hasattr(e, "detections")]
+        return ({t for t, ds in enumerate(dets) if any(box_iou(d, boxes[t]) >= 0.5 for d in ds)},
+                sum(box_iou(d, boxes[t]) < 0.1 for t, ds in enumerate(dets) for d in ds))
+
+    assert LONG_BASELINE_DEFAULTS["reregister_px"] == 3.0
+    hits, elsewhere = found()
+    assert len(hits & set(range(k2, k2 + 5))) >= 3 and elsewhere == 0
+    hits, elsewhere = found(reregister_px=0.0)
+    assert hits == set() and elsewhere > 0  # the ground that the turn moved, taken for movers
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
     """flow_params: DIS from full resolution on the long pair alone; a 26 x 14 px car at 0.8 px a frame is found in
@@ -239,6 +292,7 @@ def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
     ({"replace_rel": -0.5}, r"detection.long_baseline.replace_rel: expected a finite number >= 0"),
     ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
     ({"parallax_max_ratio": -1.0}, r"detection.long_baseline.parallax_max_ratio: expected a finite number >= 0"),
+    ({"reregister_px": -1.0}, r"detection.long_baseline.reregister_px: expected a finite number >= 0"),
     ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
     ({"frames": 6, "slow_frames": 6}, r"detection.long_baseline.slow_frames: expected 0 \(off\) or an integer over "
                                       r"frames \(6, which must be on\), got 6"),
