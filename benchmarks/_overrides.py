@@ -26,9 +26,12 @@ def pipeline_with(name: str, sets: list[str]):
         key, value = kv.split("=", 1)
         *path, leaf = key.split(".")
         node = d
-        for k in path:
+        for i, k in enumerate(path):
             if node.get(k) is None:
                 node[k] = {}
+            if not isinstance(node[k], dict):
+                at = ".".join(path[:i + 1])
+                raise ValueError(f"--set {kv}: {at} is {node[k]!r} in {name}, not a section; set it whole ({at}=...)")
             node = node[k]
         node[leaf] = parse_value(value)
     return Pipeline.from_dict(d)
