@@ -126,9 +126,11 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   city-wide world turned 2 degrees a second (about the image centre, 25 fps) the 24-frame pair's residual reaches
 #   33 px at the corners, and dis found 1260 of 3181 counted vehicle boxes (IoU 0.5) where the world as rendered
 #   gave 1609, the slow ones lost (0.3-1 m/s: 69 of 561 against 205); with the key 3, 1580, and MOTA 0.375 -> 0.500
-#   (0.499 as rendered). 3, the default: the rendered worlds' own residual stays under 1.5 px over 24 frames, as do
-#   the synthetic scenes' but urban-parallax's and jitter's, whose MOTA it leaves as it was; at 1 it also re-registered
-#   realistic's distortion (pyramidal-hs 0.944 -> 0.803 at 30 frames);
+#   (0.499 as rendered; turned 0.5 degree a second: 1504 -> 1597 boxes, MOTA 0.495 -> 0.467). 3, the default: the
+#   world's own residual as rendered stays under 1.5 px over 24 frames, as do the synthetic scenes' but
+#   urban-parallax's and jitter's, whose MOTA it leaves as it was; at 1 it also re-registered realistic's lens
+#   distortion (pyramidal-hs 0.944 -> 0.803 at 30 frames). Frame px, not scaled by px_scale (a registration error,
+#   not a vehicle's size). docs/long_baseline.md, "A camera that turns";
 LONG_BASELINE_DEFAULTS = {"frames": 0, "slow_frames": 0, "min_displacement_px": 1.5, "max_speed_px": 1.5,
                           "ground_model": "quadratic", "replace_rel": 0.5, "min_box_px": 300, "parallax_max_ratio": 1.0,
                           "mid_check": True, "flow_params": {}, "reregister_px": 3.0}
