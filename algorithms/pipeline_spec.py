@@ -484,6 +484,7 @@ class MultiSpec(_Section):
     hold_history: StrictInt = MULTI_DEFAULTS["hold_history"]
     steady_flow_rel: float = MULTI_DEFAULTS["steady_flow_rel"]
     end_min_hits: StrictInt = MULTI_DEFAULTS["end_min_hits"]
+    steady_min_hits: StrictInt = MULTI_DEFAULTS["steady_min_hits"]
     merge_hits: StrictInt = MULTI_DEFAULTS["merge_hits"]
     merge_inside: float = MULTI_DEFAULTS["merge_inside"]
     merge_covered: StrictBool = MULTI_DEFAULTS["merge_covered"]

@@ -771,6 +771,10 @@ class _Track:
 #   the last second). 0: off, the default: on two 50-frame city-wide worlds (dis, merge_hits 0) MOTA 0.234 -> 0.240
 #   (seed 1: a car that pulls away in its last 6 frames) but 0.494 -> 0.481 (seed 2: a pair of pedestrians walking
 #   together, one car-sized region, confirmed 17 frames before the travel rule would), 3 to 8 alike;
+# steady_min_hits: a tentative track detected this many times (in as many frames in a row, with birth_gap 0) whose
+#   detections measured one steady motion (steady_flow_rel; its boxes went that way) is confirmed though it has not
+#   travelled min_travel_px: a car creeping up a queue at 0.1-0.4 px a frame, found in runs of 5-25 frames broken by
+#   one it is not, whose tentative tracks died at each break. 0: off;
 # merge_hits: confirmed tracks that are parts of one vehicle are joined: a truck, bus or van whose region splits
 #   (cab and body, the shadow side) in some frames and is found whole in others gets a confirmed track per part,
 #   and the whole detection, whose centre lies outside both parts' gates, starts a tentative track the next split
@@ -842,7 +846,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
-                  "end_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True,
+                  "end_min_hits": 0, "steady_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True,
                   "merge_rigid_rel": 0.2, "smooth_size_frames": 40, "part_inside": 0.0, "sigma_accel_px": 0.5,
                   "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5, "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -1156,7 +1160,7 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("merge_hits", "end_min_hits", "smooth_size_frames"):
+        for name in ("merge_hits", "end_min_hits", "steady_min_hits", "smooth_size_frames"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name}: expected an integer >= 0 (0: off), got {v!r}")
@@ -1290,7 +1294,7 @@ class MultiTargetTracker:
                     if (not trk.confirmed and trk.misses > p["birth_gap"]) or trk.misses >= self.death_misses:
                         continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
-            if not trk.confirmed and trk.hits >= self.birth_hits and self._travelled(trk):
+            if not trk.confirmed and (trk.hits >= self.birth_hits and self._travelled(trk) or self._crept(trk)):
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
@@ -1540,7 +1544,8 @@ class MultiTargetTracker:
         return fit is not None and fit[0] >= need and fit[1] >= 2 * p["min_trend_f"]
 
     def _steady_flow(self, trk: _Track, need: float) -> bool:
-        """Whether a tentative track's detections measured one steady motion covering ``need`` px (``end_min_hits``).
+        """Whether a tentative track's detections measured one steady motion covering ``need`` px (``end_min_hits``,
+        ``steady_min_hits``).
 
         Each detection carries its region's flow over the ground (``u_px, v_px``): a vehicle's is the same
         from frame to frame, whatever its box does (a box that is part of the car in some frames, the car
@@ -1647,6 +1652,15 @@ class MultiTargetTracker:
                 out.setdefault(r["frame"], []).append((r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"],
                                                        r["bbox_y1_px"]))
         return {f: np.asarray(b, dtype=np.float64) for f, b in out.items()}
+
+    def _crept(self, trk: _Track) -> bool:
+        """Whether a tentative track detected ``steady_min_hits`` times (with ``birth_gap`` 0, in as many frames in a
+        row) measured one steady motion (:meth:`_steady_flow`, without the distance): a car creeping up a queue at
+        0.1-0.4 px a frame, found in runs of frames broken by a frame it is not, never travels ``min_travel_px``
+        within one run, and its tentative tracks die at each break.
+        """
+        n = self.params["steady_min_hits"]
+        return n > 0 and trk.hits >= n and self._steady_flow(trk, 0.0)
 
     def _ends_steady(self, trk: _Track) -> bool:
         """Whether a tentative track still detected when the clip ends is a vehicle the clip ended on (``end_min_hits``).

@@ -949,6 +949,32 @@ def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_t
 
 
 
+def test_a_car_creeping_up_a_queue_detected_frame_after_frame_is_confirmed_on_its_steady_flow():
+    # 20 frames: a 34 x 34 px car creeping at 0.12 px a frame (2.3 px in all, under min_travel_px), its box centre
+    # scattered by 0.3 px, detected in every frame; a region flickering in place, its flow turning about; and a
+    # region whose flow points one way steadily while its box stays (a static edge the flow slides along)
+    rng = np.random.default_rng(4)
+
+    def run(**kw):
+        trk = MultiTargetTracker(**kw)
+        for t in range(20):
+            a = rng.uniform(0, 2 * np.pi)
+            trk.step(t, [_box_det(60.0 + 0.12 * t + rng.normal(0, 0.3), 40.0 + rng.normal(0, 0.3), 34, 34,
+                                  0.12 + rng.normal(0, 0.03), rng.normal(0, 0.03)),
+                         _box_det(200.0 + rng.normal(0, 0.3), 80.0 + rng.normal(0, 0.3), 30, 20, np.cos(a), np.sin(a)),
+                         _box_det(300.0 + rng.normal(0, 0.3), 150.0 + rng.normal(0, 0.3), 30, 20, 0.0, 0.3)])
+        return trk.rows()
+
+    assert run() == []                                       # the default: the travel rule alone
+    rows = run(steady_min_hits=15)
+    assert {r["track_id"] for r in rows} == {0}              # the car, neither the flicker nor the static edge
+    assert [r["frame"] for r in rows] == list(range(20))     # from its first detection
+    assert rows[-1]["x_filt_px"] == pytest.approx(60.0 + 0.12 * 19, abs=1.0)
+    assert run(steady_min_hits=21) == []                     # twenty detections are fewer
+    with pytest.raises(ValueError, match=r"steady_min_hits: expected an integer >= 0 \(0: off\), got -1"):
+        MultiTargetTracker(steady_min_hits=-1)
+
+
 def _iou_xyxy(a, b):
     iw = max(0.0, min(a[0, 2], b[0, 2]) - max(a[0, 0], b[0, 0]))
     ih = max(0.0, min(a[0, 3], b[0, 3]) - max(a[0, 1], b[0, 1]))
