@@ -774,7 +774,7 @@ class _Track:
 # steady_min_hits: a tentative track detected this many times (in as many frames in a row, with birth_gap 0) whose
 #   detections measured one steady motion (steady_flow_rel; its boxes went that way) is confirmed though it has not
 #   travelled min_travel_px: a car creeping up a queue at 0.1-0.4 px a frame, found in runs of 5-25 frames broken by
-#   one it is not, whose tentative tracks died at each break. 0: off;
+#   one it is not, whose tentative tracks died at each break. 0: off, the default; 8 in dis (figures there);
 # merge_hits: confirmed tracks that are parts of one vehicle are joined: a truck, bus or van whose region splits
 #   (cab and body, the shadow side) in some frames and is found whole in others gets a confirmed track per part,
 #   and the whole detection, whose centre lies outside both parts' gates, starts a tentative track the next split
