@@ -975,6 +975,24 @@ def test_a_car_creeping_up_a_queue_detected_frame_after_frame_is_confirmed_on_it
         MultiTargetTracker(steady_min_hits=-1)
 
 
+def test_a_car_split_once_into_halves_abreast_is_found_whole_again_by_its_track():
+    # a 20 x 40 px car driving down at 2 px a frame, found whole, but in frame 12 as two halves side by side (8 and 6
+    # px wide): its track takes the left half and starts again from that size (partial_abreast), the right half starts
+    # a tentative track, and from frame 13 on the whole box holds both tracks' centres, abreast: it is neither's
+    # (abreast_shared) for birth_hits frames, then the car's track's again. Before, it was neither's for ten frames,
+    # the car's track coasting at the half's size, until the tentative track took it: two tracks for one car
+    trk = MultiTargetTracker(partial_abreast=True, abreast_shared=True)
+    for t in range(30):
+        dets = ([_box_det(94.0, 50.0 + 2 * t, 8, 40, 0.0, 2.0), _box_det(106.0, 46.0 + 2 * t, 6, 20, 0.0, 2.0)]
+                if t == 12 else [_box_det(100.0, 50.0 + 2 * t, 20, 40, 0.0, 2.0)])
+        trk.step(t, dets)
+    rows = trk.rows()
+    assert {r["track_id"] for r in rows} == {0}
+    for frame in range(16, 30):
+        (r,) = [r for r in rows if r["frame"] == frame]
+        box = np.array([[r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]]])
+        assert _iou_xyxy(box, np.array([[90.5, 30.5 + 2 * frame, 109.5, 69.5 + 2 * frame]])) > 0.8, frame
+
 def _iou_xyxy(a, b):
     iw = max(0.0, min(a[0, 2], b[0, 2]) - max(a[0, 0], b[0, 0]))
     ih = max(0.0, min(a[0, 3], b[0, 3]) - max(a[0, 1], b[0, 1]))
