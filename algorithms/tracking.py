@@ -1302,7 +1302,8 @@ class MultiTargetTracker:
                     if (not trk.confirmed and trk.misses > p["birth_gap"]) or trk.misses >= self.death_misses:
                         continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
-            if not trk.confirmed and (trk.hits >= self.birth_hits and self._travelled(trk) or self._crept(trk)):
+            if not trk.confirmed and (trk.hits >= self.birth_hits and self._travelled(trk)
+                                       or self._steady_run(trk, p["steady_min_hits"])):
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
@@ -1666,25 +1667,18 @@ class MultiTargetTracker:
                                                        r["bbox_y1_px"]))
         return {f: np.asarray(b, dtype=np.float64) for f, b in out.items()}
 
-    def _crept(self, trk: _Track) -> bool:
-        """Whether a tentative track detected ``steady_min_hits`` times (with ``birth_gap`` 0, in as many frames in a
-        row) measured one steady motion (:meth:`_steady_flow`, without the distance): a car creeping up a queue at
-        0.1-0.4 px a frame, found in runs of frames broken by a frame it is not, never travels ``min_travel_px``
-        within one run, and its tentative tracks die at each break.
-        """
-        n = self.params["steady_min_hits"]
-        return n > 0 and trk.hits >= n and self._steady_flow(trk, 0.0)
+    def _steady_run(self, trk: _Track, n: int) -> bool:
+        """Whether a tentative track detected ``n`` times or more (``n`` > 0; with ``birth_gap`` 0, in as many frames in
+        a row) measured one steady motion (:meth:`_steady_flow`, without the distance): fewer detections, or a flow
+        that turns about (flicker), do not.
 
-    def _ends_steady(self, trk: _Track) -> bool:
-        """Whether a tentative track still detected when the clip ends is a vehicle the clip ended on (``end_min_hits``).
-
-        Offline, as MOTChallenge scores a tracker: the clip's end, not the vehicle, cut the frames in which
-        it would have travelled far enough to be confirmed (a car that pulls away from a light in the last
-        second, one that enters the view). A track detected in each of its last ``end_min_hits`` frames or
-        more whose detections measured one steady motion (``steady_flow_rel``, without the distance) is
-        confirmed then; fewer detections, or a flow that turns about (flicker), are not.
+        Two rules confirm on it where the travel rule cannot. ``steady_min_hits``, in any frame: a car creeping up a
+        queue at 0.1-0.4 px a frame, found in runs of frames broken by a frame it is not, never travels
+        ``min_travel_px`` within one run, and its tentative tracks die at each break. ``end_min_hits``, when the clip
+        ends (offline, as MOTChallenge scores a tracker): the clip's end, not the vehicle, cut the frames in which it
+        would have travelled far enough (a car that pulls away from a light in the last second, one that enters the
+        view).
         """
-        n = self.params["end_min_hits"]
         return n > 0 and trk.hits >= n and self._steady_flow(trk, 0.0)
 
     def _of_ground(self, trk: _Track, box: np.ndarray) -> bool:
@@ -1728,7 +1722,7 @@ class MultiTargetTracker:
         self._path[int(frame)] = off.copy()
         img = None if image is None else np.asarray(image).astype(np.float32, copy=False)
         for trk in self._tracks:
-            if not trk.confirmed and trk.misses == 0 and self._ends_steady(trk):
+            if not trk.confirmed and trk.misses == 0 and self._steady_run(trk, self.params["end_min_hits"]):
                 trk.confirmed = True
                 self._rows.extend(trk.pending)
                 trk.pending = []
