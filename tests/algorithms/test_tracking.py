@@ -993,6 +993,7 @@ def test_a_car_split_once_into_halves_abreast_is_found_whole_again_by_its_track(
         box = np.array([[r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]]])
         assert _iou_xyxy(box, np.array([[90.5, 30.5 + 2 * frame, 109.5, 69.5 + 2 * frame]])) > 0.8, frame
 
+
 def _iou_xyxy(a, b):
     iw = max(0.0, min(a[0, 2], b[0, 2]) - max(a[0, 0], b[0, 0]))
     ih = max(0.0, min(a[0, 3], b[0, 3]) - max(a[0, 1], b[0, 1]))
