@@ -42,8 +42,8 @@ section; ``frames: 0``, the default, turns the stage off; every non-thesis built
 with 6, the thesis ones leave it off: what it gains and loses on the synthetic scenes, the 1080p held-out stand-ins and
 KIT AIS is measured there and in those pipelines' files).
 A second, longer baseline (``slow_frames``, ``k2``) runs the same stage over ``k2`` frames for movers slower
-still, added where neither the pair nor the first long pair found anything (:func:`merge_detections`
-without replacing).
+still (at the sequence's start over the frames there are, from two more than the first's), added where neither the
+pair nor the first long pair found anything (:func:`merge_detections` without replacing).
 The pipeline keeps the last ``max(k, k2)`` gray frames and pair models, and runs its own flow method once
 more a pair for each baseline: dis with one costs twice its CPU time a pair (``benchmarks/pipeline_speed.py speed``,
 640x480: 75.0 against 37.5 ms a pair).
@@ -84,11 +84,15 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #       trail the mid frame still holds part of);
 #   it does not help everywhere (tv-l1 and pyramidal-lk on the stand-in, dis's precision on KIT AIS), hence off by
 #   default;
-# slow_frames: a second, longer baseline k2 > frames (0, the default: none), run once k2 frames lie behind frame t: its
-#   slow movers (the same keys, min_displacement_px over the k2 frames) join where none of the pair's or the first
-#   long pair's detections lies, nor the path one swept over the k2 frames, and never replace one (replace_rel does
-#   not apply). A queue creeping at 0.1-0.25 px a frame moves 0.6-1.5 px over six frames, under the floor, and 2.4-6 px
-#   over 24. It costs one more flow a pair (dis's long flow from full resolution). 24 in dis; the figures there.
+# slow_frames: a second, longer baseline k2 > frames (0, the default: none): its slow movers (the same keys,
+#   min_displacement_px over the k2 frames) join where none of the pair's or the first long pair's detections lies,
+#   nor the path one swept over the k2 frames, and never replace one (replace_rel does not apply). A queue creeping at
+#   0.1-0.25 px a frame moves 0.6-1.5 px over six frames, under the floor, and 2.4-6 px over 24. At the sequence's
+#   start it runs, as the first does, over the frames there are, from frames + 2 behind frame t (a baseline two frames
+#   longer than the first's) up to k2: the frames before the k2-th are as many as a 100-frame clip's slow movers
+#   waited for otherwise (from k2 alone, the 1080p city-wide worlds' dis 0.549 / 0.551 / 0.685, from 8 0.601 /
+#   0.572 / 0.722; docs/long_baseline.md). It costs one more flow a pair (dis's long flow from full resolution). 24 in
+#   dis; the figures there.
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6; the detector's noise_k times the long pair's median residual
 #   raises it where the flow is noisier. 1.0 in dis (algorithms/pipelines/dis.yaml: the 1080p city-wide worlds' long

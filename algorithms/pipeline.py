@@ -673,9 +673,10 @@ class Pipeline:
                 k = min(len(history), long_cfg["frames"])
                 dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
-            if long_cfg["slow_frames"] and len(history) >= long_cfg["slow_frames"]:
-                # slower ones over the second, longer baseline, where none of the above lies
-                k = long_cfg["slow_frames"]
+            k = min(len(history), long_cfg["slow_frames"])
+            if long_cfg["slow_frames"] and k >= min(long_cfg["slow_frames"], long_cfg["frames"] + 2):
+                # slower ones over the second, longer baseline, where none of the above lies (at the sequence's start
+                # over the frames there are, once they are two more than the first baseline's)
                 dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=0)
             if clip_shadow and dets and np.any(shadow_at_t):

@@ -182,7 +182,8 @@ def test_the_pipeline_finds_the_slow_car_with_the_long_baseline_and_not_without_
 def test_a_car_creeping_at_0_1_px_a_frame_is_found_over_the_slow_baseline_alone(seed):
     """slow_frames: 0.6 px over six frames stays under dis's 1.0 px floor; over 18 frames the car moved 1.8 px and is
     found in every pair from the 18th on, once (the six-frame stage finds nothing to join it), and a still scene gives
-    nothing over either baseline."""
+    nothing over either baseline. Before the 18th the slow baseline runs over the frames there are (from 8): the car
+    is found in most pairs once it has moved past the floor over them, never before."""
     speed, k, k2 = 0.1, 6, 18
     frames = _sequence(k2 + 5, speed_px=speed, seed=seed)
 
@@ -193,7 +194,9 @@ def test_a_car_creeping_at_0_1_px_a_frame_is_found_over_the_slow_baseline_alone(
     both = found(_pipeline(frames=k, slow_frames=k2, min_displacement_px=1.0), frames)
     assert all(ds == [] for ds in six)
     hit = {t for t, ds in enumerate(both) if any(box_iou(d, _car_box(t, speed)) >= 0.7 for d in ds)}
-    assert hit == set(range(k2, len(both))), hit
+    floor = round(1.0 / speed)  # the pair with the car 1.0 px from where it was in frame 0
+    assert set(range(k2, len(both))) <= hit <= set(range(floor, len(both))), hit
+    assert len(hit & set(range(floor, k2))) >= (k2 - floor) // 2, hit
     assert all(len(ds) <= 1 for ds in both)
     (d,) = both[-1]
     assert (d.u_px, d.v_px) == pytest.approx((speed, 0.0), abs=0.04)  # the per-frame velocity, not the 18-frame one
@@ -231,7 +234,8 @@ def test_a_slow_car_under_a_turning_camera_is_found_once_the_long_pair_is_regist
     """A camera turning 0.6 degree a frame, under a shift model: over the 18-frame pair the ground near the car moves
     6 px and the corners 16 px. A car creeping at 0.1 px a frame near the left edge is found in three or more of
     the five pairs from the 18th on with the pair registered again (reregister_px, the default 3 px), and nothing
-    else; without it the car is found in none, and the ground the turn moved is taken for movers."""
+    else; without it the car is found in none of them (only over the shorter slow pairs before, which the turn moved
+    less), and the ground the turn moved is taken for movers."""
     speed, k, k2, deg, at = 0.1, 6, 18, 0.6, (30.0, 53.0)
     frames, boxes = [], []
     for t, f in enumerate(_sequence(k2 + 5, speed_px=speed, seed=seed, at=at)):
@@ -251,7 +255,7 @@ def test_a_slow_car_under_a_turning_camera_is_found_once_the_long_pair_is_regist
     hits, elsewhere = found()
     assert len(hits & set(range(k2, k2 + 5))) >= 3 and elsewhere == 0
     hits, elsewhere = found(reregister_px=0.0)
-    assert hits == set() and elsewhere > 0  # the ground that the turn moved, taken for movers
+    assert not hits & set(range(k2, k2 + 5)) and elsewhere > 0  # the ground that the turn moved, taken for movers
 
 
 @pytest.mark.parametrize("seed", [0, 1])
