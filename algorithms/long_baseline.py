@@ -89,10 +89,10 @@ __all__ = ["LONG_BASELINE_DEFAULTS", "check_long_baseline", "compose_models", "r
 #   nor the path one swept over the k2 frames, and never replace one (replace_rel does not apply). A queue creeping at
 #   0.1-0.25 px a frame moves 0.6-1.5 px over six frames, under the floor, and 2.4-6 px over 24. At the sequence's
 #   start it runs, as the first does, over the frames there are, from frames + 2 behind frame t (a baseline two frames
-#   longer than the first's) up to k2: the frames before the k2-th are as many as a 100-frame clip's slow movers
-#   waited for otherwise (from k2 alone, the 1080p city-wide worlds' dis 0.549 / 0.551 / 0.685, from 8 0.601 /
-#   0.572 / 0.722; docs/long_baseline.md). It costs one more flow a pair (dis's long flow from full resolution). 24 in
-#   dis; the figures there.
+#   longer than the first's) up to k2; run from the k2-th frame alone, it left a 100-frame clip's first quarter to
+#   the six-frame pair (the 1080p city-wide worlds, dis: from k2 0.549 / 0.551 / 0.685, from 8 0.601 / 0.572 / 0.722;
+#   docs/long_baseline.md). It costs one more flow a pair (dis's long flow from full resolution). 24 in dis; the
+#   figures there.
 # min_displacement_px: the detector's speed threshold on the long pair, px over the k frames (min_magnitude_px
 #   there; px-scaled): 0.25 px a frame at k = 6; the detector's noise_k times the long pair's median residual
 #   raises it where the flow is noisier. 1.0 in dis (algorithms/pipelines/dis.yaml: the 1080p city-wide worlds' long
