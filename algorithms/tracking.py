@@ -1059,7 +1059,7 @@ SMOOTH_LINE_FRAMES = 8
 # _of_ground: a track that never was a box side from where it is to be held must have its template match its place
 # in its oldest kept frame within this, px (its Kalman centre then, not its template's; dis on the worlds, pooled
 # with hold_min_travel_rel 0.1: 2 px 0.586 / 0.558, 4 px 0.586 / 0.563, 7 px, the hold's search, 0.580 / 0.564 on the
-# two sets of renders; the match asked at NCC 0.7 instead of hold_min_ncc gained one world and lost another:
+# two sets of renders; the match asked at NCC 0.7 instead of hold_min_ncc gained two worlds and lost the third:
 # benchmarks/heldout_rehearsal.md, "Misses by how fast the vehicle moves")
 HOLD_SAME_SEARCH_PX = 4.0
 
