@@ -104,7 +104,7 @@ from algorithms.registry import register_stage
 
 __all__ = ["Detection", "DETECTION_DEFAULTS", "detect_vehicles", "ground_residual", "ground_fit_at", "ground_fit_map",
            "explained_in_box", "shadow_bands", "trim_cast_shadows", "shadow_lean", "clip_shadow_direction", "trim_toward",
-           "image_yaw_rad", "turn", "box_extents", "moves_lengthwise", "fill_lane", "drop_parts_inside"]
+           "image_yaw_rad", "turn", "box_extents", "moves_lengthwise", "fill_lane", "drop_parts_inside", "iou_xyxy"]
 
 
 class Detection(NamedTuple):
@@ -593,14 +593,14 @@ def _overlapping(cores: list[_Region], iou: float) -> list[list[_Region]]:
         used[a] = True
         members = [cores[order[a]]]
         for b in range(a + 1, len(order)):
-            if not used[b] and _iou_xyxy(boxes[a], boxes[b]) >= iou:
+            if not used[b] and iou_xyxy(boxes[a], boxes[b]) >= iou:
                 used[b] = True
                 members.append(cores[order[b]])
         groups.append(members)
     return groups
 
 
-def _iou_xyxy(a, b) -> float:
+def iou_xyxy(a, b) -> float:
     """IoU of two inclusive pixel boxes ``(x0, y0, x1, y1)``."""
     iw = min(a[2], b[2]) - max(a[0], b[0]) + 1
     ih = min(a[3], b[3]) - max(a[1], b[1]) + 1
@@ -1440,7 +1440,7 @@ def _too_small_box(box, p: dict, gsd_m_per_px: float | None, h: int, w: int) -> 
 
 def _box_iou(a: Detection, b: Detection) -> float:
     """IoU of two detections' inclusive pixel boxes."""
-    return _iou_xyxy((a.x0_px, a.y0_px, a.x1_px, a.y1_px), (b.x0_px, b.y0_px, b.x1_px, b.y1_px))
+    return iou_xyxy((a.x0_px, a.y0_px, a.x1_px, a.y1_px), (b.x0_px, b.y0_px, b.x1_px, b.y1_px))
 
 
 def drop_parts_inside(detections: list[Detection], share: float, *, merge_px: float = DETECTION_DEFAULTS["merge_px"],
@@ -1974,7 +1974,8 @@ def trim_toward(detections: list[Detection], bands: np.ndarray, direction, *,
 
 @register_stage("detection")
 def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None, frames=None, prev_frame=None,
-                    gsd_m_per_px: float | None = None, **params) -> list[Detection]:
+                    gsd_m_per_px: float | None = None, parallax_exempt: Callable[[Detection], bool] | None = None,
+                    **params) -> list[Detection]:
     """Moving vehicles of a pair: regions of independent local motion, one per rigid mover (module docstring).
 
     Parameters
@@ -1995,6 +1996,9 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         t, t+1 alone without it).
     gsd_m_per_px : float, optional
         Ground sampling distance, m/px: fills ``area_m2`` and applies ``min_area_m2``, ``max_area_m2``.
+    parallax_exempt : callable, optional
+        Called with each detection the parallax test (``parallax_max_ratio``) rejects; one it returns True for
+        is kept (the long pair's chains over frames, :class:`algorithms.long_baseline.ParallaxChains`).
     **params
         Keys of ``DETECTION_DEFAULTS`` (module docstring); an unknown key raises ValueError naming it.
 
@@ -2161,7 +2165,8 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
         if not any(_box_iou(d, k) >= p["nms_iou"] for k in kept):
             kept.append(d)
             kept_ground.append(ground_of[i])
-    out = [(d, gr) for d, gr in zip(kept, kept_ground) if not _parallax(d, g, p, h, w)]
+    out = [(d, gr) for d, gr in zip(kept, kept_ground)
+           if not _parallax(d, g, p, h, w) or (parallax_exempt is not None and parallax_exempt(d))]
     parallax_dir = _common_parallax([d for d, _ in out], p, h * w)
     if parallax_dir is not None:
         e, bound = parallax_dir
