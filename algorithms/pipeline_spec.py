@@ -292,6 +292,9 @@ class LongBaselineSpec(_Section):
     parallax_max_ratio: float = LONG_BASELINE_DEFAULTS["parallax_max_ratio"]
     mid_check: StrictBool = LONG_BASELINE_DEFAULTS["mid_check"]
     reregister_px: float = LONG_BASELINE_DEFAULTS["reregister_px"]
+    parallax_trend: float = LONG_BASELINE_DEFAULTS["parallax_trend"]
+    parallax_trend_frames: StrictInt = LONG_BASELINE_DEFAULTS["parallax_trend_frames"]
+    parallax_trend_snr: float = LONG_BASELINE_DEFAULTS["parallax_trend_snr"]
     flow_params: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from algorithms.detection import Detection, detect_vehicles, explained_in_box, ground_fit_at
-from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, check_long_baseline, compose_models,
+from algorithms.long_baseline import (LONG_BASELINE_DEFAULTS, ParallaxChains, check_long_baseline, compose_models,
                                       long_baseline_detections, merge_detections, register_into, registration_fix)
 from algorithms.pipeline import Pipeline, PipelineError
 from algorithms.reference import dis
@@ -297,6 +297,9 @@ def test_the_long_pair_runs_the_flow_with_its_own_parameters(seed, monkeypatch):
     ({"min_box_px": 10.5}, r"detection.long_baseline.min_box_px: expected an integer"),
     ({"parallax_max_ratio": -1.0}, r"detection.long_baseline.parallax_max_ratio: expected a finite number >= 0"),
     ({"reregister_px": -1.0}, r"detection.long_baseline.reregister_px: expected a finite number >= 0"),
+    ({"parallax_trend": -0.1}, r"detection.long_baseline.parallax_trend: expected a finite number >= 0"),
+    ({"parallax_trend_snr": math.inf}, r"detection.long_baseline.parallax_trend_snr: expected a finite number"),
+    ({"parallax_trend_frames": 2}, r"detection.long_baseline.parallax_trend_frames: expected an integer >= 3"),
     ({"bogus": 1}, r"detection.long_baseline.bogus: unknown key; valid: frames"),
     ({"frames": 6, "slow_frames": 6}, r"detection.long_baseline.slow_frames: expected 0 \(off\) or an integer over "
                                       r"frames \(6, which must be on\), got 6"),
@@ -353,9 +356,10 @@ def test_a_long_baseline_region_where_the_pair_flow_is_fast_is_no_slow_mover():
         long_baseline_detections(wk, vk & inside, pair_flow=still[:10], **kw)
 
 
-def _flight(n, *, camera_px=1.0, gamma=0.5, car_px=(0.4, 0.0), seam_deg=30.0, seed=3):
+def _flight(n, *, camera_px=1.0, gamma=0.5, car_px=(0.4, 0.0), car_accel_px=0.0, seam_deg=30.0, seed=3):
     """``n`` gray frames (float32) of a camera flying ``camera_px`` a frame (the ground moves down the image) over
-    textured ground, a car driving ``car_px`` a frame over it, and a building's roof whose parallax is ``gamma``
+    textured ground, a car driving ``car_px`` a frame over it (speeding up by ``car_accel_px`` a frame each frame
+    down the image), and a building's roof whose parallax is ``gamma``
     times the ground's motion (``gamma = h / (Z - h)``: 0.5 is a building a third of the flight height), light
     grey with dark seams every 6 px at ``seam_deg`` from the x axis (one-dimensional texture, as roofs have).
     Returns the frames, the car's box at each frame ``(x0, y0, x1, y1)`` and the roof's."""
@@ -377,7 +381,8 @@ def _flight(n, *, camera_px=1.0, gamma=0.5, car_px=(0.4, 0.0), seam_deg=30.0, se
         img = cv2.warpAffine(ground, np.float32([[1, 0, -pad], [0, 1, -pad + dy]]), (w, h), flags=cv2.INTER_LINEAR)
         for layer, mask, x, y, boxes in (
                 (roof, np.ones_like(roof), 150.0, 30.0 + (1 + gamma) * dy, roof_boxes),
-                (car, alpha, 30.0 + car_px[0] * t, 80.0 + dy + car_px[1] * t, car_boxes)):
+                (car, alpha, 30.0 + car_px[0] * t, 80.0 + dy + car_px[1] * t + 0.5 * car_accel_px * t * t,
+                 car_boxes)):
             M = np.float32([[1, 0, x], [0, 1, y]])
             lay = cv2.warpAffine(layer, M, (w, h), flags=cv2.INTER_LINEAR)
             al = cv2.warpAffine(mask, M, (w, h), flags=cv2.INTER_LINEAR)
@@ -424,6 +429,85 @@ def test_a_car_creeping_along_the_flight_slower_than_a_building_is_given_up_and_
         # either is found without the test
         dets = long_baseline_detections(flow, valid, parallax_max_ratio=0.0, **pair)
         assert any(box_iou(d, cars[k]) >= 0.5 for d in dets), (car_px, dets)
+
+
+def test_a_car_speeding_up_along_the_flight_is_kept_once_its_ratio_changes_and_the_roof_never_is():
+    # 0.25 -> 0.55 px a frame along the flight, in its sense: at every frame the long pair alone takes it for a roof
+    # (its ratio to the camera's motion under parallax_max_ratio); over the frames its ratio changes, the roof's
+    # (gamma 0.5) does not
+    k, n = 6, 30
+    frames, cars, roofs = _flight(n, car_px=(0.0, 0.25), car_accel_px=0.01)
+    chains = ParallaxChains(min_change=0.1, min_frames=8, snr=5.0)
+    with_chains, without = [], []
+    for t in range(k, n):
+        pair = _long_pair(frames, t, k, 1.0)
+        flow, valid = pair.pop("flow"), pair.pop("valid")
+        without.append(long_baseline_detections(flow, valid, **pair))
+        with_chains.append(long_baseline_detections(flow, valid, parallax_chains=chains, frame=t, **pair))
+    car_found = [any(box_iou(d, cars[t]) >= 0.5 for d in dets) for t, dets in zip(range(k, n), with_chains)]
+    assert not any(any(box_iou(d, cars[t]) >= 0.5 for d in dets) for t, dets in zip(range(k, n), without))
+    # released once its chain holds min_frames and its ratio changed by 0.1 (0.01 a frame: about frame 16, ten
+    # after the first long pair), and kept from then on
+    first = car_found.index(True) + k
+    assert 15 <= first <= 21, car_found
+    assert all(car_found[first - k:]), car_found
+    assert not any(box_iou(d, roofs[t]) >= 0.3 for t, dets in zip(range(k, n), with_chains) for d in dets)
+
+
+def _rejected(x, y, gamma, g=(0.0, -6.0), size=(20, 12)):
+    """A detection at ``(x, y)`` whose motion over the pair is ``gamma`` times the pair's global motion ``g``."""
+    return Detection(x + size[0] / 2, y + size[1] / 2, size[0] * size[1], x, y, x + size[0] - 1, y + size[1] - 1,
+                     gamma * g[0], gamma * g[1], math.nan)
+
+
+@pytest.mark.parametrize("gammas, released_at", [
+    ([0.3] * 30, None),  # a roof: its ratio stays
+    ([0.3 + 0.004 * (i % 3 - 1) for i in range(30)], None),  # a roof, the flow's noise about its ratio
+    ([0.1 + 0.015 * i for i in range(30)], 7),  # a car speeding up: 0.1 along the chain from its 8th detection
+    ([0.5 - 0.012 * i for i in range(30)], 9),  # one slowing down: 0.1 along it at its 10th (0.108)
+    ([0.1 + 0.004 * i + 0.08 * (i % 2) for i in range(30)], None),  # 0.12 along it, under 5 times its scatter 0.04
+])
+def test_a_chain_is_released_when_its_ratio_changes_beyond_its_scatter_and_stays_released(gammas, released_at):
+    g, k = np.array([0.0, -6.0]), 6  # the pair's global motion: the ground 1 px a frame down the image
+    chains = ParallaxChains(min_change=0.1, min_frames=8, snr=5.0)
+    out = []
+    for i, gamma in enumerate(gammas):
+        chains.begin(i, g, k)
+        # the point moves (1 + gamma) px a frame down the image
+        y = 20.0 + sum(1.0 + a for a in gammas[:i])
+        out.append(chains.exempt(_rejected(40.0, y, gamma, g)))
+    assert out == [released_at is not None and i >= released_at for i in range(len(gammas))]
+
+
+def test_chains_link_across_a_short_gap_only_and_one_detection_is_added_once_a_frame():
+    g, k = np.array([0.0, -6.0]), 6
+    rising = [0.1 + 0.02 * i for i in range(12)]
+
+    def run(skip):
+        chains = ParallaxChains(min_change=0.1, min_frames=8, snr=5.0)
+        said = False
+        for i, gamma in enumerate(rising):
+            chains.begin(i, g, k)
+            if i in skip:
+                continue
+            d = _rejected(40.0, 20.0 + sum(1.0 + a for a in rising[:i]), gamma, g)
+            said = chains.exempt(d)
+            assert chains.exempt(d) == said  # judged by both tests: one point of the chain
+        return said
+
+    assert run(skip=set()) is True
+    assert run(skip={4, 5}) is True  # two frames missed: still one chain (10 points, 0.22 along it)
+    assert run(skip={3, 4, 5}) is False  # three: two chains, the second too short
+    chains = ParallaxChains(min_change=0.1)
+    chains.begin(3, g, k)
+    with pytest.raises(ValueError, match=r"frame: expected frames in order, got 3 after 3"):
+        chains.begin(3, g, k)
+    with pytest.raises(ValueError, match=r"parallax_trend_frames: expected an integer >= 3"):
+        ParallaxChains(min_change=0.1, min_frames=2)
+    f, v = np.zeros((8, 8, 2), np.float32), np.ones((8, 8), bool)
+    with pytest.raises(ValueError, match=r"frame: expected the index of frame t with parallax_chains"):
+        long_baseline_detections(f, v, baseline_frames=2, frames=(np.zeros((8, 8), np.float32),) * 2,
+                                 composed=np.eye(3), parallax_chains=ParallaxChains(min_change=0.1))
 
 
 def test_explained_in_box_tells_the_true_motion_from_others_and_the_ground_fit_is_read_where_asked():
