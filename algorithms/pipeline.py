@@ -51,8 +51,8 @@ from algorithms.registry import STAGES, get_stage, register_stage
 from algorithms.shared_work import SharedWork
 from algorithms.detection import (DETECTION_DEFAULTS, clip_shadow_direction, drop_parts_inside, fill_lane,
                                   ground_fit_at, image_yaw_rad, shadow_lean, trim_toward, turn)
-from algorithms.long_baseline import (compose_models, long_baseline_detections, merge_detections, register_into,
-                                      registration_fix)
+from algorithms.long_baseline import (ParallaxChains, compose_models, long_baseline_detections, merge_detections,
+                                      register_into, registration_fix)
 from algorithms.sequence_size import equivalent_gsd, relative_size_keep, typical_mover
 from algorithms.tracking import TRACK_COLUMNS, MultiTargetTracker, PointTracker, boxes_in_image, motion_mask
 
@@ -540,6 +540,11 @@ class Pipeline:
         long_cfg = scale_px(det_cfg["long_baseline"], PX_SCALED_KEYS["long_baseline"], px)
         # frames t-k .. t-1 (gray, the pair's model), oldest first: the long baseline's frame t-k and models
         history: deque = deque(maxlen=max(1, long_cfg["frames"], long_cfg["slow_frames"]))
+        # each baseline's chains of what its parallax tests rejected (long_baseline.parallax_trend; ParallaxChains)
+        parallax_chains = ({stage: ParallaxChains(min_change=long_cfg["parallax_trend"],
+                                                  min_frames=long_cfg["parallax_trend_frames"],
+                                                  snr=long_cfg["parallax_trend_snr"])
+                            for stage in ("frames", "slow_frames")} if long_cfg["parallax_trend"] > 0 else {})
         # (box area px^2, speed px/frame) of the detections so far: the typical mover (detection.sequence_size)
         size_cfg = det_cfg["sequence_size"]
         sizes: deque = deque(maxlen=size_cfg["history"])
@@ -640,7 +645,7 @@ class Pipeline:
             # the clip's direction in frame t's axes
             shadow_at_t = turn(shadow["direction"], yaw["rad"])
             yaw["rad"] += image_yaw_rad(cur["matrix"])
-            def slow_movers(k: int) -> list:
+            def slow_movers(k: int, stage: str) -> list:
                 # frame t against frame t-k registered into it (algorithms.long_baseline); frame t-m, m = k // 2:
                 # the consistency of the creep (long_baseline_detections' mid_frame)
                 models = [m for _, m in list(history)[-k:]]
@@ -666,18 +671,35 @@ class Pipeline:
                     max_speed_px=long_cfg["max_speed_px"], ground_model=long_cfg["ground_model"],
                     gsd_m_per_px=gsd_pair, detection_params=det_params, pair_flow=cur["flow_local"],
                     pair_valid=cur["valid"], min_box_px=long_cfg["min_box_px"],
-                    parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid)
+                    parallax_max_ratio=long_cfg["parallax_max_ratio"], mid_frame=mid,
+                    parallax_chains=parallax_chains.get(stage), frame=t)
+
+            # what a long pair kept only because its parallax chain's ratio changed (ParallaxChains): added last, where
+            # nothing else lies, and never in place of a pair's box (a moving car's long box holds its trail)
+            by_trend: list[tuple[int, list]] = []
+
+            def slow_movers_kept(k: int, stage: str) -> list:
+                found, chains = slow_movers(k, stage), parallax_chains.get(stage)
+                if chains is not None:
+                    by_trend.append((k, [d for d in found if chains.kept(d)]))
+                    found = [d for d in found if not chains.kept(d)]
+                return found
 
             if long_cfg["frames"] >= 2 and len(history) >= 2:
                 # slow movers over the first baseline (over the frames there are, at the sequence's start)
                 k = min(len(history), long_cfg["frames"])
-                dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
-                                        max_speed_px=long_cfg["max_speed_px"], replace_rel=long_cfg["replace_rel"])
+                dets = merge_detections(dets, slow_movers_kept(k, "frames"), baseline_frames=k,
+                                        nms_iou=det_params["nms_iou"], max_speed_px=long_cfg["max_speed_px"],
+                                        replace_rel=long_cfg["replace_rel"])
             k = min(len(history), long_cfg["slow_frames"])
             if long_cfg["slow_frames"] and k >= min(long_cfg["slow_frames"], long_cfg["frames"] + 2):
                 # slower ones over the second, longer baseline, where none of the above lies (at the sequence's start
                 # over the frames there are, once they are two more than the first baseline's)
-                dets = merge_detections(dets, slow_movers(k), baseline_frames=k, nms_iou=det_params["nms_iou"],
+                dets = merge_detections(dets, slow_movers_kept(k, "slow_frames"), baseline_frames=k,
+                                        nms_iou=det_params["nms_iou"], max_speed_px=long_cfg["max_speed_px"],
+                                        replace_rel=0)
+            for k, kept in by_trend:
+                dets = merge_detections(dets, kept, baseline_frames=k, nms_iou=det_params["nms_iou"],
                                         max_speed_px=long_cfg["max_speed_px"], replace_rel=0)
             if clip_shadow and dets and np.any(shadow_at_t):
                 # the merged boxes lose their shadow: a slow mover's box from the long pair holds it as the pair's
