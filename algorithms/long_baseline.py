@@ -509,13 +509,15 @@ class ParallaxChains:
     camera's) does. On ``realistic`` at seed 1 (dis, the 6-frame pair) a car pulling away along the flight line went
     from 0.07 to 0.26 over 41 frames, 0.008 about a straight line, while the chains of roofs and crowns stayed
     within 0.03 of their start, 0.002-0.013 about it; on the 1080p city-wide worlds (24-frame pair) the chains whose
-    ratio changed by 0.1 or more at five times their scatter were seven creeping cars and no static structure.
+    ratio changed by 0.1 or more at five times their scatter were eight, on seven creeping cars, none on a static
+    structure.
 
     Each rejected detection joins the chain whose last box, moved by the parallax of its last ``gamma`` over the
-    frames since (``(1 + gamma) G / k`` a frame, at most ``max_gap`` frames back), it overlaps most, at IoU
-    ``link_iou`` or more; else it starts one. A chain of ``min_frames`` or more whose least-squares line of ``gamma``
-    against the frame changes by ``min_change`` or more along it, and by ``snr`` times the scatter about it, is
-    released: its detections are kept (:meth:`exempt`) from then on, while it goes on.
+    frames since (``(1 + gamma) G / k`` a frame; a chain that missed more than ``max_gap`` frames has ended), it
+    overlaps most, at IoU ``link_iou`` or more; else it starts one. A chain of ``min_frames`` or more whose
+    least-squares line of ``gamma`` against the frame changes by ``min_change`` or more along it, and by ``snr``
+    times the scatter about it, is released: its detections are kept (:meth:`exempt`) from then on, while it goes
+    on.
     """
 
     def __init__(self, *, min_change: float, min_frames: int = LONG_BASELINE_DEFAULTS["parallax_trend_frames"],
