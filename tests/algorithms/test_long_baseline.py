@@ -454,6 +454,29 @@ def test_a_car_speeding_up_along_the_flight_is_kept_once_its_ratio_changes_and_t
     assert not any(box_iou(d, roofs[t]) >= 0.3 for t, dets in zip(range(k, n), with_chains) for d in dets)
 
 
+def test_the_pipeline_with_parallax_trend_finds_the_speeding_car_and_adds_nothing_on_the_roof():
+    from algorithms.pipeline import PairEstimate
+
+    n = 30
+    frames, cars, roofs = _flight(n, car_px=(0.0, 0.25), car_accel_px=0.01)
+
+    def frames_on(pipeline):
+        car, roof = set(), set()
+        for e in pipeline.run(frames):
+            if isinstance(e, PairEstimate):
+                car |= {e.index} if any(box_iou(d, cars[e.index]) >= 0.5 for d in e.detections) else set()
+                roof |= {e.index} if any(box_iou(d, roofs[e.index]) >= 0.3 for d in e.detections) else set()
+        return car, roof
+
+    car_off, roof_off = frames_on(_pipeline(frames=6))
+    car_on, roof_on = frames_on(_pipeline(frames=6, parallax_trend=0.1))
+    # off: the pair detector finds it in a frame or two once it passes 0.5 px a frame; on: from its chain's release
+    assert len(car_off) <= 3 and car_off <= car_on, (car_off, car_on)
+    assert len(car_on - car_off) >= 6 and min(car_on - car_off) >= 15, (car_off, car_on)
+    # the roof (gamma 0.5) is the pair detector's business (over its bound 0.25); the chains add no frame of it
+    assert roof_on == roof_off
+
+
 def _rejected(x, y, gamma, g=(0.0, -6.0), size=(20, 12)):
     """A detection at ``(x, y)`` whose motion over the pair is ``gamma`` times the pair's global motion ``g``."""
     return Detection(x + size[0] / 2, y + size[1] / 2, size[0] * size[1], x, y, x + size[0] - 1, y + size[1] - 1,
