@@ -479,8 +479,7 @@ def _parallax_explains(d: Detection, frames, g: np.ndarray, ground, ratio: float
     seams, a facade's rows of windows): the flow slides along the lines by any amount, and only the
     component across them is the parallax's.
     """
-    h, w = frames[0].shape
-    G = g if g.ndim == 1 else g[min(h - 1, max(0, round(d.y_px))), min(w - 1, max(0, round(d.x_px)))]
+    G = _motion_at(g, d)
     gn = math.hypot(*G)
     if not gn > 0:
         return False
@@ -544,10 +543,7 @@ class ParallaxChains:
         key = (d.x0_px, d.y0_px, d.x1_px, d.y1_px)
         if key in self._now:
             return self._now[key]["released"]
-        g = self._g
-        if g.ndim == 3:
-            h, w = g.shape[:2]
-            g = g[min(h - 1, max(0, round(d.y_px))), min(w - 1, max(0, round(d.x_px)))]
+        g = _motion_at(self._g, d)
         gn2 = float(g @ g)
         if not gn2 > 0:
             return False
@@ -590,6 +586,14 @@ def _ratio_changes(frames, gammas, min_change: float, snr: float) -> bool:
     change = abs(coef[0]) * (t[-1] - t[0])
     scatter = math.sqrt(float(np.mean((y - A @ coef) ** 2)))
     return bool(change >= min_change and change >= snr * scatter)
+
+
+def _motion_at(g: np.ndarray, d: Detection) -> np.ndarray:
+    """The global motion ``g`` (a shift ``(2,)`` or a field ``(H, W, 2)``) at ``d``'s centre, clipped into the image."""
+    if g.ndim == 1:
+        return g
+    h, w = g.shape[:2]
+    return g[min(h - 1, max(0, round(d.y_px))), min(w - 1, max(0, round(d.x_px)))]
 
 
 def _box_area(d: Detection) -> float:

@@ -680,10 +680,11 @@ class Pipeline:
 
             def slow_movers_kept(k: int, stage: str) -> list:
                 found, chains = slow_movers(k, stage), parallax_chains.get(stage)
-                if chains is not None:
-                    by_trend.append((k, [d for d in found if chains.kept(d)]))
-                    found = [d for d in found if not chains.kept(d)]
-                return found
+                if chains is None:
+                    return found
+                kept = [chains.kept(d) for d in found]
+                by_trend.append((k, [d for d, x in zip(found, kept) if x]))
+                return [d for d, x in zip(found, kept) if not x]
 
             if long_cfg["frames"] >= 2 and len(history) >= 2:
                 # slow movers over the first baseline (over the frames there are, at the sequence's start)
