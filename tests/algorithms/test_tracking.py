@@ -1169,3 +1169,66 @@ def test_a_track_on_part_of_a_tracked_truck_is_left_out_with_part_inside_and_a_c
     assert dropped == {"truck": 40, "car": 40}
     with pytest.raises(ValueError, match=r"part_inside: expected a number in \[0, 1\] \(0: off\), got 1.5"):
         MultiTargetTracker(part_inside=1.5)
+
+
+def _queue_frame(t: int, bodies, *, h: int = 120, w: int = 260, seed: int = 5) -> np.ndarray:
+    """A gray frame: asphalt (grey 100, noise 3) with dashed lane marks, and the ``bodies`` ``(x0, y0, x1, y1, grey)``
+    at frame ``t`` (their x moved by 1.5 px a frame)."""
+    img = np.random.default_rng(seed).normal(100.0, 3.0, (h, w)).astype(np.float32)
+    img[88:90, ::24] = 230.0
+    for x0, y0, x1, y1, grey in bodies:
+        dx = 1.5 * t
+        img[y0:y1 + 1, int(x0 + dx):int(x1 + dx) + 1] = grey + np.random.default_rng(t).normal(0, 3.0, (y1 - y0 + 1,
+                                                                                                  int(x1 - x0) + 1))
+    return img
+
+
+def test_a_bus_found_as_its_two_ends_is_one_track_where_its_body_bridges_them_and_two_cars_stay_two():
+    # a 90 x 20 px bus (grey 200) at 1.5 px a frame whose uniform roof moves in no flow: its detections are its two
+    # ends, 24 x 20 px, 66 px apart, every frame; no detection ever covers both. With merge_bridge_grey the gap
+    # between the two ends' tracks is the bus's grey as their ends are, and unlike the asphalt beside it: after
+    # merge_hits frames one track, boxed as the whole bus from its first frame. Two 30 x 20 px cars (grey 200) nose to
+    # tail 16 px apart, found each whole: the gap is the asphalt beside them, two tracks
+    def run(kind, **kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, smooth_size_frames=0, **kw)
+        for t in range(40):
+            x = 40.0 + 1.5 * t
+            if kind == "bus":
+                img = _queue_frame(t, [(40, 50, 129, 69, 200.0)])
+                dets = [_box_det(x + 11.5, 59.5, 24, 20, 1.5), _box_det(x + 77.5, 59.5, 24, 20, 1.5)]
+            else:
+                img = _queue_frame(t, [(40, 50, 69, 69, 200.0), (86, 50, 115, 69, 200.0)])
+                dets = [_box_det(x + 14.5, 59.5, 30, 20, 1.5), _box_det(x + 60.5, 59.5, 30, 20, 1.5)]
+            trk.step(t, dets, image=img)
+        return trk.rows()
+
+    rows = run("bus", merge_bridge_grey=25.0)
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(40))
+    for r in rows:   # the bus's box, 90 x 20 px, in every frame (the union of its ends' before the merge)
+        x = 40.0 + 1.5 * r["frame"]
+        np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
+                                   [x - 0.5, 49.5, x + 89.5, 69.5], atol=2.0, err_msg=str(r["frame"]))
+    assert len({r["track_id"] for r in run("bus")}) == 2   # off, the default: a track per end
+    assert len({r["track_id"] for r in run("cars", merge_bridge_grey=25.0)}) == 2
+    with pytest.raises(ValueError, match=r"merge_bridge_grey: expected a finite number >= 0, got -5"):
+        MultiTargetTracker(merge_bridge_grey=-5)
+
+
+def test_the_bridge_greys_read_the_gap_its_ends_and_the_ground_beside_it():
+    # _bridge_greys on the bus of the test above at frame 0 (its ends' boxes 24 x 20 px): the gap's grey is the body's,
+    # its ends' too, and the asphalt lies beside it; boxes whose gap is under 3 px, or whose band leaves the image,
+    # give none, as does a gap longer than max_gap_px (42 px here)
+    from algorithms.tracking import _bridge_greys
+
+    img = _queue_frame(0, [(40, 50, 129, 69, 200.0)])
+    gap, end_a, end_b, side_1, side_2 = _bridge_greys(img, np.array([51.5, 59.5, 24, 20]),
+                                                      np.array([117.5, 59.5, 24, 20]), max_gap_px=48)
+    assert gap == pytest.approx(200.0, abs=3.0) and end_a == pytest.approx(200.0, abs=3.0)
+    assert end_b == pytest.approx(200.0, abs=3.0)
+    assert side_1 == pytest.approx(100.0, abs=3.0) and side_2 == pytest.approx(100.0, abs=3.0)
+    assert _bridge_greys(img, np.array([51.5, 59.5, 24, 20]), np.array([117.5, 59.5, 24, 20]), max_gap_px=40) is None
+    assert _bridge_greys(img, np.array([51.5, 59.5, 24, 20]), np.array([74.5, 59.5, 24, 20]),
+                         max_gap_px=48) is None   # touching
+    assert _bridge_greys(img, np.array([51.5, 10.5, 24, 20]), np.array([117.5, 10.5, 24, 20]),
+                         max_gap_px=48) is None   # off the top
