@@ -1481,13 +1481,7 @@ class MultiTargetTracker:
             parts = {t.id for pair in pairs for t in pair if whole in pair} - {whole.id}
             if not parts:
                 continue
-            whole.kf.x[:4] = d
-            whole.merged = True
-            self._reshow(whole, frame, d, off)
-            whole.sizes.clear()
-            whole.sizes.append(d[2:4].copy())
-            if img is not None:
-                whole.template = _crop(img, d, off)
+            self._take_whole(whole, d, frame, img, off)
             for t in list(tracks):
                 if t.id in parts:
                     tracks.remove(t)
@@ -1499,6 +1493,17 @@ class MultiTargetTracker:
         if p["merge_covered"]:
             self._merge_covered(tracks, frame, off)
         return took
+
+    def _take_whole(self, whole: _Track, box: np.ndarray, frame, img, off: np.ndarray) -> None:
+        """``whole`` takes the box of the vehicle it was joined into (``merge_hits``, ``merge_bridge_grey``): its state,
+        its row of this frame, its size history and its template start again from ``box``."""
+        whole.kf.x[:4] = box
+        whole.merged = True
+        self._reshow(whole, frame, box, off)
+        whole.sizes.clear()
+        whole.sizes.append(box[2:4].copy())
+        if img is not None:
+            whole.template = _crop(img, box, off)
 
     def _may_be_parts(self, a: _Track, b: _Track) -> bool:
         """Whether two confirmed tracks may be parts of one vehicle (``merge_hits``, ``merge_covered``): they move alike
@@ -1575,12 +1580,7 @@ class MultiTargetTracker:
             lo = np.minimum(a.kf.x[:2] - a.kf.x[2:4] / 2, b.kf.x[:2] - b.kf.x[2:4] / 2)
             hi = np.maximum(a.kf.x[:2] + a.kf.x[2:4] / 2, b.kf.x[:2] + b.kf.x[2:4] / 2)
             union = np.concatenate([(lo + hi) / 2, hi - lo])
-            whole.kf.x[:4] = union
-            whole.merged = True
-            self._reshow(whole, frame, union, off)
-            whole.sizes.clear()
-            whole.sizes.append(union[2:4].copy())
-            whole.template = _crop(img, union, off)
+            self._take_whole(whole, union, frame, img, off)
             tracks.remove(part)
             gone.add(part.id)
             self._merges.append((part.id, whole.id))
