@@ -1,20 +1,16 @@
-"""The runner: failing cells recorded, same numbers on 1 or 2 workers, kill -9 and resume, run folder rules."""
+"""The runner: failing cells recorded, same numbers on 1 or 2 workers, run folder rules (kill -9 and resume:
+tests/reliability/test_faults.py)."""
 
 from __future__ import annotations
 
 import copy
 import fcntl
-import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pandas as pd
 import numpy as np
 import pytest
-from tests.harness.harness_testdata import RESUME_SUITE, ROOT, TINY_SUITE, accuracy_table
+from tests.harness.harness_testdata import RESUME_SUITE, TINY_SUITE, accuracy_table
 
 from harness.cli import main
 from harness.results import read_results, read_run_json
@@ -83,43 +79,6 @@ def test_a_failing_cell_is_recorded_and_the_run_goes_on(tmp_path, render_cache, 
     folder = tmp_path / "run" / "cells" / failed["cell_id"].iloc[0]
     assert "RuntimeError" in (folder / "error.txt").read_text()
     assert read_run_json(tmp_path / "run")["status"] == "failed"
-
-
-def _cli(args: list[str], env: dict) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "harness.cli", *args], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=120)
-
-
-@pytest.mark.gl
-@pytest.mark.slow
-def test_kill_and_resume_finishes_with_the_same_numbers(reference_run, tmp_path, write_suite, cli_env):
-    suite = write_suite(RESUME_SUITE)
-    out = tmp_path / "run"
-    log = tmp_path / "killed.log"
-    with open(log, "w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", str(suite), "--out", str(out),
-                                 "--workers", "1", "--quiet", "--no-report"],
-                                cwd=ROOT, env=cli_env, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
-    deadline = time.monotonic() + 120
-    try:
-        while time.monotonic() < deadline:
-            done = [p for p in (out / "cells").glob("*/cell.json") if not p.parent.name.startswith(".")]
-            if done or proc.poll() is not None:
-                break
-            time.sleep(0.02)
-        assert proc.poll() is None, f"the run ended before the kill: {log.read_text()}"
-        os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its pool workers, like a lost machine
-    finally:
-        proc.wait(timeout=30)
-    assert not (out / "results.parquet").exists(), "the run finished before it was killed"
-
-    resumed = _cli(["run", str(suite), "--out", str(out), "--resume", "--workers", "2", "--quiet", "--no-report"],
-                   cli_env)
-    assert resumed.returncode == 0, resumed.stderr
-    meta = read_run_json(out)
-    assert meta["status"] == "ok" and meta["cells_reused"] >= 1
-    pd.testing.assert_frame_equal(accuracy_table(read_results(out)), accuracy_table(reference_run.table))
-    assert not _partial_files(out)
 
 
 def test_a_non_empty_folder_is_refused_without_resume(tmp_path):

@@ -106,6 +106,35 @@ def _cli_run(out: Path, suite_file: Path, env: dict, *extra: str) -> subprocess.
                             start_new_session=True, text=True)
 
 
+def _finished_cells(out: Path) -> dict[Path, int]:
+    """cell.json of every finished cell (the folder under its final name) -> its modification time."""
+    return {p: p.stat().st_mtime_ns for p in (out / "cells").glob("*/cell.json") if not p.parent.name.startswith(".")}
+
+
+def _kill_after_a_new_cell(out: Path, suite_file: Path, env: dict) -> dict[Path, int] | None:
+    """Resume the run and SIGKILL it as soon as it finishes a cell: the finished cells then, or None if
+    the run ended before finishing a new one."""
+    before = set(_finished_cells(out)) if out.exists() else set()
+    proc = _cli_run(out, suite_file, env, "--resume")
+    deadline = time.monotonic() + 120
+    try:
+        while (time.monotonic() < deadline and proc.poll() is None
+               and not (out.exists() and set(_finished_cells(out)) - before)):
+            time.sleep(0.02)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its pool workers, like a lost machine
+        proc.wait(timeout=30)
+        if proc.returncode == 0:
+            return None
+        assert proc.returncode == -signal.SIGKILL, f"the run failed (exit {proc.returncode}): {proc.stderr.read()}"
+    finally:
+        proc.stderr.close()
+    _assert_nothing_half_written(out)
+    kept = _finished_cells(out)
+    assert set(kept) - before, "no cell was finished within two minutes"
+    return kept
+
+
 def _assert_nothing_half_written(out: Path) -> None:
     assert_all_readable(out)  # final names only ever hold whole files
     for cell in (out / "cells").iterdir() if (out / "cells").is_dir() else ():
@@ -148,11 +177,19 @@ def test_sigkill_at_random_points_then_resume_gives_the_uninterrupted_numbers(re
             # segment starts the run afresh, so that every kill interrupts real work
             shutil.rmtree(out)
     assert len(kills) == N_KILLS, f"only {len(kills)} kills landed in {tries} runs: {kills}"
+    # the last kill lands just after a cell is written: the resumed run must take that cell as it is
+    kept = _kill_after_a_new_cell(out, suite_file, rel_env)
+    if kept is None:  # the run finished first: afresh, so that the kill interrupts real work
+        shutil.rmtree(out)
+        kept = _kill_after_a_new_cell(out, suite_file, rel_env)
+    assert kept, "no cell was written before the run ended"
 
     final = _cli_run(out, suite_file, rel_env, "--resume")
     _, err = final.communicate(timeout=120)
     assert final.returncode == 0, err
-    assert read_run_json(out)["status"] == "ok"
+    meta = read_run_json(out)
+    assert meta["status"] == "ok" and meta["cells_reused"] >= len(kept)
+    assert {cell: cell.stat().st_mtime_ns for cell in kept} == kept, "a finished cell was computed again"
     assert_bit_identical(read_results(out), reference_run.table)
     assert not partial_files(out), partial_files(out)
     _assert_nothing_half_written(out)
