@@ -11,7 +11,6 @@ import pytest
 from harness.runner import run_suite
 from harness.suites import parse_suite
 from reports import write_report
-from reports.load import load_run
 from reports.model import build_model
 
 PIPES = ["dis", "farneback", "pyramidal-lk"]
@@ -79,17 +78,3 @@ def test_the_sections_show_tables_pictures_and_one_verdict_and_n_a_where_truth_i
     clip = md[md.index("### clip"):]
     clip = clip[:clip.index("\n\n", clip.index("|"))]
     assert "n/a" in clip or "epe" not in clip
-
-
-def test_a_run_without_real_footage_has_neither_section(mixed_run, tmp_path):
-    data = load_run(mixed_run)
-    model = build_model(mixed_run, data=data)
-    assert model.real_scenes  # the mixed run has them; a synthetic-only run (the fixture of test_report) has none
-    from tests.reports.conftest import build_run
-
-    plain = build_run(tmp_path)
-    m = build_model(plain)
-    assert m.real_scenes == [] and m.synthetic_vs_real is None
-    write_report(plain, workers=1)
-    page = (plain / "report.html").read_text()
-    assert 'id="real-footage"' not in page and 'id="synthetic-vs-real"' not in page

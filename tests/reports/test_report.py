@@ -131,6 +131,15 @@ def _files(report: dict[str, Path]) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted((report["html"].parent / "report_files").iterdir())}
 
 
+def test_a_run_without_real_footage_has_neither_real_section(run_dir, html_text):
+    """The fixture run is synthetic only (tests/reports/test_real_sections.py has the run with footage)."""
+    from reports.model import build_model
+
+    model = build_model(run_dir)
+    assert model.real_scenes == [] and model.synthetic_vs_real is None
+    assert 'id="real-footage"' not in html_text and 'id="synthetic-vs-real"' not in html_text
+
+
 def test_two_writes_are_byte_identical(run_dir, report, tmp_path):
     stale = tmp_path / "report_files" / "0123456789abcdef.png"  # a picture of an earlier report of the folder
     stale.parent.mkdir()
