@@ -117,13 +117,8 @@ def test_smoke_run_passes_the_committed_baseline(tmp_path, cli_env):
                          cwd=ROOT, env=cli_env, capture_output=True, text=True, timeout=240)
     assert run.returncode == 0, run.stderr
     assert (out / "report.html").is_file() and (out / "report.md").is_file()
-    # the run's report (figures drawn while the results were collected, the table handed over in memory)
-    # is the one `aerobench report` writes for the folder afterwards
-    written = {name: (out / name).read_bytes() for name in ("report.html", "report.md")}
-    again = subprocess.run([sys.executable, "-m", "harness.cli", "report", str(out), "--quiet"],
-                           cwd=ROOT, env=cli_env, capture_output=True, text=True, timeout=120)
-    assert again.returncode == 0, again.stderr
-    assert {name: (out / name).read_bytes() for name in written} == written
+    # that the run's report (figures drawn early, the table handed over in memory) is the one a later
+    # `aerobench report` writes: tests/reports/test_report.py and tests/harness/test_results.py
     junit = tmp_path / "gate.xml"
     gate = subprocess.run([sys.executable, "-m", "harness.cli", "gate", str(out), "--baseline", str(SMOKE_BASELINE),
                            "--rules", str(GATE_RULES), "--junit", str(junit)],
