@@ -140,23 +140,16 @@ def test_a_run_without_real_footage_has_neither_real_section(run_dir, html_text)
     assert 'id="real-footage"' not in html_text and 'id="synthetic-vs-real"' not in html_text
 
 
-def test_two_writes_are_byte_identical(run_dir, report, tmp_path):
+def test_a_second_write_by_worker_processes_gives_the_same_bytes(run_dir, report, html_text, tmp_path):
     stale = tmp_path / "report_files" / "0123456789abcdef.png"  # a picture of an earlier report of the folder
     stale.parent.mkdir()
     stale.write_bytes(b"old")
-    again = write_report(run_dir, out_dir=tmp_path)
+    # two scenes x three scene sections: the blocks are drawn by two spawned processes, in their own order
+    again = write_report(run_dir, out_dir=tmp_path, workers=2)
     assert not stale.exists(), "a file the new report does not reference is removed"
     assert again["html"].read_bytes() == report["html"].read_bytes()
     assert again["md"].read_bytes() == report["md"].read_bytes()
-    assert _files(again) == _files(report)
-
-
-def test_figures_drawn_by_worker_processes_give_the_same_bytes(run_dir, report, html_text, tmp_path):
-    # two scenes x three scene sections: the blocks are drawn by two spawned processes, in their own order
-    drawn = write_report(run_dir, out_dir=tmp_path, workers=2)
-    assert drawn["html"].read_bytes() == report["html"].read_bytes()
-    assert drawn["md"].read_bytes() == report["md"].read_bytes()
-    assert _files(drawn) == _files(report) and len(_files(report)) > 10  # the pictures too
+    assert _files(again) == _files(report) and len(_files(report)) > 10  # the pictures too
     for sid in ("pictures", "stabilisation", "tracking"):  # both scenes in each, in the run's order
         body = section(html_text, sid)
         assert body.index("<h3>urban") < body.index("<h3>rural")
@@ -265,16 +258,24 @@ def test_stabilisation_legend_names_the_after_row(html_text):
     assert "(red)" not in stab  # the flight line is drawn in vermillion/orange
 
 
-def test_a_figure_process_that_dies_costs_no_figure(run_dir, capsys):
-    import multiprocessing
-    import os
-    from concurrent.futures import ProcessPoolExecutor
-
+@pytest.fixture(scope="module")
+def drawn_here(run_dir):
+    """The fixture run's data and every scene block drawn in this process (``_draw_blocks`` without a pool)."""
     from reports.load import load_run
     from reports.report import _draw_blocks
 
     data = load_run(run_dir)
-    alone = _draw_blocks(data, None, False, lambda: "numbers")
+    return data, _draw_blocks(data, None, False, lambda: "numbers")
+
+
+def test_a_figure_process_that_dies_costs_no_figure(drawn_here, capsys):
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    from reports.report import _draw_blocks
+
+    data, alone = drawn_here
     # a pool whose process exits as it starts: every block it was given is lost with it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=os._exit,
                              initargs=(3,)) as pool:
@@ -327,15 +328,12 @@ def test_a_figure_process_that_dies_before_the_report_costs_no_figure(run_dir, r
     assert "a report figure process died" in capsys.readouterr().err
 
 
-def test_the_page_as_bytes_is_the_page_encoded_even_when_a_table_spans_two_blocks(run_dir):
-    from reports.html import cell_index, render_html, render_html_bytes, scene_block, scene_blocks
-    from reports.load import load_run
+def test_the_page_as_bytes_is_the_page_encoded_even_when_a_table_spans_two_blocks(run_dir, drawn_here):
+    from reports.html import render_html, render_html_bytes
     from reports.model import build_model
 
-    data = load_run(run_dir)
+    data, (_, blocks) = drawn_here
     model = build_model(run_dir, data=data)
-    cells = cell_index(data)
-    blocks = {key: scene_block(data, cells, *key) for key in scene_blocks(cells)}
     page = render_html(model, blocks)
     assert render_html_bytes(model, blocks) == page.encode("utf-8")
     assert "\u2193" in page and 'data-cards="1"' in page  # not ASCII; tables marked for the narrow layout
