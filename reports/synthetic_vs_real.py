@@ -48,14 +48,16 @@ _TOTAL_RULES = {"mean", "rms", "rate", "complement", "total"}
 
 def ranks(x: Sequence[float]) -> np.ndarray:
     """1-based ranks of the 1-D ``x`` (ascending), ties given the mean of the ranks they span."""
-    x = np.asarray(x, np.float64)
-    order = np.argsort(x, kind="stable")
-    r = np.empty(len(x))
-    r[order] = np.arange(1, len(x) + 1)
-    for v in np.unique(x):
-        tie = x == v
-        r[tie] = r[tie].mean()
-    return r
+    return _ranks_rows(np.asarray(x, np.float64)[None])[0]
+
+
+def _ranks_rows(x: np.ndarray) -> np.ndarray:
+    """:func:`ranks` of each row of the 2-D ``x``: a value below ``less`` others and equal to ``equal``
+    (itself included) spans ranks ``less + 1 .. less + equal``, whose mean is ``less + (equal + 1) / 2``.
+    Quadratic in the row length: rows here are a run's pipelines."""
+    less = (x[:, None, :] < x[:, :, None]).sum(axis=2)
+    equal = (x[:, None, :] == x[:, :, None]).sum(axis=2)
+    return less + 0.5 * (equal + 1)
 
 
 def _pair(name: str, a, b) -> tuple[np.ndarray, np.ndarray] | None:
@@ -72,26 +74,41 @@ def _pair(name: str, a, b) -> tuple[np.ndarray, np.ndarray] | None:
 def spearman(a: Sequence[float], b: Sequence[float]) -> float:
     """Spearman's rho of two score vectors of the same items (NaN with fewer than 3 items or a constant side)."""
     ab = _pair("spearman", a, b)
-    if ab is None:
-        return float("nan")
-    ra, rb = ranks(ab[0]), ranks(ab[1])
-    ra, rb = ra - ra.mean(), rb - rb.mean()
-    den = math.sqrt(float((ra ** 2).sum() * (rb ** 2).sum()))
-    return float((ra * rb).sum() / den) if den > 0 else float("nan")
+    return float("nan") if ab is None else float(_spearman_rows(ab[0][None], ab[1][None])[0])
 
 
 def kendall_tau_b(a: Sequence[float], b: Sequence[float]) -> float:
     """Kendall's tau-b of two score vectors of the same items (ties on either side handled; NaN below 3 items)."""
     ab = _pair("kendall_tau_b", a, b)
-    if ab is None:
-        return float("nan")
-    a, b = ab
-    i, j = np.triu_indices(len(a), k=1)
-    sa, sb = np.sign(a[i] - a[j]), np.sign(b[i] - b[j])
+    return float("nan") if ab is None else float(_kendall_rows(ab[0][None], ab[1][None])[0])
+
+
+def _undefined(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows of ``(rows, n)`` pairs where a correlation is undefined (see :func:`_pair`)."""
+    return np.full(len(a), a.shape[1] < 3) | ~(np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1))
+
+
+def _spearman_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`spearman` of each row pair of two ``(rows, n)`` arrays (the bootstrap's resamples at once)."""
+    ra, rb = _ranks_rows(a), _ranks_rows(b)
+    ra, rb = ra - ra.mean(axis=1, keepdims=True), rb - rb.mean(axis=1, keepdims=True)
+    den = np.sqrt((ra ** 2).sum(axis=1) * (rb ** 2).sum(axis=1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = (ra * rb).sum(axis=1) / den
+    return np.where((den > 0) & ~_undefined(a, b), rho, np.nan)
+
+
+def _kendall_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`kendall_tau_b` of each row pair of two ``(rows, n)`` arrays:
+    (concordant - discordant) / sqrt((n0 - n1)(n0 - n2)) over the n0 = n(n-1)/2 pairs of items."""
+    i, j = np.triu_indices(a.shape[1], k=1)
+    sa, sb = np.sign(a[:, i] - a[:, j]), np.sign(b[:, i] - b[:, j])
     n0 = len(i)
-    n1, n2 = int((sa == 0).sum()), int((sb == 0).sum())
-    den = math.sqrt(float((n0 - n1) * (n0 - n2)))
-    return float((sa * sb).sum() / den) if den > 0 else float("nan")
+    n1, n2 = (sa == 0).sum(axis=1), (sb == 0).sum(axis=1)
+    den = np.sqrt(((n0 - n1) * (n0 - n2)).astype(np.float64))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = (sa * sb).sum(axis=1) / den
+    return np.where((den > 0) & ~_undefined(a, b), tau, np.nan)
 
 
 def comparable_views(table: pd.DataFrame) -> list[tuple[str, str, str]]:
@@ -267,8 +284,7 @@ def compare(table: pd.DataFrame, real_scenes: Iterable[str], *, pipelines: Seque
         i_real = rng.integers(0, len(s_real), size=(n_boot, len(s_real)))
         b_syn = _values(metric, s_syn[i_syn], c_syn[i_syn])
         b_real = _values(metric, s_real[i_real], c_real[i_real])
-        rho = np.array([spearman(a, b) for a, b in zip(b_syn, b_real)])
-        tau = np.array([kendall_tau_b(a, b) for a, b in zip(b_syn, b_real)])
+        rho, tau = _spearman_rows(b_syn, b_real), _kendall_rows(b_syn, b_real)
         out.views.append(MetricAgreement(
             metric=metric, region=region, motion=motion, unit=d.unit, higher_is_better=d.higher_is_better,
             pipelines=pipes, synthetic=v_syn, real=v_real, rank_synthetic=rs, rank_real=rr,

@@ -32,6 +32,27 @@ def test_rank_correlations_equal_scipys_with_ties(seed):
     assert kendall_tau_b(a, b) == pytest.approx(stats.kendalltau(a, b).statistic, abs=1e-12)
 
 
+def test_the_bootstraps_row_by_row_correlations_are_scipys_and_nan_where_undefined():
+    from reports.synthetic_vs_real import _kendall_rows, _spearman_rows
+
+    rng = np.random.default_rng(11)
+    a = rng.integers(0, 4, size=(300, 6)).astype(float)  # ties, and some constant rows
+    b = rng.integers(0, 4, size=(300, 6)).astype(float)
+    b[:20] = rng.random((20, 6))  # no ties
+    a[5, 2], b[7, 0] = np.nan, np.inf  # a resample without a value: undefined
+    a[9] = 2.0  # a constant side: undefined
+    rho, tau = _spearman_rows(a, b), _kendall_rows(a, b)
+    for k in range(len(a)):
+        defined = np.isfinite(a[k]).all() and np.isfinite(b[k]).all() and len(set(a[k])) > 1 and len(set(b[k])) > 1
+        if not defined:
+            assert np.isnan(rho[k]) and np.isnan(tau[k]), k
+            continue
+        assert rho[k] == pytest.approx(stats.spearmanr(a[k], b[k]).statistic, abs=1e-12), k
+        assert tau[k] == pytest.approx(stats.kendalltau(a[k], b[k]).statistic, abs=1e-12), k
+        assert rho[k] == spearman(a[k], b[k]) and tau[k] == kendall_tau_b(a[k], b[k])  # one formula
+    assert np.isnan(rho[[5, 7, 9]]).all()
+
+
 def test_rank_correlations_refuse_mismatched_vectors_and_say_nan_below_three_items():
     with pytest.raises(ValueError, match=r"spearman: expected two 1-D vectors of one length, got \(3,\) and \(2,\)"):
         spearman([1, 2, 3], [1, 2])
