@@ -281,15 +281,16 @@ def test_fused_scoring_equals_the_reference_with_nan_truth_and_empty_regions():
 @pytest.mark.gl
 @pytest.mark.slow
 def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
-    """Every pair of every cell of the smoke suite, scored both ways (fused with and without a
-    prepared truth, and the reference): every metric, region and motion."""
+    """Every pair of the smoke suite's cells of seed 1 (both scenes, with and without jitter, every
+    pipeline), scored both ways (fused with and without a prepared truth, and the reference): every
+    metric, region and motion. Seed 2 is another world of the same scenes: twice the time, no other code."""
     from algorithms.pipeline import PairEstimate, Pipeline
     from harness.cell_scoring import point_seeds
     from harness.suites import expand, load_suite
     from scenes import cached_sequence, open_sequence
 
-    cells = expand(load_suite("smoke"))
-    assert len(cells) == 20
+    cells = [c for c in expand(load_suite("smoke")) if c.variant.seed == 1]
+    assert len(cells) == 10
     pairs = 0
     for cell in cells:
         seq = open_sequence(cached_sequence(cell.variant.spec, render_cache))
@@ -297,4 +298,4 @@ def test_fused_scoring_equals_the_reference_on_the_smoke_run(render_cache):
             if isinstance(est, PairEstimate):
                 assert_same_scores(est, seq.pair_truth(est.index), est.index)
                 pairs += 1
-    assert pairs == 20 * 5
+    assert pairs == 10 * 5
