@@ -16,7 +16,7 @@ the digit (it is checked: ``capture`` stores them). Run from the project root:
 or the cache entry ``aerobench eval-video`` decoded a real clip with its ``gt.txt`` into: the ``real-clip-*``
 folder). ``--set`` on ``replay`` takes the tracker's own keys (``merge_covered=false``, or
 ``tracking.multi.merge_covered=false`` as a pipeline file spells it); px-sized keys are given at the
-clip's scale (``--show-params`` prints what the capture holds). Several captures are pooled from summed
+clip's scale, as the capture holds them. Several captures are pooled from summed
 counts. ``--merges`` lists the tracks the tracker joined into others (``merge_hits``, ``merge_covered``,
 ``merge_bridge_grey``), by frame, with the vehicle each one's last rows lay on.
 """
