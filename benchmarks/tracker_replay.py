@@ -18,7 +18,9 @@ folder). ``--set`` on ``replay`` takes the tracker's own keys (``merge_covered=f
 ``tracking.multi.merge_covered=false`` as a pipeline file spells it); px-sized keys are given at the
 clip's scale, as the capture holds them. Several captures are pooled from summed
 counts. ``--merges`` lists the tracks the tracker joined into others (``merge_hits``, ``merge_covered``,
-``merge_bridge_grey``), by frame, with the vehicle each one's last rows lay on.
+``merge_bridge_grey``), by frame, with the vehicle each one's last rows lay on; ``--breakdown`` each vehicle's
+missed frames by cause (no detection, a detection box under IoU 0.5, the tracker) and each false-positive
+track, as ``benchmarks/tracking_quality.py --breakdown`` prints them.
 """
 
 from __future__ import annotations
@@ -151,17 +153,19 @@ def _override(params: dict, sets: list[str]) -> dict:
     return out
 
 
-def replay_one(path: str, sets: list[str], *, merges: bool = False) -> tuple[dict, dict]:
+def replay_one(path: str, sets: list[str], *, merges: bool = False, breakdown: bool = False) -> tuple[dict, dict]:
     """The tracker run again on one capture with ``sets``: (its scores, the capture's own)."""
     from scenes import open_sequence
 
     with np.load(path) as z:
         meta = json.loads(str(z["meta"]))
         trk = MultiTargetTracker(**_override(meta["params"], sets))
+        dets_of: dict[int, list] = {}
         for i, s in enumerate(meta["steps"]):
             img = z[f"img{i}"] if s["has_image"] else None
             if s["kind"] == "step":
                 dets = [Detection(*row) for row in z[f"det{i}"]]
+                dets_of[s["frame"]] = dets
                 trk.step(s["frame"], dets, offset_px=s["offset"], image=img)
             else:
                 trk.extrapolate(s["frame"], offset_px=s["offset"], image=img)
@@ -169,6 +173,15 @@ def replay_one(path: str, sets: list[str], *, merges: bool = False) -> tuple[dic
     tracks = _tracks_frame(trk.rows(), tuple(meta["frame_shape"]))
     if merges:
         _print_merges(trk, seq)
+    if breakdown:
+        from benchmarks.tracking_quality import _print_breakdown, error_breakdown
+
+        dets = [dets_of.get(f, []) for f in range(max(dets_of, default=-1) + 1)]
+        fn, fp = error_breakdown(tracks[tracks["source"] == "multi"], dets, seq.tracks,
+                                 frame_shape=tuple(meta["frame_shape"]))
+        print(f"  misses by cause: {fn['cause'].value_counts().to_dict()}; false positives: {len(fp)} rows of "
+              f"{fp['track_id'].nunique()} tracks")
+        _print_breakdown(fn, fp)
     return _scores(tracks, seq), meta["own"]
 
 
@@ -199,7 +212,7 @@ def _print_merges(trk: MultiTargetTracker, seq) -> None:
 def replay(args) -> int:
     mine, own = [], []
     for path in args.captures:
-        s, o = replay_one(path, args.set, merges=args.merges)
+        s, o = replay_one(path, args.set, merges=args.merges, breakdown=args.breakdown)
         mine.append(s)
         own.append(o)
         print(f"{path}: {_summary(s)}" + ("" if args.set else
@@ -222,6 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("captures", nargs="+")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a tracker key")
     r.add_argument("--merges", action="store_true", help="list the tracks joined into others")
+    r.add_argument("--breakdown", action="store_true",
+                   help="each vehicle's missed frames by cause and each false-positive track "
+                        "(benchmarks/tracking_quality.py's breakdown)")
     r.set_defaults(fn=replay)
     args = ap.parse_args(argv)
     return args.fn(args)
