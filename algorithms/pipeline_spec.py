@@ -492,6 +492,7 @@ class MultiSpec(_Section):
     merge_inside: float = MULTI_DEFAULTS["merge_inside"]
     merge_covered: StrictBool = MULTI_DEFAULTS["merge_covered"]
     merge_rigid_rel: float = MULTI_DEFAULTS["merge_rigid_rel"]
+    merge_union_rel: float = MULTI_DEFAULTS["merge_union_rel"]
     merge_bridge_grey: float = MULTI_DEFAULTS["merge_bridge_grey"]
     smooth_size_frames: StrictInt = MULTI_DEFAULTS["smooth_size_frames"]
     part_inside: float = MULTI_DEFAULTS["part_inside"]

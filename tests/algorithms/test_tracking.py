@@ -1023,8 +1023,38 @@ def test_a_car_found_as_its_two_ends_then_whole_is_one_track_when_one_end_s_trac
         if not 12 <= r["frame"] <= 14:
             assert _iou_xyxy(box, np.array([[63.5, y - 23.5, 97.5, y + 24.5]])) > 0.85, r
     assert len({r["track_id"] for r in run(merge_covered=False)}) == 2
+    # the two ends' union is the car's box, the whole's size when it took the rear in: merge_union_rel keeps it
+    assert run(merge_union_rel=0.5) == rows
     with pytest.raises(ValueError, match="merge_covered: expected true/false"):
         MultiTargetTracker(merge_covered="yes")
+
+
+def test_a_part_whose_rows_lay_on_another_car_keeps_them_where_the_union_would_be_two_cars_long():
+    # two 20 x 40 px cars in a column at 2 px a frame, 60 px apart, each tracked. The tracker took the front car's
+    # track in as a part of the rear's when the rear was 20 x 40 px (as merge_covered does when a track that lost its
+    # car drifted onto the front of the car behind): joined over all their frames, every row is one 20 x 100 px box
+    # over both cars; with merge_union_rel the union may be at most 1.5 times 40 px long, so each frame keeps both
+    def run(rel):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, merge_union_rel=rel)
+        for t in range(20):
+            y = 100.0 + 2 * t
+            trk.step(t, [_box_det(80.0, y, 20, 40, 0.0, 2.0), _box_det(80.0, y - 60, 20, 40, 0.0, 2.0)])
+        ids = sorted({r["track_id"] for r in trk.rows()})
+        assert len(ids) == 2
+        trk._merges.append((ids[0], ids[1]))
+        trk._merge_size[ids[0]] = np.array([20.0, 40.0])
+        return trk.rows()
+
+    joined = run(0.0)
+    assert {r["track_id"] for r in joined} == {1}
+    assert all(r["bbox_y1_px"] - r["bbox_y0_px"] > 95 for r in joined)
+    apart = run(0.5)
+    assert {r["track_id"] for r in apart} == {0, 1}
+    for frame in range(20):
+        boxes = sorted((r["bbox_y0_px"], r["bbox_y1_px"]) for r in apart if r["frame"] == frame)
+        assert len(boxes) == 2 and all(39 <= y1 - y0 <= 41 for y0, y1 in boxes), (frame, boxes)
+    with pytest.raises(ValueError, match=r"merge_union_rel: expected a finite number >= 0, got -1"):
+        MultiTargetTracker(merge_union_rel=-1)
 
 
 def test_two_slow_cars_abreast_that_the_detector_joins_now_and_then_keep_one_track_each():

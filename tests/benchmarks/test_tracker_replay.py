@@ -23,8 +23,8 @@ def captured(tmp_path_factory, shared_render_cache):
     from scenes import load_scene_spec
     from scenes.cache import cached_sequence
 
-    seq_dir = cached_sequence(load_scene_spec("tiny", {"image.n_frames": 24, "image.width_px": 240, "image.height_px": 180}),
-                             shared_render_cache)
+    spec = load_scene_spec("tiny", {"image.n_frames": 24, "image.width_px": 240, "image.height_px": 180})
+    seq_dir = cached_sequence(spec, shared_render_cache)
     out = tmp_path_factory.mktemp("replay") / "tiny.npz"
     assert tr.main(["capture", str(seq_dir), "--pipeline", "dis", "--out", str(out)]) == 0
     return out
