@@ -821,7 +821,13 @@ class _Track:
 #   vehicles, and the part's row stays its own track's in that frame. The 1080p city-wide world at seed 3: a track
 #   followed car 223 for 33 frames, lost it, took the front of car 155 behind it at its speed and was taken in as
 #   155's part (merge_covered) at frame 50; the union of the two tracks' rows over their shared frames 8-48 was one
-#   box over both cars (each row a false positive and two misses). 0: off (always the union), the default;
+#   box over both cars (each row a false positive and two misses). 0.5 there (benchmarks/tracker_replay.py, the
+#   tracker replayed on captured inputs of the three worlds): dis 0.692 / 0.568 / 0.706 -> 0.692 / 0.568 / 0.715, the
+#   18 standard cells of dis (six scenes, seeds 1-3) and KIT AIS identical, pyramidal-hs identical (0.570 / 0.560 /
+#   0.649); but pyramidal-lk 0.591 / 0.533 / 0.667 -> 0.591 / 0.479 / 0.667: at seed 2 the whole was itself one end of
+#   bus 38 (37 x 28 px of 96 x 46) when it took in the other end, which had drifted inside it, and the two ends'
+#   earlier union, the bus, was kept apart as two false positives (FP 118 -> 256). Size alone does not tell the two
+#   cases apart, so it is off in every built-in. 0: off (always the union), the default;
 # merge_bridge_grey: ... and a frame is also counted for two confirmed tracks both placed in it (detected or held),
 #   moving alike and having kept their distance (merge_rigid_rel), whose boxes lie apart along the line between their
 #   centres by at most twice the larger box's larger side, where that gap is the vehicle's body (_bridge_greys): its
