@@ -816,18 +816,21 @@ class _Track:
 #   seeds pooled, a63dbb8 -> 0.2): drift +0.154 to +0.160 for dis, farneback, pyramidal-hs, pyramidal-lk and tv-l1 (dis
 #   0.768 -> 0.925), thesis-hs realistic -0.021, no other cell by more than 0.0005; the 40 cells of five scenes x eight
 #   pipelines at 30 frames and KIT AIS unchanged. 0: off;
-# merge_union_rel: offline, a joined part's row is unioned with the whole's row of the same frame only where the union
-#   is at most 1 + this many times the whole's width and length when it took the part in; a longer union is two
-#   vehicles, and the part's row stays its own track's in that frame. The 1080p city-wide world at seed 3: a track
-#   followed car 223 for 33 frames, lost it, took the front of car 155 behind it at its speed and was taken in as
-#   155's part (merge_covered) at frame 50; the union of the two tracks' rows over their shared frames 8-48 was one
-#   box over both cars (each row a false positive and two misses). 0.5 there (benchmarks/tracker_replay.py, the
-#   tracker replayed on captured inputs of the three worlds): dis 0.692 / 0.568 / 0.706 -> 0.692 / 0.568 / 0.715, the
-#   18 standard cells of dis (six scenes, seeds 1-3) and KIT AIS identical, pyramidal-hs identical (0.570 / 0.560 /
-#   0.649); but pyramidal-lk 0.591 / 0.533 / 0.667 -> 0.591 / 0.479 / 0.667: at seed 2 the whole was itself one end of
-#   bus 38 (37 x 28 px of 96 x 46) when it took in the other end, which had drifted inside it, and the two ends'
-#   earlier union, the bus, was kept apart as two false positives (FP 118 -> 256). Size alone does not tell the two
-#   cases apart, so it is off in every built-in. 0: off (always the union), the default;
+# merge_union_rel: offline, a joined part's row is unioned with the whole's row of the same frame unless the union is
+#   longer or wider than 1 + this many times the whole's size when it took the part in and the frame (kept while
+#   the clip's last hold_history frames) shows road between the two boxes (_road_between: the gap's grey within
+#   merge_bridge_grey levels, at least 10, of the ground beside it and further than that from both boxes' ends):
+#   then they are two vehicles, and the part's row stays its own track's in that frame. The 1080p city-wide world
+#   at seed 3: a track followed car 223 for 33 frames, lost it, took the front of car 155 behind it at the same
+#   speed and was taken in as 155's part (merge_covered) at frame 50; the union of the two tracks' rows over their
+#   shared frames 8-48 was one box over both cars (each row a false positive and two misses). 0.5 on size alone
+#   (benchmarks/tracker_replay.py, the tracker replayed on captured inputs of the three worlds): dis 0.692 / 0.568 /
+#   0.706 -> 0.692 / 0.568 / 0.715, pyramidal-hs identical (0.570 / 0.560 / 0.649), but pyramidal-lk 0.591 / 0.533 /
+#   0.667 -> 0.591 / 0.479 / 0.667: at seed 2 the whole was itself one end of bus 38 (37 x 28 px of 96 x 46) when
+#   it took in the other end, and the bus's two ends were kept apart (FP 118 -> 256). With the road test: dis 0.692
+#   / 0.568 / 0.713 (pooled over 12,090 counted rows 0.659 -> 0.662), pyramidal-lk and pyramidal-hs identical to
+#   off; the gap as dark as the ground but not unlike the ends (the first form of the test) left pyramidal-lk
+#   0.531. 0: off (always the union), the default;
 # merge_bridge_grey: ... and a frame is also counted for two confirmed tracks both placed in it (detected or held),
 #   moving alike and having kept their distance (merge_rigid_rel), whose boxes lie apart along the line between their
 #   centres by at most twice the larger box's larger side, where that gap is the vehicle's body (_bridge_greys): its
@@ -1407,7 +1410,8 @@ class MultiTargetTracker:
                         trk.travel >= p["back_min_travel_rel"] * max(trk.first[2].shape):
                     self._extend_back(trk, img, off)
         # kept as 8 bits: 2 MB a 1080p frame
-        if img is not None and (p["hold_min_ncc"] > 0 or (p["fill_gaps"] and p["fill_min_ncc"] > 0)):
+        if img is not None and (p["hold_min_ncc"] > 0 or (p["fill_gaps"] and p["fill_min_ncc"] > 0)
+                                or p["merge_union_rel"] > 0):
             self._seen.append((int(frame), np.clip(img, 0, 255).astype(np.uint8), off.copy()))
 
     def _shared_abreast(self, preds: np.ndarray, boxes: np.ndarray) -> tuple[set, set]:
@@ -1921,6 +1925,7 @@ class MultiTargetTracker:
             return rows
         into = dict(self._merges)
         rel = self.params["merge_union_rel"]
+        kept = {f: g for f, g, _ in self._seen} if rel > 0 else {}
 
         def final(i):
             while i in into:
@@ -1950,7 +1955,7 @@ class MultiTargetTracker:
             x0, y0 = min(have["bbox_x0_px"], r["bbox_x0_px"]), min(have["bbox_y0_px"], r["bbox_y0_px"])
             x1, y1 = max(have["bbox_x1_px"], r["bbox_x1_px"]), max(have["bbox_y1_px"], r["bbox_y1_px"])
             most = limit(origin[key], r["track_id"])
-            if most is not None and (x1 - x0 > most[0] or y1 - y0 > most[1]):
+            if most is not None and (x1 - x0 > most[0] or y1 - y0 > most[1]) and self._road_between(kept, have, r):
                 # two vehicles: the part's row stays its own track's, the whole's row the whole's
                 part = r if r["track_id"] != tid else out[key]
                 own = (r["frame"], origin[key] if part is out[key] else r["track_id"])
@@ -1962,6 +1967,22 @@ class MultiTargetTracker:
             have.update(bbox_x0_px=x0, bbox_y0_px=y0, bbox_x1_px=x1, bbox_y1_px=y1,
                         x_filt_px=(x0 + x1) / 2, y_filt_px=(y0 + y1) / 2)
         return [out[k] for k in order]
+
+    def _road_between(self, kept: dict, a: dict, b: dict) -> bool:
+        """Whether the frame of rows ``a`` and ``b`` shows road between their boxes (:func:`_bridge_greys`: the gap's
+        grey within ``merge_bridge_grey`` levels, at least 10, of the ground beside it and not of both boxes' ends):
+        two vehicles, not one vehicle's two ends. False where the frame is no longer kept or the test cannot be made."""
+        img = kept.get(a["frame"])
+        if img is None:
+            return False
+        box = [np.array([(q["bbox_x0_px"] + q["bbox_x1_px"]) / 2, (q["bbox_y0_px"] + q["bbox_y1_px"]) / 2,
+                         q["bbox_x1_px"] - q["bbox_x0_px"], q["bbox_y1_px"] - q["bbox_y0_px"]]) for q in (a, b)]
+        greys = _bridge_greys(img.astype(np.float32), box[0], box[1], max_gap_px=2.0 * max(*box[0][2:], *box[1][2:]))
+        if greys is None:
+            return False
+        gap, end_a, end_b, side_1, side_2 = greys
+        tol = max(10.0, float(self.params["merge_bridge_grey"]))
+        return min(abs(gap - end_a), abs(gap - end_b)) > tol and min(abs(gap - side_1), abs(gap - side_2)) <= tol
 
     def _motion(self, rows: list[dict]) -> dict[int, tuple]:
         """Per track, its rows with a box: their indices into ``rows``, frames, boxes ``(n, 4)``, the camera path

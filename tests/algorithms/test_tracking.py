@@ -1030,25 +1030,33 @@ def test_a_car_found_as_its_two_ends_then_whole_is_one_track_when_one_end_s_trac
 
 
 def test_a_part_whose_rows_lay_on_another_car_keeps_them_where_the_union_would_be_two_cars_long():
-    # two 20 x 40 px cars in a column at 2 px a frame, 60 px apart, each tracked. The tracker took the front car's
-    # track in as a part of the rear's when the rear was 20 x 40 px (as merge_covered does when a track that lost its
-    # car drifted onto the front of the car behind): joined over all their frames, every row is one 20 x 100 px box
-    # over both cars; with merge_union_rel the union may be at most 1.5 times 40 px long, so each frame keeps both
-    def run(rel):
-        trk = MultiTargetTracker(fill_min_ncc=0.0, merge_union_rel=rel)
+    # two 20 x 40 px boxes in a column at 2 px a frame, 60 px apart (20 px between them), each tracked. The tracker
+    # took the front box's track in as a part of the rear's when the rear was 20 x 40 px (as merge_covered does when a
+    # track that lost its car drifted onto the front of the car behind): joined over all their frames, every row is
+    # one 20 x 100 px box. With merge_union_rel the union may be at most 1.5 times 40 px long unless the frame shows
+    # no road between the two: two cars on the road keep their own boxes, a bus's two ends (its body between them as
+    # bright as they are) are still one
+    def run(rel, scene):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, hold_min_ncc=0.0, merge_union_rel=rel)
         for t in range(20):
             y = 100.0 + 2 * t
-            trk.step(t, [_box_det(80.0, y, 20, 40, 0.0, 2.0), _box_det(80.0, y - 60, 20, 40, 0.0, 2.0)])
+            img = np.full((260, 160), 90.0, np.float32)
+            img[int(y) - 80:int(y) + 20, 70:90] = 200.0  # both cars, or the bus from end to end
+            if scene == "cars":
+                img[int(y) - 40:int(y) - 20, 70:90] = 90.0  # the road between the two cars
+            trk.step(t, [_box_det(80.0, y, 20, 40, 0.0, 2.0), _box_det(80.0, y - 60, 20, 40, 0.0, 2.0)], image=img)
         ids = sorted({r["track_id"] for r in trk.rows()})
         assert len(ids) == 2
         trk._merges.append((ids[0], ids[1]))
         trk._merge_size[ids[0]] = np.array([20.0, 40.0])
         return trk.rows()
 
-    joined = run(0.0)
-    assert {r["track_id"] for r in joined} == {1}
-    assert all(r["bbox_y1_px"] - r["bbox_y0_px"] > 95 for r in joined)
-    apart = run(0.5)
+    for scene in ("cars", "bus"):
+        joined = run(0.0, scene)
+        assert {r["track_id"] for r in joined} == {1}
+        assert all(r["bbox_y1_px"] - r["bbox_y0_px"] > 95 for r in joined)
+    assert run(0.5, "bus") == run(0.0, "bus")
+    apart = run(0.5, "cars")
     assert {r["track_id"] for r in apart} == {0, 1}
     for frame in range(20):
         boxes = sorted((r["bbox_y0_px"], r["bbox_y1_px"]) for r in apart if r["frame"] == frame)
