@@ -26,6 +26,7 @@ track, as ``benchmarks/tracking_quality.py --breakdown`` prints them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -43,8 +44,10 @@ from algorithms.detection import Detection  # noqa: E402
 from algorithms.tracking import MULTI_DEFAULTS, TRACK_COLUMNS, MultiTargetTracker, boxes_in_image  # noqa: E402
 from benchmarks._overrides import parse_value, pipeline_with  # noqa: E402
 from harness.metrics import hota_counts, mot_counts  # noqa: E402
+from harness.metrics.mot import HOTACounts, MOTCounts  # noqa: E402
 
 BOX = ["bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px"]
+HOTA_FIELDS = ("tp", "fn", "fp", "ass_sum", "loc_sum")
 
 
 class _Recorder(MultiTargetTracker):
@@ -77,31 +80,30 @@ def _tracks_frame(rows: list[dict], shape: tuple[int, int]) -> pd.DataFrame:
 
 
 def _scores(tracks: pd.DataFrame, seq) -> dict:
+    """The harness's CLEAR-MOT / identity and HOTA counts of the multi tracks, as plain numbers (a capture keeps
+    them as JSON); :func:`_summary` reads them back into :class:`MOTCounts` and :class:`HOTACounts`."""
     est = tracks[tracks["source"] == "multi"]
     ignore = getattr(seq, "ignore_regions", None)
     c = mot_counts(est, seq.tracks, ignore=ignore)
     h = hota_counts(est, seq.tracks, ignore=ignore)
-    return {"objects": c.objects, "predictions": c.predictions, "fp": c.false_positives, "fn": c.misses,
-            "idsw": c.switches, "idtp": c.idtp, "hota_tp": h.tp.tolist(), "hota_fn": h.fn.tolist(),
-            "hota_fp": h.fp.tolist(), "hota_ass": h.ass_sum.tolist(), "hota_loc": h.loc_sum.tolist()}
+    return {"mot": dataclasses.asdict(c), "hota": {k: getattr(h, k).tolist() for k in HOTA_FIELDS}}
+
+
+def _counts(s: dict) -> tuple[MOTCounts, HOTACounts]:
+    return MOTCounts(**s["mot"]), HOTACounts(**{k: np.asarray(v) for k, v in s["hota"].items()})
 
 
 def _summary(s: dict) -> str:
-    mota = 1 - (s["fp"] + s["fn"] + s["idsw"]) / s["objects"] if s["objects"] else float("nan")
-    idf1 = 2 * s["idtp"] / (s["objects"] + s["predictions"]) if s["objects"] + s["predictions"] else float("nan")
-    tp, fn, fp, ass = (np.asarray(s[k]) for k in ("hota_tp", "hota_fn", "hota_fp", "hota_ass"))
-    den = tp + fn + fp
-    hota = float(np.mean(np.sqrt(np.divide(ass, den, out=np.zeros_like(ass), where=den > 0))))
-    return (f"MOTA {mota:.3f}  IDF1 {idf1:.3f}  HOTA {hota:.3f}  FP {s['fp']}  FN {s['fn']}  IDSW {s['idsw']}  "
-            f"(objects {s['objects']})")
+    c, h = _counts(s)
+    return (f"MOTA {c.mota:.3f}  IDF1 {c.idf1:.3f}  HOTA {h.hota:.3f}  FP {c.false_positives}  FN {c.misses}  "
+            f"IDSW {c.switches}  (objects {c.objects})")
 
 
 def _pooled(scores: list[dict]) -> dict:
-    out = {}
-    for k in scores[0]:
-        v = [s[k] for s in scores]
-        out[k] = (np.sum(v, axis=0).tolist() if isinstance(v[0], list) else int(sum(v)))
-    return out
+    """Several captures' counts summed (the pooled scores are ratios of sums, as the harness pools them)."""
+    mot = {k: sum(s["mot"][k] for s in scores) for k in scores[0]["mot"]}
+    hota = {k: np.sum([s["hota"][k] for s in scores], axis=0).tolist() for k in HOTA_FIELDS}
+    return {"mot": mot, "hota": hota}
 
 
 def capture(args) -> int:
@@ -214,11 +216,14 @@ def replay(args) -> int:
     for path in args.captures:
         s, o = replay_one(path, args.set, merges=args.merges, breakdown=args.breakdown)
         mine.append(s)
+        if "mot" not in o:  # written before the counts were kept whole: nothing to compare with
+            o = None
         own.append(o)
-        print(f"{path}: {_summary(s)}" + ("" if args.set else
+        print(f"{path}: {_summary(s)}" + ("" if args.set or o is None else
                                           ("  (= the pipeline's)" if s == o else f"  (pipeline's: {_summary(o)})")))
     if len(mine) > 1:
-        print(f"pooled: {_summary(_pooled(mine))}   (as captured: {_summary(_pooled(own))})")
+        print(f"pooled: {_summary(_pooled(mine))}" + ("" if None in own else
+                                                      f"   (as captured: {_summary(_pooled(own))})"))
     return 0
 
 

@@ -32,7 +32,7 @@ def captured(tmp_path_factory, shared_render_cache):
 
 def test_a_replay_without_overrides_scores_what_the_pipeline_scored(captured):
     mine, own = tr.replay_one(str(captured), [])
-    assert own["objects"] > 0 and own["predictions"] > 0  # the capture holds tracks to reproduce
+    assert own["mot"]["objects"] > 0 and own["mot"]["predictions"] > 0  # the capture holds tracks to reproduce
     assert mine == own
     with np.load(captured) as z:
         meta = json.loads(str(z["meta"]))
@@ -43,6 +43,6 @@ def test_a_replay_without_overrides_scores_what_the_pipeline_scored(captured):
 def test_an_override_reaches_the_tracker_and_an_unknown_key_is_refused(captured):
     # no track is ever confirmed: every counted row a miss, nothing predicted
     mine, own = tr.replay_one(str(captured), ["tracking.multi.birth_hits=100000"])
-    assert mine["predictions"] == 0 and mine["fn"] == own["objects"] > 0
+    assert mine["mot"]["predictions"] == 0 and mine["mot"]["misses"] == own["mot"]["objects"] > 0
     with pytest.raises(SystemExit, match="'birth_hit' is not a key of the multi-target tracker"):
         tr.replay_one(str(captured), ["birth_hit=3"])
