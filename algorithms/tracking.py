@@ -623,6 +623,7 @@ class _Track:
     gap: list = field(default_factory=list)  # rows output without a box since then, to fill (fill_gaps)
     merged: bool = False  # it took in another track as a part of the same vehicle (merge_hits)
     excused: int = 0  # consecutive frames a detection abreast held it with another track (abreast_shared)
+    partial: list = field(default_factory=list)  # (axis, raw extent) of its consecutive completed detections
 
 
 # The multi-target tracker's keys (tracking.multi) and their defaults, one home (pipeline_spec checks against it):
@@ -669,6 +670,13 @@ class _Track:
 #   track's size then starts again from the detection's (BoxKalman.restart_size; filtered, a 47 px size took 30
 #   frames to shrink to one car). Nose to tail (a cab and its trailer found apart) it still completes. False: off,
 #   the default; on in dis (figures there);
+# partial_steady_frames: a track whose detections were completed (partial_rel) along the same axis this many times
+#   in a row, their extents along it within PARTIAL_STEADY_PX of their median, starts its size again from the
+#   detection's (BoxKalman.restart_size): a view that stays the same is the vehicle, and the size the track had came
+#   from detections that held something else too (a car's first boxes with its shadow or a neighbour: the 1080p
+#   city-wide world at seed 3, a 20 x 37 px car tracked as 37 x 41 px for 68 frames, completed back from each good
+#   detection, every row a false positive and a miss). A vehicle sliding under a crown or across the border changes
+#   its partial view frame by frame. 0: off, the default; 6 in dis (figures there);
 # abreast_shared: a detection whose box holds the predicted centres of two tracks that lie abreast (side by side across
 #   their motion, _abreast; their boxes long along the same image axis) is two vehicles in adjacent lanes that the
 #   detector joined in that frame (a queue creeping away from a light: their flows agree and the road between them is
@@ -801,6 +809,13 @@ class _Track:
 #   992 / 726 / 1184); both keys leave all 35 cells of the five synthetic scenes x seven pipelines (30 frames)
 #   unchanged, and dis on the 1080p city stand-in (0.564), the city-wide stand-in (0.364, older generator: cars and
 #   motorbikes only) and KIT AIS (dis / pyramidal-hs track precision 0.429 / 0.319, recall 0.438 / 0.382);
+# merge_whole_spares: a track without a detection that a detection no track took covers together with another track
+#   (merge_inside of each one's predicted box inside it) is not ended as a tentative track is at its first miss
+#   (birth_gap): the vehicle it is a part of was found whole. It still counts the miss (death_misses). A bus found as
+#   its two ends in most frames and whole in every few had each end's tentative track ended by each whole frame
+#   before it could be confirmed, and merge_hits, which joins confirmed tracks only, never joined them: the ends were
+#   confirmed apart late or never, each row a false positive beside a miss. false, the default; true in dis (figures
+#   there);
 # merge_rigid_rel: ... and a frame is counted for a pair (either way) only while the two tracks have kept their
 #   distance (_kept_their_distance): over the frames both were detected in, the median distance between their centres
 #   (ground-fixed) in the later half lies within this many times the smaller track's larger side of the earlier half's
@@ -870,6 +885,7 @@ class _Track:
 # sigma_*: BoxKalman noise (algorithms.kalman), px, px/frame, px/frame^2.
 MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap": 0, "min_travel_px": 3.0, "min_travel_rel": 0.25,
                   "travel_lengthwise_rel": 0.0, "min_trend_f": 10.0, "partial_rel": 0.25, "partial_abreast": False,
+                  "partial_steady_frames": 0,
                   "abreast_shared": False, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
@@ -878,7 +894,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
                   "end_min_hits": 0, "steady_min_hits": 0, "merge_hits": 3, "merge_inside": 0.8, "merge_covered": True,
-                  "merge_rigid_rel": 0.2, "merge_union_rel": 0.0, "merge_bridge_grey": 0.0, "smooth_size_frames": 40, "part_inside": 0.0,
+                  "merge_whole_spares": False, "merge_rigid_rel": 0.2, "merge_union_rel": 0.0, "merge_bridge_grey": 0.0, "smooth_size_frames": 40, "part_inside": 0.0,
                   "sigma_accel_px": 0.5, "sigma_size_accel_px": 0.3, "sigma_meas_px": 1.5,
                   "sigma_vel_meas_px": 1.0, "sigma_vel0_px": 5.0}
 
@@ -1089,6 +1105,10 @@ SMOOTH_LINE_FRAMES = 8
 # benchmarks/heldout_rehearsal.md, "Misses by how fast the vehicle moves")
 HOLD_SAME_SEARCH_PX = 4.0
 
+# _partial_steady: a partial view's extent that changes by no more than this, px, over partial_steady_frames
+# detections is not sliding under a crown or across the border (a vehicle at 0.5 px a frame changes it by 4 px in 8)
+PARTIAL_STEADY_PX = 3.0
+
 # _kept_their_distance: the frames both tracks of a pair must have been detected in for their distance to be judged
 # (merge_rigid_rel); half of them make each median
 MERGE_RIGID_MIN_FRAMES = 6
@@ -1241,7 +1261,7 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("merge_hits", "end_min_hits", "steady_min_hits", "smooth_size_frames"):
+        for name in ("merge_hits", "end_min_hits", "steady_min_hits", "smooth_size_frames", "partial_steady_frames"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name}: expected an integer >= 0 (0: off), got {v!r}")
@@ -1257,7 +1277,7 @@ class MultiTargetTracker:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
         for name in ("report_coasting", "fill_gaps", "use_velocity", "merge_covered", "back_track_size",
-                     "partial_abreast", "abreast_shared"):
+                     "partial_abreast", "abreast_shared", "merge_whole_spares"):
             if not isinstance(p[name], bool):
                 raise ValueError(f"{name}: expected true/false, got {p[name]!r}")
         for name in ("gate_px", "min_iou", "coast_gate_growth", "min_travel_px", "min_travel_rel", "hold_search_px",
@@ -1341,6 +1361,7 @@ class MultiTargetTracker:
         det_of = dict(pairs)
         taken_d = set(det_of.values()) | shared
         detected = [boxes[c] for c in det_of.values()]
+        spared = self._within_whole(preds, boxes, taken_d, set(det_of)) if p["merge_whole_spares"] else set()
         survivors = []
         for i, trk in enumerate(self._tracks):
             pred = preds[i]
@@ -1353,6 +1374,12 @@ class MultiTargetTracker:
                         # the size it had was two vehicles': it starts again from this one's
                         trk.kf.restart_size(float(z[2]), float(z[3]))
                         trk.sizes.clear()
+                        trk.partial.clear()
+                    elif self._partial_steady(trk, z, full):
+                        # the same partial view detection after detection: the size it had was not the vehicle's
+                        trk.kf.restart_size(float(z[2]), float(z[3]))
+                        trk.sizes.clear()
+                        trk.partial.clear()
                     else:
                         z = full
                 trk.kf.update(z, vels[c])
@@ -1375,7 +1402,8 @@ class MultiTargetTracker:
                     trk.excused += 1
                 else:
                     trk.misses += 1
-                    if (not trk.confirmed and trk.misses > p["birth_gap"]) or trk.misses >= self.death_misses:
+                    if (not trk.confirmed and trk.misses > p["birth_gap"] and i not in spared) \
+                            or trk.misses >= self.death_misses:
                         continue
             self._emit(trk, frame, z, trk.kf.x[:4], pred, off)
             if not trk.confirmed and (trk.hits >= self.birth_hits and self._travelled(trk)
@@ -1440,6 +1468,46 @@ class MultiTargetTracker:
                 shared.add(c)
                 excused.update(int(i) for pair in pairs for i in pair)
         return shared, excused
+
+    def _partial_steady(self, trk: _Track, z: np.ndarray, full: np.ndarray) -> bool:
+        """Whether ``trk``'s detection ``z``, completed to ``full`` (``partial_rel``), is the last of
+        ``partial_steady_frames`` detections in a row completed along the same axis whose extents along it lie
+        within ``PARTIAL_STEADY_PX`` of their median: the view is not partial, the track's size is wrong."""
+        n = self.params["partial_steady_frames"]
+        done = [k for k in (0, 1) if full[2 + k] != z[2 + k]]
+        if n <= 0 or len(done) != 1:
+            trk.partial.clear()
+            return False
+        k = done[0]
+        if trk.partial and trk.partial[-1][0] != k:
+            trk.partial.clear()
+        trk.partial.append((k, float(z[2 + k])))
+        if len(trk.partial) < n:
+            return False
+        ext = np.array([e for _, e in trk.partial[-n:]])
+        return bool(np.abs(ext - np.median(ext)).max() <= PARTIAL_STEADY_PX)
+
+    def _within_whole(self, preds: np.ndarray, boxes: np.ndarray, taken: set, detected: set) -> set:
+        """The tracks without a detection that a detection no track took covers together with another track
+        (``merge_inside`` of each one's predicted box inside it): the vehicle they are parts of was found whole
+        (``merge_whole_spares``)."""
+        if not len(preds) or not len(boxes):
+            return set()
+        share = self.params["merge_inside"]
+        area = preds[:, 2] * preds[:, 3]
+        out: set = set()
+        for c in range(len(boxes)):
+            if c in taken:
+                continue
+            d = boxes[c]
+            iw = np.clip(np.minimum(preds[:, 0] + preds[:, 2] / 2, d[0] + d[2] / 2)
+                         - np.maximum(preds[:, 0] - preds[:, 2] / 2, d[0] - d[2] / 2), 0, None)
+            ih = np.clip(np.minimum(preds[:, 1] + preds[:, 3] / 2, d[1] + d[3] / 2)
+                         - np.maximum(preds[:, 1] - preds[:, 3] / 2, d[1] - d[3] / 2), 0, None)
+            inside = np.flatnonzero(iw * ih >= share * area)
+            if len(inside) >= 2:
+                out.update(int(i) for i in inside if int(i) not in detected)
+        return out
 
     def _merge_parts(self, tracks: list, boxes: np.ndarray, taken: set, frame, img, off) -> set:
         """Join confirmed tracks that are parts of one vehicle (``merge_hits``); the detections this takes.

@@ -842,6 +842,50 @@ def test_a_truck_found_in_two_parts_and_whole_by_turns_is_one_track_boxed_whole(
         MultiTargetTracker(merge_inside=0)
 
 
+def test_the_parts_of_a_truck_found_whole_every_fourth_frame_live_to_be_joined_with_merge_whole_spares():
+    # the truck above found whole in every fourth frame from frame 3 on: each whole frame ended the two parts'
+    # tentative tracks (a miss, birth_gap 0) before they travelled far enough to be confirmed, and the whole
+    # detection's own track the next split frame; nothing was output. Spared while a whole detection no track
+    # took covers them, the parts are confirmed and then joined (merge_hits), one track boxed whole
+    def run(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(40):
+            x, y = 60.0 + 1.5 * t, 50.0
+            trk.step(t, [_box_det(x, y, 80, 30, 1.5)] if t % 4 == 3 else
+                     [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
+        return trk.rows()
+
+    assert run() == []
+    rows = run(merge_whole_spares=True)
+    assert {r["track_id"] for r in rows} == {0}
+    assert sorted(r["frame"] for r in rows) == list(range(40))
+    for r in rows:   # before the join the union of the two parts' boxes, after it the truck's
+        x = 60.0 + 1.5 * r["frame"]
+        np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
+                                   [x - 39.5, 35.5, x + 39.5, 64.5], atol=2.5, err_msg=str(r["frame"]))
+    with pytest.raises(ValueError, match=r"merge_whole_spares: expected true/false, got 1"):
+        MultiTargetTracker(merge_whole_spares=1)
+
+
+def test_a_track_born_too_wide_takes_the_cars_size_back_after_partial_steady_frames_alike_views():
+    # a 20 x 36 px car driving down at 1.5 px a frame, its first 12 detections 44 px wide (the car and something
+    # beside it: its shadow, a neighbour), then the car alone, flush with the wide box's left side: each narrow
+    # detection looks like a partial view of the 44 px track (partial_rel) and was completed back to 44 px, for
+    # ever; partial_steady_frames such views in a row, alike, give the track the car's size again
+    def widths(**kw):
+        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
+        for t in range(60):
+            y = 40.0 + 1.5 * t
+            trk.step(t, [_box_det(72.0, y, 44, 36, 0.0, 1.5) if t < 12 else _box_det(60.0, y, 20, 36, 0.0, 1.5)])
+        return {r["frame"]: r["bbox_x1_px"] - r["bbox_x0_px"] + 1 for r in trk.rows()}
+
+    off, on = widths(), widths(partial_steady_frames=6)
+    assert min(off[t] for t in range(30, 60)) > 38   # completed to the wide box throughout
+    assert max(on[t] for t in range(30, 60)) < 23 and min(on[t] for t in range(30, 60)) > 18
+    with pytest.raises(ValueError, match=r"partial_steady_frames: expected an integer >= 0 \(0: off\), got -2"):
+        MultiTargetTracker(partial_steady_frames=-2)
+
+
 def test_two_cars_nose_to_tail_that_the_detector_joins_twice_stay_two_tracks():
     # two 30 x 14 px cars 36 px apart at the same 1.5 px a frame; in frames 15 and 25 their regions join into one
     # 66 x 14 px detection: each keeps its own track, as without merging (the joined box overlaps one car's track
