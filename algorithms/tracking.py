@@ -1054,6 +1054,15 @@ def _intersections(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return iw * ih
 
 
+def _overlap_areas(boxes: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Areas of intersection of boxes ``(cx, cy, w, h)`` (N, 4) with the one box ``d``: (N,)."""
+    iw = np.clip(np.minimum(boxes[:, 0] + boxes[:, 2] / 2, d[0] + d[2] / 2)
+                 - np.maximum(boxes[:, 0] - boxes[:, 2] / 2, d[0] - d[2] / 2), 0, None)
+    ih = np.clip(np.minimum(boxes[:, 1] + boxes[:, 3] / 2, d[1] + d[3] / 2)
+                 - np.maximum(boxes[:, 1] - boxes[:, 3] / 2, d[1] - d[3] / 2), 0, None)
+    return iw * ih
+
+
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
     corners = [np.stack([q[:, 0] - q[:, 2] / 2, q[:, 1] - q[:, 3] / 2, q[:, 0] + q[:, 2] / 2, q[:, 1] + q[:, 3] / 2],
@@ -1499,12 +1508,7 @@ class MultiTargetTracker:
         for c in range(len(boxes)):
             if c in taken:
                 continue
-            d = boxes[c]
-            iw = np.clip(np.minimum(preds[:, 0] + preds[:, 2] / 2, d[0] + d[2] / 2)
-                         - np.maximum(preds[:, 0] - preds[:, 2] / 2, d[0] - d[2] / 2), 0, None)
-            ih = np.clip(np.minimum(preds[:, 1] + preds[:, 3] / 2, d[1] + d[3] / 2)
-                         - np.maximum(preds[:, 1] - preds[:, 3] / 2, d[1] - d[3] / 2), 0, None)
-            inside = np.flatnonzero(iw * ih >= share * area)
+            inside = np.flatnonzero(_overlap_areas(preds, boxes[c]) >= share * area)
             if len(inside) >= 2:
                 out.update(int(i) for i in inside if int(i) not in detected)
         return out
@@ -1540,14 +1544,11 @@ class MultiTargetTracker:
             if c in taken:
                 continue
             d = boxes[c]
-            iw = np.clip(np.minimum(tb[:, 0] + tb[:, 2] / 2, d[0] + d[2] / 2)
-                         - np.maximum(tb[:, 0] - tb[:, 2] / 2, d[0] - d[2] / 2), 0, None)
-            ih = np.clip(np.minimum(tb[:, 1] + tb[:, 3] / 2, d[1] + d[3] / 2)
-                         - np.maximum(tb[:, 1] - tb[:, 3] / 2, d[1] - d[3] / 2), 0, None)
-            if any(conf[i].merged for i in np.flatnonzero(iw * ih >= p["merge_inside"] * d[2] * d[3])):
+            inter = _overlap_areas(tb, d)
+            if any(conf[i].merged for i in np.flatnonzero(inter >= p["merge_inside"] * d[2] * d[3])):
                 took.add(c)  # the other part of a vehicle already joined: no new track
                 continue
-            inside = np.flatnonzero(iw * ih >= p["merge_inside"] * ta)
+            inside = np.flatnonzero(inter >= p["merge_inside"] * ta)
             if len(inside) < 2:
                 continue
             for a in range(len(inside)):
