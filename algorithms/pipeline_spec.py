@@ -481,6 +481,7 @@ class MultiSpec(_Section):
     hold_min_ncc: float = MULTI_DEFAULTS["hold_min_ncc"]
     hold_search_px: float = MULTI_DEFAULTS["hold_search_px"]
     hold_min_travel_rel: float = MULTI_DEFAULTS["hold_min_travel_rel"]
+    hold_same_frames: StrictInt = MULTI_DEFAULTS["hold_same_frames"]
     back_min_travel_rel: float = MULTI_DEFAULTS["back_min_travel_rel"]
     back_track_size: StrictBool = MULTI_DEFAULTS["back_track_size"]
     back_stop_inside: float = MULTI_DEFAULTS["back_stop_inside"]

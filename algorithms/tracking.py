@@ -743,6 +743,12 @@ class _Track:
 #   realistic 0.758 -> 0.747, thesis-hs realistic 0.697 -> 0.685; the other 28 cells unchanged. KIT AIS (--kit-ais)
 #   pseudo-MOT MOTA dis -0.250 -> -0.247 (tracks recall 0.562 -> 0.570), pyramidal-lk -0.490 -> -0.495, tv-l1 -0.531 ->
 #   -0.533, pyramidal-hs unchanged;
+# hold_same_frames: the kept frame in which a track that never was a box side away must show what its template holds
+#   (_of_ground, hold_min_travel_rel) is the oldest within this many frames before the template's detection, or, with
+#   none there, the latest before them; 0, the default: the oldest kept (up to hold_history frames back). A car or a
+#   bus that slowed over 80 frames looks different in its box by then (its box, light on its roof), and was refused
+#   its hold where it stopped: the 1080p city-wide world at seed 1, a 94 x 70 px bus lost 19 frames before the clip's
+#   end at 0.1 m/s, a car 56 frames. A box that slides off its car does so within a few frames. 12 in dis (figures there);
 # back_min_travel_rel: a confirmed track is followed back from its first detection (a vehicle that waited at a light
 #   when the clip began stood where it was first found: once it has left that place, which then looks different, the
 #   kept frames before are searched for its first template, :meth:`MultiTargetTracker._extend_back`) once its
@@ -889,7 +895,7 @@ MULTI_DEFAULTS = {"gate_px": 20.0, "min_iou": 0.3, "birth_hits": 3, "birth_gap":
                   "abreast_shared": False, "death_misses": 10, "coast_gate_growth": 0.5,
                   "report_coasting": False, "fill_gaps": True, "fill_min_ncc": 0.8, "min_area_rel": 0.15,
                   "use_velocity": True, "hold_min_ncc": 0.8, "hold_search_px": 6.0,
-                  "hold_min_travel_rel": 0.1, "back_min_travel_rel": 1.0, "back_track_size": False,
+                  "hold_min_travel_rel": 0.1, "hold_same_frames": 0, "back_min_travel_rel": 1.0, "back_track_size": False,
                   "back_stop_inside": 0.0,
                   "hold_frames": 250, "hold_history": 100,
                   "steady_flow_rel": 0.8,
@@ -1108,7 +1114,7 @@ SMOOTH_SLOW_PX = 0.3
 SMOOTH_LINE_FRAMES = 8
 
 # _of_ground: a track that never was a box side from where it is to be held must have its template match its place
-# in its oldest kept frame within this, px (its Kalman centre then, not its template's; dis on the worlds, pooled
+# in its oldest kept frame (hold_same_frames) within this, px (its Kalman centre then, not its template's; dis on the worlds, pooled
 # with hold_min_travel_rel 0.1: 2 px 0.586 / 0.558, 4 px 0.586 / 0.563, 7 px, the hold's search, 0.580 / 0.564 on the
 # two sets of renders; the match asked at NCC 0.7 instead of hold_min_ncc gained two worlds and lost the third:
 # benchmarks/heldout_rehearsal.md, "Misses by how fast the vehicle moves")
@@ -1270,7 +1276,8 @@ class MultiTargetTracker:
         if unknown:
             raise ValueError(f"multi: unknown key(s) {unknown}; valid: {', '.join(MULTI_DEFAULTS)}")
         p = {**MULTI_DEFAULTS, **params}
-        for name in ("merge_hits", "end_min_hits", "steady_min_hits", "smooth_size_frames", "partial_steady_frames"):
+        for name in ("merge_hits", "end_min_hits", "steady_min_hits", "smooth_size_frames", "partial_steady_frames",
+                     "hold_same_frames"):
             v = p[name]
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 raise ValueError(f"{name}: expected an integer >= 0 (0: off), got {v!r}")
@@ -1893,7 +1900,8 @@ class MultiTargetTracker:
         crept up a queue by less than its length: no frame shows the place without it. It must then have been
         detected twice ``birth_hits`` times (a track confirmed on its first few detections and lost at once is as
         often a roof that parallax moved, or a passing truck's box left on a parked car), and its template must
-        match the track's place in its oldest kept frame (before the template's), within ``HOLD_SAME_SEARCH_PX``:
+        match the track's place in its oldest kept frame (before the template's; with ``hold_same_frames``, the oldest
+        within that many frames before it), within ``HOLD_SAME_SEARCH_PX``:
         what it holds now is what it was found on; a box that slid off a car onto the crossing the car had stood on
         does not match the car it held then.
         """
@@ -1909,11 +1917,14 @@ class MultiTargetTracker:
             return then is None or then >= ncc
         if trk.hits < 2 * self.birth_hits:
             return True
-        for frame, img, off in self._seen:
-            c = where.get(frame)
-            if c is not None and frame < trk.hist[-1][0]:  # before the detection the template was taken at
-                found = _best_match(img, trk.template, c + off, HOLD_SAME_SEARCH_PX)
-                return found is None or not found[0] >= ncc
+        last = trk.hist[-1][0]  # the detection the template was taken at
+        then = [(frame, img, off) for frame, img, off in self._seen if frame in where and frame < last]
+        n = self.params["hold_same_frames"]
+        if n > 0:  # the oldest within n frames, else the latest before them
+            then = [x for x in then if x[0] >= last - n] or then[-1:]
+        for frame, img, off in then[:1]:
+            found = _best_match(img, trk.template, where[frame] + off, HOLD_SAME_SEARCH_PX)
+            return found is None or not found[0] >= ncc
         return True
 
     def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:

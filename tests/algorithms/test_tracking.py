@@ -248,6 +248,28 @@ def test_a_car_that_crept_less_than_its_length_is_held_where_it_stops_unless_its
     assert (lost_after(4), lost_after(8)) == (3, 19)
 
 
+def test_a_creeping_car_whose_look_changed_since_the_oldest_kept_frame_is_held_with_hold_same_frames():
+    # the queue above, but the car's roof shows no bright stripe in its first 5 frames (light on it changed): what the
+    # track held in its oldest kept frame no longer matches its template, and the stop is refused; compared with a
+    # kept frame at most hold_same_frames before the template's detection, it is held to the clip's end
+    xs = [30.0 + 0.5 * t for t in range(20)] + [39.5] * 20
+
+    def last(**kw):
+        trk = MultiTargetTracker(death_misses=3, hold_min_travel_rel=0.1, **kw)
+        for t, x in enumerate(xs):
+            img = _car_scene(80, 160, x, 40.0)
+            if t < 5:
+                x0, y0 = int(round(x)) - 7, int(round(40.0)) - 4
+                img[y0 + 3:y0 + 5, x0 + 2:x0 + 12] = 40.0
+            trk.step(t, [_car_det(x, 40.0, 0.5)] if t < 20 else [], image=img)
+        return max(r["frame"] for r in trk.rows() if not np.isnan(r["x_filt_px"]))
+
+    assert last() == 19
+    assert last(hold_same_frames=12) == 39
+    with pytest.raises(ValueError, match=r"hold_same_frames: expected an integer >= 0 \(0: off\), got 1.5"):
+        MultiTargetTracker(hold_same_frames=1.5)
+
+
 def test_a_car_waiting_when_the_clip_starts_is_followed_back_to_the_first_frame():
     # it waits 10 frames (the motion detector cannot see it), then drives off, 1.5 px/frame when first found
     xs = [30.0] * 10 + [30.0 + 1.5 * k + 0.1 * k * k for k in range(1, 16)]
