@@ -1498,9 +1498,10 @@ class MultiTargetTracker:
         if trk.partial and trk.partial[-1][0] != k:
             trk.partial.clear()
         trk.partial.append((k, float(z[2 + k])))
+        del trk.partial[:-n]
         if len(trk.partial) < n:
             return False
-        ext = np.array([e for _, e in trk.partial[-n:]])
+        ext = np.array([e for _, e in trk.partial])
         return bool(np.abs(ext - np.median(ext)).max() <= PARTIAL_STEADY_PX)
 
     def _within_whole(self, preds: np.ndarray, boxes: np.ndarray, taken: set, detected: set) -> set:
