@@ -1060,20 +1060,14 @@ def _intersections(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return iw * ih
 
 
-def _overlap_areas(boxes: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Areas of intersection of boxes ``(cx, cy, w, h)`` (N, 4) with the one box ``d``: (N,)."""
-    iw = np.clip(np.minimum(boxes[:, 0] + boxes[:, 2] / 2, d[0] + d[2] / 2)
-                 - np.maximum(boxes[:, 0] - boxes[:, 2] / 2, d[0] - d[2] / 2), 0, None)
-    ih = np.clip(np.minimum(boxes[:, 1] + boxes[:, 3] / 2, d[1] + d[3] / 2)
-                 - np.maximum(boxes[:, 1] - boxes[:, 3] / 2, d[1] - d[3] / 2), 0, None)
-    return iw * ih
+def _corners(q: np.ndarray) -> np.ndarray:
+    """Boxes (cx, cy, w, h) (N, 4) as (x0, y0, x1, y1) (N, 4)."""
+    return np.stack([q[:, 0] - q[:, 2] / 2, q[:, 1] - q[:, 3] / 2, q[:, 0] + q[:, 2] / 2, q[:, 1] + q[:, 3] / 2], axis=1)
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of boxes (cx, cy, w, h) a (N, 4) against b (M, 4): (N, M)."""
-    corners = [np.stack([q[:, 0] - q[:, 2] / 2, q[:, 1] - q[:, 3] / 2, q[:, 0] + q[:, 2] / 2, q[:, 1] + q[:, 3] / 2],
-                        axis=1) for q in (a, b)]
-    inter = _intersections(*corners)
+    inter = _intersections(_corners(a), _corners(b))
     union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None] - inter
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
@@ -1512,11 +1506,12 @@ class MultiTargetTracker:
             return set()
         share = self.params["merge_inside"]
         area = preds[:, 2] * preds[:, 3]
+        inter = _intersections(_corners(preds), _corners(boxes))
         out: set = set()
         for c in range(len(boxes)):
             if c in taken:
                 continue
-            inside = np.flatnonzero(_overlap_areas(preds, boxes[c]) >= share * area)
+            inside = np.flatnonzero(inter[:, c] >= share * area)
             if len(inside) >= 2:
                 out.update(int(i) for i in inside if int(i) not in detected)
         return out
@@ -1548,11 +1543,11 @@ class MultiTargetTracker:
             return took
         tb = np.array([t.kf.x[:4] for t in conf])
         ta = tb[:, 2] * tb[:, 3]
+        overlap = _intersections(_corners(tb), _corners(boxes))
         for c in range(len(boxes)):
             if c in taken:
                 continue
-            d = boxes[c]
-            inter = _overlap_areas(tb, d)
+            d, inter = boxes[c], overlap[:, c]
             if any(conf[i].merged for i in np.flatnonzero(inter >= p["merge_inside"] * d[2] * d[3])):
                 took.add(c)  # the other part of a vehicle already joined: no new track
                 continue
@@ -1923,10 +1918,11 @@ class MultiTargetTracker:
         n = self.params["hold_same_frames"]
         if n > 0:  # the oldest within n frames, else the latest before them
             then = [x for x in then if x[0] >= last - n] or then[-1:]
-        for frame, img, off in then[:1]:
-            found = _best_match(img, trk.template, where[frame] + off, HOLD_SAME_SEARCH_PX)
-            return found is None or not found[0] >= ncc
-        return True
+        if not then:
+            return True
+        frame, img, off = then[0]
+        found = _best_match(img, trk.template, where[frame] + off, HOLD_SAME_SEARCH_PX)
+        return found is None or not found[0] >= ncc
 
     def extrapolate(self, frame: int, *, offset_px=(0.0, 0.0), image=None) -> None:
         """Output ``frame`` (the sequence's last, which starts no pair and so has no detections) for every confirmed

@@ -836,28 +836,38 @@ def _box_det(x, y, w, h, u=0.0, v=0.0):
     return Detection(x, y, int(w * h), x - (w - 1) / 2, y - (h - 1) / 2, x + (w - 1) / 2, y + (h - 1) / 2, u, v)
 
 
-def test_a_truck_found_in_two_parts_and_whole_by_turns_is_one_track_boxed_whole():
-    # an 80 x 30 px truck at 1.5 px a frame whose region splits into two 30 x 20 px parts (cab, body: their centres
-    # 25 px from the truck's, beyond the gate, and IoU 0.25 with it) in frames 0-11 and every odd frame after, and
-    # is found whole in the even ones from frame 12: two part tracks are confirmed; the whole detection, which
-    # neither takes, covers both, moving alike, and after merge_hits such frames they are one track, boxed whole
-    def run(**kw):
-        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)   # no frames: the parts coast through the whole ones
-        for t in range(40):
-            x, y = 60.0 + 1.5 * t, 50.0
-            whole = t >= 12 and t % 2 == 0
-            trk.step(t, [_box_det(x, y, 80, 30, 1.5)] if whole else
-                     [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
-        return trk.rows()
+def _split_truck_rows(whole, **kw) -> list[dict]:
+    """The tracker's rows for an 80 x 30 px truck at 1.5 px a frame over 40 frames, found whole in the frames where
+    ``whole(t)`` and else as two 30 x 20 px parts (cab, body: their centres 25 px from the truck's, beyond the gate,
+    and IoU 0.25 with it)."""
+    trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)   # no frames: the parts coast through the whole ones
+    for t in range(40):
+        x, y = 60.0 + 1.5 * t, 50.0
+        trk.step(t, [_box_det(x, y, 80, 30, 1.5)] if whole(t) else
+                 [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
+    return trk.rows()
 
-    rows = run()
+
+def _assert_one_track_boxed_as_the_truck(rows: list[dict]) -> None:
+    """Every frame of :func:`_split_truck_rows` in one track whose box is the truck's: before the join the union of
+    the two parts' boxes, after it the truck's (parts completed)."""
     assert {r["track_id"] for r in rows} == {0}
     assert sorted(r["frame"] for r in rows) == list(range(40))
-    for r in rows:   # before the merge the union of the two parts' boxes, after it the truck's (parts completed)
+    for r in rows:
         x = 60.0 + 1.5 * r["frame"]
         np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
                                    [x - 39.5, 35.5, x + 39.5, 64.5], atol=2.5, err_msg=str(r["frame"]))
-    assert len({r["track_id"] for r in run(merge_hits=0)}) == 2   # off: a track per part
+
+
+def test_a_truck_found_in_two_parts_and_whole_by_turns_is_one_track_boxed_whole():
+    # the truck splits into its two parts in frames 0-11 and every odd frame after, and is found whole in the even
+    # ones from frame 12: two part tracks are confirmed; the whole detection, which neither takes, covers both,
+    # moving alike, and after merge_hits such frames they are one track, boxed whole
+    def whole(t):
+        return t >= 12 and t % 2 == 0
+
+    _assert_one_track_boxed_as_the_truck(_split_truck_rows(whole))
+    assert len({r["track_id"] for r in _split_truck_rows(whole, merge_hits=0)}) == 2   # off: a track per part
     with pytest.raises(ValueError, match=r"merge_hits: expected an integer >= 0 \(0: off\), got -1"):
         MultiTargetTracker(merge_hits=-1)
     with pytest.raises(ValueError, match=r"merge_inside: expected a number in \(0, 1\], got 0"):
@@ -869,22 +879,11 @@ def test_the_parts_of_a_truck_found_whole_every_fourth_frame_live_to_be_joined_w
     # tentative tracks (a miss, birth_gap 0) before they travelled far enough to be confirmed, and the whole
     # detection's own track the next split frame; nothing was output. Spared while a whole detection no track
     # took covers them, the parts are confirmed and then joined (merge_hits), one track boxed whole
-    def run(**kw):
-        trk = MultiTargetTracker(fill_min_ncc=0.0, **kw)
-        for t in range(40):
-            x, y = 60.0 + 1.5 * t, 50.0
-            trk.step(t, [_box_det(x, y, 80, 30, 1.5)] if t % 4 == 3 else
-                     [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
-        return trk.rows()
+    def whole(t):
+        return t % 4 == 3
 
-    assert run() == []
-    rows = run(merge_whole_spares=True)
-    assert {r["track_id"] for r in rows} == {0}
-    assert sorted(r["frame"] for r in rows) == list(range(40))
-    for r in rows:   # before the join the union of the two parts' boxes, after it the truck's
-        x = 60.0 + 1.5 * r["frame"]
-        np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
-                                   [x - 39.5, 35.5, x + 39.5, 64.5], atol=2.5, err_msg=str(r["frame"]))
+    assert _split_truck_rows(whole) == []
+    _assert_one_track_boxed_as_the_truck(_split_truck_rows(whole, merge_whole_spares=True))
     with pytest.raises(ValueError, match=r"merge_whole_spares: expected true/false, got 1"):
         MultiTargetTracker(merge_whole_spares=1)
 
