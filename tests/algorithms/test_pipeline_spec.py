@@ -54,6 +54,15 @@ def test_each_builtin_is_one_yaml_file_named_like_the_pipeline():
         assert d["name"] == name and d["description"]
 
 
+@pytest.mark.parametrize("lk, hs", [("thesis-lk", "thesis-hs"), ("pyramidal-lk", "pyramidal-hs")])
+def test_the_lk_and_hs_twins_differ_in_their_flow_alone(lk, hs):
+    # the LK vs HS answer compares flows: every other stage (detection, tracker keys) must be the same in both
+    builtins = builtin_pipelines()
+    a, b = resolve_pipeline(builtins[lk]), resolve_pipeline(builtins[hs])
+    assert a["flow"]["method"] == "lucas_kanade" and b["flow"]["method"] == "horn_schunck"
+    assert {k for k in a if a[k] != b[k]} == {"name", "description", "flow"}
+
+
 def test_a_broken_builtin_file_is_refused_naming_the_file(tmp_path, monkeypatch):
     (tmp_path / "bad-one.yaml").write_text(yaml.safe_dump({**BASE, "name": "bad-one", "spatial": "yes"}))
     (tmp_path / "renamed.yaml").write_text(yaml.safe_dump({**BASE, "name": "other"}))
