@@ -1380,13 +1380,10 @@ class MultiTargetTracker:
                 z = boxes[c]
                 if trk.confirmed and trk.sizes:  # the size it has had lately, against a partial view
                     full = _completed(z, np.concatenate([pred[:2], np.median(trk.sizes, axis=0)]), p["partial_rel"])
-                    if p["partial_abreast"] and _completes_over_abreast(z, full, vels[c], boxes, c):
-                        # the size it had was two vehicles': it starts again from this one's
-                        trk.kf.restart_size(float(z[2]), float(z[3]))
-                        trk.sizes.clear()
-                        trk.partial.clear()
-                    elif self._partial_steady(trk, z, full):
-                        # the same partial view detection after detection: the size it had was not the vehicle's
+                    # the size it had was two vehicles' (completed over the one abreast), or not the vehicle's (the
+                    # same partial view detection after detection): it starts again from this detection's
+                    if (p["partial_abreast"] and _completes_over_abreast(z, full, vels[c], boxes, c)) \
+                            or self._partial_steady(trk, z, full):
                         trk.kf.restart_size(float(z[2]), float(z[3]))
                         trk.sizes.clear()
                         trk.partial.clear()
