@@ -245,10 +245,12 @@ class Detection(NamedTuple):
 # box_split_rel: a part of those pixels that lies at least half in the region, stays out of its box (static texture
 #   between) and holds at least this fraction of the pixels of the part the box started from is a second detection
 #   at the region's motion: two cars at about one velocity, close together, whose flow a smoothing method (Farneback's
-#   window) joined into one region (0: off, the default; the farneback pipeline sets 0.8: urban-parallax MOTA 0.541 ->
-#   0.730 there; DIS at 0.8 gains on urban-parallax, 0.667 -> 0.704, but loses KIT AIS detection precision,
-#   0.241 -> 0.240, and track precision, 0.328 -> 0.322: its regions seldom join two cars, and the parts it splits
-#   off there are queues of parked cars and road texture);
+#   window) joined into one region. The parts kept out are first joined among themselves by the rule that joins
+#   parts to the box (_joined_apart): a second car whose front and rear edges alone changed (a uniform roof between)
+#   is one box, not two halves each under the fraction (0: off, the default; the farneback pipeline sets 0.8:
+#   urban-parallax MOTA 0.541 -> 0.730 there; DIS at 0.8 gained on urban-parallax, 0.667 -> 0.704, but lost KIT AIS
+#   detection precision, 0.241 -> 0.240, and track precision, 0.328 -> 0.322, before the parts were joined: its
+#   regions seldom join two cars, and the parts it split off there were queues of parked cars and road texture);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
@@ -881,13 +883,12 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
             bx0, by0, bx1, by1, extra = _join_in_lane(far, static, (bx0, by0, bx1, by1), u, v, reach_join, full,
                                                       parts=taken if reach_parts else None, road=road)
             count += extra
-    if others is not None:
-        for j in apart:
-            if stats[j, cv2.CC_STAT_AREA] >= other_rel * stats[k, cv2.CC_STAT_AREA] and not (
-                    left[j] <= bx1 and right[j] >= bx0 and top[j] <= by1 and bottom[j] >= by0):
+    if others is not None and apart:  # (apart only with join > 0, which made ``static``)
+        for cx0, cy0, cx1, cy1, n_px in _joined_apart(apart, labels, stats, moved, static, join):
+            if n_px >= other_rel * stats[k, cv2.CC_STAT_AREA] and not (
+                    cx0 <= bx1 and cx1 >= bx0 and cy0 <= by1 and cy1 >= by0):
                 # the 3 x 3 average widened the part by a pixel a side (as the box below)
-                others.append((int(left[j] + xa + 1), int(top[j] + ya + 1), int(right[j] + xa - 1),
-                               int(bottom[j] + ya - 1), int(stats[j, cv2.CC_STAT_AREA])))
+                others.append((int(cx0 + xa + 1), int(cy0 + ya + 1), int(cx1 + xa - 1), int(cy1 + ya - 1), n_px))
     bx0, by0, bx1, by1 = bx0 + xa, by0 + ya, bx1 + xa, by1 + ya
     if prev is None:
         # the marked pixels are the vehicle and the ground it covers next: one motion ahead taken off, unless
@@ -901,6 +902,32 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     if bx1 < bx0 or by1 < by0:
         return None
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
+
+
+def _joined_apart(parts, labels: np.ndarray, stats: np.ndarray, moved: np.ndarray, static: np.ndarray,
+                  join: float) -> list[tuple[int, int, int, int, int]]:
+    """The parts that did not join a region's box (labels of ``labels``, largest vote first), joined among themselves
+    by :func:`_moved_box`'s rule (at most ``join`` of the pixels between them static texture): a second vehicle
+    whose front and rear the flow marked apart (a uniform roof between) is one box, not two halves.
+    ``(x0, y0, x1, y1, n)`` each, in the masks' pixels; ``n`` the marked pixels of its parts."""
+    left, top = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    right, bottom = left + stats[:, cv2.CC_STAT_WIDTH] - 1, top + stats[:, cv2.CC_STAT_HEIGHT] - 1
+    out, free = [], list(parts)
+    while free:
+        j = free.pop(0)
+        x0, y0, x1, y1, n_px = left[j], top[j], right[j], bottom[j], int(stats[j, cv2.CC_STAT_AREA])
+        taken = labels == j
+        for i in list(free):
+            c0, r0, c1, r1 = min(x0, left[i]), min(y0, top[i]), max(x1, right[i]), max(y1, bottom[i])
+            ys, xs = np.nonzero(taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == i))
+            if _static_between(np.stack([xs, ys], axis=1), moved[r0:r1 + 1, c0:c1 + 1],
+                               static[r0:r1 + 1, c0:c1 + 1]) <= join:
+                x0, y0, x1, y1 = c0, r0, c1, r1
+                n_px += int(stats[i, cv2.CC_STAT_AREA])
+                taken |= labels == i
+                free.remove(i)
+        out.append((int(x0), int(y0), int(x1), int(y1), n_px))
+    return out
 
 
 # _gap_split: a part must hold a line (across the cut) of which at least this fraction is no road; the ring of ground

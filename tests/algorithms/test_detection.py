@@ -731,6 +731,29 @@ def test_two_cars_one_smoothed_flow_region_joined_are_split_by_box_split_rel():
         detect_vehicles(flow, valid, box_split_rel=-0.5)
 
 
+def test_a_second_car_split_off_a_region_gets_one_box_not_its_two_edges():
+    # a 20 x 12 px car with a textured roof and, in the next lane, a 36 x 16 px car with a uniform roof, both 3 px a
+    # frame to the right and joined by a smoothing flow into one region: the uniform car's front and rear edges change
+    # and its roof does not, so the frames mark it as two parts with no static texture between them
+    rng = np.random.default_rng(21)
+    g = _ground(rng)
+    roof = cv2.GaussianBlur(rng.uniform(0, 255, (12, 20)).astype(np.float32), (0, 0), 1.0)
+    kw = _textured(g, [(30, 52, 3, roof)])
+    prev, (t0, t1) = kw["prev_frame"], kw["frames"]
+    prev, t0, t1 = (_paint_car(f, 56 + 3 * k, 70, 36, 16) for f, k in ((prev, -1), (t0, 0), (t1, 1)))
+    flow = _field(rng, [(44, 92, 22, 98, (3.0, 0.0))], blur=1.5)
+    valid = np.ones((H, W), bool)
+    first, second = (30, 52, 49, 63), (56, 70, 91, 85)
+    kw = dict(frames=(t0, t1), prev_frame=prev, parallax_min_fraction=0.0)
+    (one,) = detect_vehicles(flow, valid, **kw)
+    assert box_iou(one, first) >= 0.8, one
+    two = detect_vehicles(flow, valid, box_split_rel=0.3, **kw)
+    assert len(two) == 2, two
+    for car in (first, second):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.8]
+        assert (d.u_px, d.v_px) == pytest.approx((3.0, 0.0), abs=0.5)
+
+
 def test_a_region_beyond_max_area_halo_rel_is_rejected_before_its_box():
     # the halo test's car (test_the_size_limit_judges_the_box_from_the_frames_not_the_flow_halo): its 106 m^2
     # region is 1.3 times a max_area_m2 of 80, inside the default 4 and beyond 1.2
