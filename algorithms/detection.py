@@ -844,21 +844,9 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     apart = []  # parts in the region that did not join: static texture between them and the box
     if join > 0:
         static = gain < -gain_grey
-        taken = labels == k  # the parts joined so far
-        for j in np.argsort(-votes, kind="stable"):
-            if j == k or votes[j] == 0 or 2 * votes[j] < stats[j, cv2.CC_STAT_AREA]:
-                continue
-            c0, r0, c1, r1 = min(bx0, left[j]), min(by0, top[j]), max(bx1, right[j]), max(by1, bottom[j])
-            # between: inside the convex hull of the parts, not marked (a box would add the ground beside a
-            # vehicle that drives diagonally, and a diagonal car's front and rear would never join)
-            ys, xs = np.nonzero(taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == j))
-            if _static_between(np.stack([xs, ys], axis=1), moved[r0:r1 + 1, c0:c1 + 1],
-                               static[r0:r1 + 1, c0:c1 + 1]) <= join:
-                bx0, by0, bx1, by1 = c0, r0, c1, r1
-                count += int(stats[j, cv2.CC_STAT_AREA])
-                taken |= labels == j
-            else:
-                apart.append(j)
+        inside = [j for j in np.argsort(-votes, kind="stable")
+                  if j != k and votes[j] > 0 and 2 * votes[j] >= stats[j, cv2.CC_STAT_AREA]]
+        (bx0, by0, bx1, by1), count, taken, apart = _join_parts(k, inside, labels, stats, moved, static, join)
         if reach_px > 0 and math.hypot(u, v) >= 0.25:
             zone = np.zeros_like(moved)
             zone[max(0, y0 - reach_px) - ya:min(h - 1, y1 + reach_px) - ya + 1,
@@ -904,29 +892,42 @@ def _moved_box(region: _Region, frames, u: float, v: float, ground=(0.0, 0.0), p
     return int(round(bx0)), int(round(by0)), int(round(bx1)), int(round(by1)), count
 
 
+def _join_parts(seed: int, parts, labels: np.ndarray, stats: np.ndarray, moved: np.ndarray, static: np.ndarray,
+                join: float) -> tuple[tuple[int, int, int, int], int, np.ndarray, list]:
+    """Part ``seed`` of ``labels`` (connected components, ``stats`` theirs) joined by each of ``parts`` in turn when at
+    most ``join`` of the pixels between them are static texture: inside the convex hull of the parts joined so far and
+    the next, not ``moved`` (a box would add the ground beside a vehicle that drives diagonally, and a diagonal car's
+    front and rear would never join; a uniform roof between a car's edges is neither moved nor static).
+    ``((x0, y0, x1, y1), n, taken, rest)``: the joined parts' box, their marked pixels, their mask, the parts left."""
+    left, top = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    right, bottom = left + stats[:, cv2.CC_STAT_WIDTH] - 1, top + stats[:, cv2.CC_STAT_HEIGHT] - 1
+    x0, y0, x1, y1 = int(left[seed]), int(top[seed]), int(right[seed]), int(bottom[seed])
+    n_px = int(stats[seed, cv2.CC_STAT_AREA])
+    taken = labels == seed
+    rest = []
+    for j in parts:
+        c0, r0, c1, r1 = min(x0, left[j]), min(y0, top[j]), max(x1, right[j]), max(y1, bottom[j])
+        ys, xs = np.nonzero(taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == j))
+        if _static_between(np.stack([xs, ys], axis=1), moved[r0:r1 + 1, c0:c1 + 1],
+                           static[r0:r1 + 1, c0:c1 + 1]) <= join:
+            x0, y0, x1, y1 = int(c0), int(r0), int(c1), int(r1)
+            n_px += int(stats[j, cv2.CC_STAT_AREA])
+            taken |= labels == j
+        else:
+            rest.append(j)
+    return (x0, y0, x1, y1), n_px, taken, rest
+
+
 def _joined_apart(parts, labels: np.ndarray, stats: np.ndarray, moved: np.ndarray, static: np.ndarray,
                   join: float) -> list[tuple[int, int, int, int, int]]:
     """The parts that did not join a region's box (labels of ``labels``, largest vote first), joined among themselves
-    by :func:`_moved_box`'s rule (at most ``join`` of the pixels between them static texture): a second vehicle
-    whose front and rear the flow marked apart (a uniform roof between) is one box, not two halves.
-    ``(x0, y0, x1, y1, n)`` each, in the masks' pixels; ``n`` the marked pixels of its parts."""
-    left, top = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    right, bottom = left + stats[:, cv2.CC_STAT_WIDTH] - 1, top + stats[:, cv2.CC_STAT_HEIGHT] - 1
+    by the same rule (:func:`_join_parts`): a second vehicle whose front and rear the flow marked apart (a uniform
+    roof between) is one box, not two halves. ``(x0, y0, x1, y1, n)`` each, in the masks' pixels; ``n`` the marked
+    pixels of its parts."""
     out, free = [], list(parts)
     while free:
-        j = free.pop(0)
-        x0, y0, x1, y1, n_px = left[j], top[j], right[j], bottom[j], int(stats[j, cv2.CC_STAT_AREA])
-        taken = labels == j
-        for i in list(free):
-            c0, r0, c1, r1 = min(x0, left[i]), min(y0, top[i]), max(x1, right[i]), max(y1, bottom[i])
-            ys, xs = np.nonzero(taken[r0:r1 + 1, c0:c1 + 1] | (labels[r0:r1 + 1, c0:c1 + 1] == i))
-            if _static_between(np.stack([xs, ys], axis=1), moved[r0:r1 + 1, c0:c1 + 1],
-                               static[r0:r1 + 1, c0:c1 + 1]) <= join:
-                x0, y0, x1, y1 = c0, r0, c1, r1
-                n_px += int(stats[i, cv2.CC_STAT_AREA])
-                taken |= labels == i
-                free.remove(i)
-        out.append((int(x0), int(y0), int(x1), int(y1), n_px))
+        box, n_px, _, free = _join_parts(free[0], free[1:], labels, stats, moved, static, join)
+        out.append((*box, n_px))
     return out
 
 
