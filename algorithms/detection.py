@@ -246,11 +246,10 @@ class Detection(NamedTuple):
 #   between) and holds at least this fraction of the pixels of the part the box started from is a second detection
 #   at the region's motion: two cars at about one velocity, close together, whose flow a smoothing method (Farneback's
 #   window) joined into one region. The parts kept out are first joined among themselves by the rule that joins
-#   parts to the box (_joined_apart): a second car whose front and rear edges alone changed (a uniform roof between)
+#   parts to the box (_join_parts): a second car whose front and rear edges alone changed (a uniform roof between)
 #   is one box, not two halves each under the fraction (0: off, the default; the farneback pipeline sets 0.8:
-#   urban-parallax MOTA 0.541 -> 0.730 there; DIS at 0.8 gained on urban-parallax, 0.667 -> 0.704, but lost KIT AIS
-#   detection precision, 0.241 -> 0.240, and track precision, 0.328 -> 0.322, before the parts were joined: its
-#   regions seldom join two cars, and the parts it split off there were queues of parked cars and road texture);
+#   urban-parallax MOTA 0.541 -> 0.730 there; dis sets 0.8 since the parts are joined, figures in dis.yaml: DIS beside
+#   a lane joins two cars into one region too; before the join it lost KIT AIS track precision at 0.8);
 # border_px: moving pixels this close to the image border are left out (a flow window the border clips,
 #   content that enters the frame);
 # noise_k: the speed threshold is at least this many times the median residual speed of the ground (the
