@@ -47,7 +47,8 @@ each with its keys (``DETECTION_DEFAULTS``, the pipeline's ``detection`` section
    ``gap_split_width_px`` / ``gap_split_length_px``, a box that a band of road crosses from side to
    side, across or along its motion, is two or three vehicles that move together and is cut there
    (:func:`_gap_split`: cars leaving a parking row or a queue side by side, one close behind another;
-   a bus has no band of road inside it); with ``leftover_rel``, the parts of a region outside every
+   a bus has no band of road inside it; with ``gap_split_moved`` a band its motion does not move
+   is one too); with ``leftover_rel``, the parts of a region outside every
    box found in it and in the lane of one go through steps 5 and 6 once more at their own flow
    (:func:`_left_over`: a slower car close behind a faster one, which step 3 did not split and
    ``core_rel`` left out as its halo), added where they overlap no other detection;
@@ -298,6 +299,10 @@ class Detection(NamedTuple):
 #   888 unmatched track rows, 2 along the lane). gap_split_length_px 20 beside it measured (dis): city-wide MOTA
 #   0.338 -> 0.333 (FN 3447 -> 3487), KIT AIS detection precision / recall 0.269 / 0.417 -> 0.265 / 0.419, the
 #   synthetic scenes (30 frames) unchanged: left off, a key for footage with queues nose to tail.
+# gap_split_moved: where no band of road grey crosses the box, a band of ground that the box's motion does not move is
+#   one too (_gap_split with by_motion; a zebra crossing, a marking or a shadow between two cars abreast is no road
+#   grey, yet nothing between them moves), each part reaching further along the motion than across it. Off by
+#   default; the pipeline files that set it give the figures.
 # shadow_trim_rel, shadow_ratio_lo, shadow_ratio_hi, shadow_vote, shadow_min_votes: a vehicle's cast shadow moves with
 #   it and its flow is the vehicle's, so the box of step 6 holds it; annotators box the body alone
 #   (trim_cast_shadows, last, needs the frames). A pixel is dark at shadow_ratio_lo to shadow_ratio_hi times the
@@ -365,6 +370,7 @@ DETECTION_DEFAULTS = {
     "change_noise_k": 5.0, "change_enough": 0.5, "box_margin_rel": 1.0, "box_split_rel": 0.0, "leftover_rel": 0.0,
     "max_area_halo_rel": 4.0, "min_box_m2": 4.0, "refine_wide_px": 0,
     "gap_split_width_px": 0, "gap_split_length_px": 0, "gap_split_road_k": 3.0, "gap_split_valley": 0.12,
+    "gap_split_moved": False,
     "shadow_trim_rel": 0.0, "shadow_ratio_lo": 0.2, "shadow_ratio_hi": 0.8, "shadow_vote": 0.1, "shadow_min_votes": 3,
     "shadow_scope": "frame", "shadow_clip_min_votes": 20, "shadow_lead_px": 2, "shadow_diagonal_deg": 20.0,
     "lane_fill_rel": 0.0, "lane_fill_line": 0.6, "lane_fill_road_k": 3.0,
@@ -460,7 +466,7 @@ def _check_keys(params: dict) -> dict:
         if k in ("ground_model", "shadow_scope") or (v is None and k in ("max_area_px", "min_area_m2", "max_area_m2",
                                                                           "min_box_m2")):
             continue
-        if k in ("box_from_frames", "box_three_frames", "box_reach_parts"):
+        if k in ("box_from_frames", "box_three_frames", "box_reach_parts", "gap_split_moved"):
             if not isinstance(v, bool):
                 raise ValueError(f"{k}: expected true/false, got {v!r}")
             continue
@@ -937,6 +943,9 @@ GAP_SPLIT_RING_PX = 4
 # _gap_split: each part must hold at least this share of the moving pixels its area would hold at the box's density
 # (a part that holds none is ground or a kerb the box took in, not a vehicle)
 GAP_SPLIT_MOVED_SHARE = 0.4
+# _gap_split with by_motion: a part must hold a line across the motion that moves at least this fraction as much as
+# the box's most moving line (a second vehicle, not a fringe of the first's edge)
+GAP_SPLIT_MOVED_PEAK = 0.5
 
 
 def _road_grey(ring: np.ndarray) -> tuple[float, float] | None:
@@ -952,8 +961,8 @@ def _road_grey(ring: np.ndarray) -> tuple[float, float] | None:
 
 def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, length_px: int, road_k: float = 3.0,
                valley: float = 0.12, peak: float = GAP_SPLIT_PEAK, ring_px: int = GAP_SPLIT_RING_PX,
-               moved: Callable[[], np.ndarray] | None = None,
-               moved_share: float = GAP_SPLIT_MOVED_SHARE) -> list[tuple[int, int, int, int, int]]:
+               moved: Callable[[], np.ndarray] | None = None, moved_share: float = GAP_SPLIT_MOVED_SHARE,
+               by_motion: bool = False) -> list[tuple[int, int, int, int, int]]:
     """The vehicles of a box that a band of road parts: their boxes ``(x0, y0, x1, y1, n)``, or [] for one vehicle.
 
     Two or three vehicles that move together at one velocity (cars leaving a parking row or a queue side
@@ -983,6 +992,14 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
         bool), called only when the box has parts (most boxes have none): with it, each part must hold at
         least ``moved_share`` of the moving pixels its area would hold at the box's density, else no cut
         (the part is ground, a kerb or a wall the box took in).
+    by_motion : bool
+        With ``moved``: where no band of road parts the box, a band of ground that the box's motion does not move is
+        one too, judged the same way on the moving pixels, as fractions of the box's most moving line (a band at
+        most ``valley`` of it, each part holding a line of ``GAP_SPLIT_MOVED_PEAK``). Two cars abreast at one
+        velocity with a zebra crossing, a marking or a shadow between them leave no band of road grey, yet nothing
+        between them moves; across one vehicle its moving ends and windows span its whole width. Each part
+        must reach further along the motion than across it (a vehicle drives along its length; the crowns of a
+        flickering tree the flow joined are as wide as long).
 
     Returns
     -------
@@ -999,32 +1016,49 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
     inside = np.zeros(patch.shape, bool)
     inside[y0 - ya:y1 - ya + 1, x0 - xa:x1 - xa + 1] = True
     model = _road_grey(patch[~inside])
-    if model is None:
+    by_motion = by_motion and moved is not None
+    if model is None and not by_motion:
         return []
-    road, sigma = model
     ys, xs = np.nonzero(inside)
-    vehicle = np.abs(patch[ys, xs] - road) > road_k * sigma
     speed = math.hypot(u, v)
     du, dv = (u / speed, v / speed) if speed > 0 else (1.0, 0.0)
     xc, yc = xs - xs.mean(), ys - ys.mean()
     along, across = xc * du + yc * dv, -xc * dv + yc * du
-    parts = [np.ones(len(xs), bool)]
-    for coord, min_px in ((across, width_px), (along, length_px)):
-        if min_px > 0:
-            parts = [q for sel in parts for q in _cut_at_gaps(coord, vehicle, sel, min_px, valley, peak)]
+
+    def cut(vehicle: np.ndarray, low: float, top: float) -> list[np.ndarray]:
+        parts = [np.ones(len(xs), bool)]
+        for coord, min_px in ((across, width_px), (along, length_px)):
+            if min_px > 0:
+                parts = [q for sel in parts for q in _cut_at_gaps(coord, vehicle, sel, min_px, low, top)]
+        return parts
+
+    def moving() -> np.ndarray:  # the box's pixels that its motion explains, asked for only where needed
+        return np.asarray(moved(), bool)[ys - (y0 - ya), xs - (x0 - xa)]
+
+    parts, m, low, lengthwise = [], None, valley, False
+    if model is not None:
+        vehicle = np.abs(patch[ys, xs] - model[0]) > road_k * model[1]
+        parts = cut(vehicle, low, peak)
+    if len(parts) < 2 and by_motion:
+        # how much of a line moves depends on the vehicles' texture (a uniform roof moves at its ends alone): the
+        # fractions are taken relative to the box's most moving line across
+        m = moving()
+        most = float(_line_fractions(across, m, np.ones(len(xs), bool))[0].max())
+        vehicle, low, lengthwise = m, valley * most, True
+        parts = cut(m, low, GAP_SPLIT_MOVED_PEAK * most) if most > 0 else []
     if len(parts) < 2:
         return []
     if moved is not None:
-        m = np.asarray(moved(), bool)[ys - (y0 - ya), xs - (x0 - xa)]
+        m = moving() if m is None else m
         density = m.mean()
         if any(not m[sel].sum() >= moved_share * density * sel.sum() for sel in parts):
             return []
     out = []
     for sel in parts:
         for coord in (across, along):
-            sel = sel & _over_valley(coord, vehicle, sel, valley)
-        if not sel.any():
-            return []
+            sel = sel & _over_valley(coord, vehicle, sel, low)
+        if not sel.any() or (lengthwise and np.ptp(along[sel]) < np.ptp(across[sel])):
+            return []  # a part cut by motion must drive along its length: no round crown of a tree's flicker
         out.append((int(xs[sel].min() + xa), int(ys[sel].min() + ya), int(xs[sel].max() + xa), int(ys[sel].max() + ya),
                     int(vehicle[sel].sum())))
     return out
@@ -2164,7 +2198,7 @@ def detect_vehicles(flow: np.ndarray, valid: np.ndarray, *, global_flow_px=None,
             # two or three vehicles at one velocity, a band of road between them: one detection each
             cut = _gap_split(frames[0], (x0, y0, x1, y1), u, v, width_px=p["gap_split_width_px"],
                              length_px=p["gap_split_length_px"], road_k=p["gap_split_road_k"],
-                             valley=p["gap_split_valley"],
+                             valley=p["gap_split_valley"], by_motion=p["gap_split_moved"],
                              moved=lambda: _box_motion(frames, (x0, y0, x1, y1), u, v, ground, prev)) \
                 if p["gap_split_width_px"] > 0 or p["gap_split_length_px"] > 0 else []
             if cut and not any(_too_small_box(q[:4], p, gsd_m_per_px, h, w) for q in cut):

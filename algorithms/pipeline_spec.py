@@ -369,6 +369,7 @@ class DetectionSpec(_Section):
     gap_split_length_px: StrictInt = DETECTION_DEFAULTS["gap_split_length_px"]
     gap_split_road_k: float = DETECTION_DEFAULTS["gap_split_road_k"]
     gap_split_valley: float = DETECTION_DEFAULTS["gap_split_valley"]
+    gap_split_moved: StrictBool = DETECTION_DEFAULTS["gap_split_moved"]
     shadow_trim_rel: float = DETECTION_DEFAULTS["shadow_trim_rel"]
     shadow_ratio_lo: float = DETECTION_DEFAULTS["shadow_ratio_lo"]
     shadow_ratio_hi: float = DETECTION_DEFAULTS["shadow_ratio_hi"]

@@ -575,6 +575,7 @@ def test_a_flow_region_over_texture_that_did_not_move_is_rejected():
     ({"box_reach_px": 2.5}, r"box_reach_px: expected an integer >= 0, got 2.5"),
     ({"box_three_frames": 1}, r"box_three_frames: expected true/false, got 1"),
     ({"box_reach_parts": 1}, r"box_reach_parts: expected true/false, got 1"),
+    ({"gap_split_moved": 1}, r"gap_split_moved: expected true/false, got 1"),
     ({"box_reach_road_k": -1.0}, r"box_reach_road_k: expected a finite number >= 0, got -1.0"),
     ({"prev_frame": np.zeros((4, 5), np.float32)}, r"prev_frame: expected a gray frame of shape \(4, 4\)"),
 ])
@@ -883,6 +884,51 @@ def test_two_cars_side_by_side_at_one_speed_are_two_boxes():
         assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
     # a box two narrow cars wide is not cut into parts narrower than the key
     assert len(detect_vehicles(flow, valid, gap_split_width_px=16, **kw)) == 1
+
+
+def test_two_cars_abreast_with_a_marking_between_them_are_cut_where_nothing_moves():
+    # the cars of the side-by-side test, but a white marking fills the 4 px between them (a zebra crossing's
+    # stripe along their motion): no band of road grey crosses the box, yet the marking does not move with them
+    rng = np.random.default_rng(22)
+    flow = _field(rng, [(30, 72, 48, 86, (0.0, 1.0))], blur=1.5)
+    valid = np.ones((H, W), bool)
+    g = _road(rng)
+    g[:, 64:68] = 220.0
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        for x0 in (50, 68):
+            f[32 + k - 1:62 + k - 1, x0:x0 + 14] = 30.0
+            f[34 + k - 1:60 + k - 1, x0 + 2:x0 + 12] = 200.0
+        frames.append(f)
+    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], parallax_min_fraction=0.0, gap_split_width_px=8)
+    (one,) = detect_vehicles(flow, valid, **kw)  # the road's grey alone finds no band: one box
+    assert box_iou(one, (50, 32, 81, 61)) >= 0.7, one
+    two = detect_vehicles(flow, valid, gap_split_moved=True, **kw)
+    assert len(two) == 2, two
+    for car in ((50, 32, 63, 61), (68, 32, 81, 61)):
+        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
+        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+    # one vehicle as wide as both, its roof uniform: its moving ends span its width, and it stays whole
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        f[32 + k - 1:62 + k - 1, 50:82] = 30.0
+        f[34 + k - 1:60 + k - 1, 52:80] = 200.0
+        frames.append(f)
+    wide = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    (d,) = detect_vehicles(flow, valid, gap_split_moved=True, **wide)
+    assert box_iou(d, (50, 32, 81, 61)) >= 0.7, d
+    # two blobs as wide as long (a tree's crowns that flicker): no vehicle drives across its length, no cut
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        for x0 in (50, 68):
+            f[40 + k - 1:54 + k - 1, x0:x0 + 14] = 30.0
+            f[42 + k - 1:52 + k - 1, x0 + 2:x0 + 12] = 200.0
+        frames.append(f)
+    blobs = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
+    assert len(detect_vehicles(flow, valid, gap_split_moved=True, **blobs)) == 1
 
 
 def test_gap_split_cuts_only_where_a_band_of_road_crosses_the_box():
