@@ -299,10 +299,10 @@ class Detection(NamedTuple):
 #   888 unmatched track rows, 2 along the lane). gap_split_length_px 20 beside it measured (dis): city-wide MOTA
 #   0.338 -> 0.333 (FN 3447 -> 3487), KIT AIS detection precision / recall 0.269 / 0.417 -> 0.265 / 0.419, the
 #   synthetic scenes (30 frames) unchanged: left off, a key for footage with queues nose to tail.
-# gap_split_moved: where no band of road grey crosses the box, a band of ground that the box's motion does not move is
-#   one too (_gap_split with by_motion; a zebra crossing, a marking or a shadow between two cars abreast is no road
-#   grey, yet nothing between them moves), each part reaching further along the motion than across it. Off by
-#   default; the pipeline files that set it give the figures.
+# gap_split_moved: where no band of road grey crosses the box (or the parts it leaves hold too few moving pixels), a
+#   band of ground that the box's motion does not move is one too (_gap_split with by_motion; a zebra crossing, a
+#   marking or a shadow between two cars abreast is no road grey, yet nothing between them moves), each part reaching
+#   further along the motion than across it. Off by default; the pipeline files that set it give the figures.
 # shadow_trim_rel, shadow_ratio_lo, shadow_ratio_hi, shadow_vote, shadow_min_votes: a vehicle's cast shadow moves with
 #   it and its flow is the vehicle's, so the box of step 6 holds it; annotators box the body alone
 #   (trim_cast_shadows, last, needs the frames). A pixel is dark at shadow_ratio_lo to shadow_ratio_hi times the
@@ -993,13 +993,13 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
         least ``moved_share`` of the moving pixels its area would hold at the box's density, else no cut
         (the part is ground, a kerb or a wall the box took in).
     by_motion : bool
-        With ``moved``: where no band of road parts the box, a band of ground that the box's motion does not move is
-        one too, judged the same way on the moving pixels, as fractions of the box's most moving line (a band at
-        most ``valley`` of it, each part holding a line of ``GAP_SPLIT_MOVED_PEAK``). Two cars abreast at one
-        velocity with a zebra crossing, a marking or a shadow between them leave no band of road grey, yet nothing
-        between them moves; across one vehicle its moving ends and windows span its whole width. Each part
-        must reach further along the motion than across it (a vehicle drives along its length; the crowns of a
-        flickering tree the flow joined are as wide as long).
+        With ``moved``: where no band of road parts the box (or the parts it leaves fail ``moved_share``), a band of
+        ground that the box's motion does not move is one too, judged the same way on the moving pixels as fractions
+        of the box's most moving line (a band at most ``valley`` of it, each part holding a line of
+        ``GAP_SPLIT_MOVED_PEAK``). Two cars abreast at one velocity with a zebra crossing, a marking or a shadow
+        between them leave no band of road grey, yet nothing between them moves; across one vehicle its moving ends
+        and windows span its whole width. Each part must reach further along the motion than across it (a vehicle
+        drives along its length; the crowns of a flickering tree the flow joined are as wide as long).
 
     Returns
     -------
@@ -1032,27 +1032,32 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
                 parts = [q for sel in parts for q in _cut_at_gaps(coord, vehicle, sel, min_px, low, top)]
         return parts
 
-    def moving() -> np.ndarray:  # the box's pixels that its motion explains, asked for only where needed
-        return np.asarray(moved(), bool)[ys - (y0 - ya), xs - (x0 - xa)]
+    m = None
 
-    parts, m, low, lengthwise = [], None, valley, False
+    def moving() -> np.ndarray:  # the box's pixels that its motion explains, asked for once and only where needed
+        nonlocal m
+        if m is None:
+            m = np.asarray(moved(), bool)[ys - (y0 - ya), xs - (x0 - xa)]
+        return m
+
+    def each_moves(parts: list[np.ndarray]) -> bool:  # no part is ground, a kerb or a wall the box took in
+        if moved is None:
+            return True
+        density = moving().mean()
+        return all(moving()[sel].sum() >= moved_share * density * sel.sum() for sel in parts)
+
+    parts, low, lengthwise = [], valley, False
     if model is not None:
         vehicle = np.abs(patch[ys, xs] - model[0]) > road_k * model[1]
         parts = cut(vehicle, low, peak)
-    if len(parts) < 2 and by_motion:
+    if (len(parts) < 2 or not each_moves(parts)) and by_motion:
         # how much of a line moves depends on the vehicles' texture (a uniform roof moves at its ends alone): the
         # fractions are taken relative to the box's most moving line across
-        m = moving()
-        most = float(_line_fractions(across, m, np.ones(len(xs), bool))[0].max())
-        vehicle, low, lengthwise = m, valley * most, True
-        parts = cut(m, low, GAP_SPLIT_MOVED_PEAK * most) if most > 0 else []
-    if len(parts) < 2:
+        most = float(_line_fractions(across, moving(), np.ones(len(xs), bool))[0].max())
+        vehicle, low, lengthwise = moving(), valley * most, True
+        parts = cut(vehicle, low, GAP_SPLIT_MOVED_PEAK * most) if most > 0 else []
+    if len(parts) < 2 or not each_moves(parts):
         return []
-    if moved is not None:
-        m = moving() if m is None else m
-        density = m.mean()
-        if any(not m[sel].sum() >= moved_share * density * sel.sum() for sel in parts):
-            return []
     out = []
     for sel in parts:
         for coord in (across, along):
