@@ -859,29 +859,36 @@ def test_two_cars_nose_to_tail_at_one_speed_are_two_boxes_and_a_bus_of_their_len
     assert box_iou(one, (20, 40, 85, 53)) >= 0.8, one
 
 
+def _driving_down(g, lefts, *, top=32, length=30, width=14) -> dict:
+    """Frames t-1, t, t+1 on the ground ``g`` of vehicles ``width`` px wide (a dark outline, a light roof) whose left
+    columns are ``lefts``, ``length`` px long from row ``top`` at frame t, driving 1 px a frame down the image."""
+    frames = []
+    for k in range(3):
+        f = g.copy()
+        for x0 in lefts:
+            f[top + k - 1:top + length + k - 1, x0:x0 + width] = 30.0
+            f[top + 2 + k - 1:top + length - 2 + k - 1, x0 + 2:x0 + width - 2] = 200.0
+        frames.append(f)
+    return dict(frames=(frames[1], frames[2]), prev_frame=frames[0])
+
+
+def _one_box_each(detections, cars):
+    assert len(detections) == len(cars), detections
+    for car in cars:
+        (d,) = [d for d in detections if box_iou(d, car) >= 0.7]
+        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+
+
 def test_two_cars_side_by_side_at_one_speed_are_two_boxes():
     # cars leaving a parking row together: two 30 x 14 px cars 4 px apart across their motion, 1 px a frame down
     # the image (the cars lie along it), one flow region
     rng = np.random.default_rng(22)
     flow = _field(rng, [(30, 72, 48, 86, (0.0, 1.0))], blur=1.5)
     valid = np.ones((H, W), bool)
-    g = _road(rng)
-    frames = []
-    for k in range(3):
-        f = g
-        for x0 in (50, 68):
-            f = f.copy()
-            f[32 + k - 1:62 + k - 1, x0:x0 + 14] = 30.0
-            f[34 + k - 1:60 + k - 1, x0 + 2:x0 + 12] = 200.0
-        frames.append(f)
-    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], parallax_min_fraction=0.0)
+    kw = dict(parallax_min_fraction=0.0, **_driving_down(_road(rng), (50, 68)))
     (one,) = detect_vehicles(flow, valid, **kw)
     assert box_iou(one, (50, 32, 81, 61)) >= 0.7, one
-    two = detect_vehicles(flow, valid, gap_split_width_px=8, **kw)
-    assert len(two) == 2, two
-    for car in ((50, 32, 63, 61), (68, 32, 81, 61)):
-        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
-        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+    _one_box_each(detect_vehicles(flow, valid, gap_split_width_px=8, **kw), [(50, 32, 63, 61), (68, 32, 81, 61)])
     # a box two narrow cars wide is not cut into parts narrower than the key
     assert len(detect_vehicles(flow, valid, gap_split_width_px=16, **kw)) == 1
 
@@ -894,64 +901,26 @@ def test_two_cars_abreast_with_a_marking_between_them_are_cut_where_nothing_move
     valid = np.ones((H, W), bool)
     g = _road(rng)
     g[:, 64:68] = 220.0
-    frames = []
-    for k in range(3):
-        f = g.copy()
-        for x0 in (50, 68):
-            f[32 + k - 1:62 + k - 1, x0:x0 + 14] = 30.0
-            f[34 + k - 1:60 + k - 1, x0 + 2:x0 + 12] = 200.0
-        frames.append(f)
-    kw = dict(frames=(frames[1], frames[2]), prev_frame=frames[0], parallax_min_fraction=0.0, gap_split_width_px=8)
-    (one,) = detect_vehicles(flow, valid, **kw)  # the road's grey alone finds no band: one box
+    kw = dict(parallax_min_fraction=0.0, gap_split_width_px=8)
+    (one,) = detect_vehicles(flow, valid, **_driving_down(g, (50, 68)), **kw)  # the road's grey finds no band
     assert box_iou(one, (50, 32, 81, 61)) >= 0.7, one
-    two = detect_vehicles(flow, valid, gap_split_moved=True, **kw)
-    assert len(two) == 2, two
-    for car in ((50, 32, 63, 61), (68, 32, 81, 61)):
-        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
-        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
+    _one_box_each(detect_vehicles(flow, valid, gap_split_moved=True, **_driving_down(g, (50, 68)), **kw),
+                  [(50, 32, 63, 61), (68, 32, 81, 61)])
+    # one vehicle as wide as both, its roof uniform: its moving ends span its width, and it stays whole
+    (d,) = detect_vehicles(flow, valid, gap_split_moved=True, **_driving_down(g, (50,), width=32), **kw)
+    assert box_iou(d, (50, 32, 81, 61)) >= 0.7, d
+    # two blobs as wide as long (a tree's crowns that flicker): no vehicle drives across its length, no cut
+    blobs = _driving_down(g, (50, 68), top=40, length=14)
+    assert len(detect_vehicles(flow, valid, gap_split_moved=True, **blobs, **kw)) == 1
     # a marking as wide as a narrow car, a band of road on each side of it: the road's grey cuts out three parts, and
     # the marking's, which holds no moving pixel, fails; the band that does not move still parts the two cars
     flow = _field(rng, [(30, 72, 48, 94, (0.0, 1.0))], blur=1.5)
     g = _road(rng)
     g[:, 66:74] = 220.0
-    frames = []
-    for k in range(3):
-        f = g.copy()
-        for x0 in (50, 76):
-            f[32 + k - 1:62 + k - 1, x0:x0 + 14] = 30.0
-            f[34 + k - 1:60 + k - 1, x0 + 2:x0 + 12] = 200.0
-        frames.append(f)
-    apart = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
-    (one,) = detect_vehicles(flow, valid, **apart)
+    (one,) = detect_vehicles(flow, valid, **_driving_down(g, (50, 76)), **kw)
     assert box_iou(one, (50, 32, 89, 61)) >= 0.7, one
-    two = detect_vehicles(flow, valid, gap_split_moved=True, **apart)
-    assert len(two) == 2, two
-    for car in ((50, 32, 63, 61), (76, 32, 89, 61)):
-        (d,) = [d for d in two if box_iou(d, car) >= 0.7]
-        assert (d.x0_px, d.y0_px, d.x1_px, d.y1_px) == pytest.approx(car, abs=2)
-    flow = _field(rng, [(30, 72, 48, 86, (0.0, 1.0))], blur=1.5)
-    g = _road(rng)
-    g[:, 64:68] = 220.0
-    # one vehicle as wide as both, its roof uniform: its moving ends span its width, and it stays whole
-    frames = []
-    for k in range(3):
-        f = g.copy()
-        f[32 + k - 1:62 + k - 1, 50:82] = 30.0
-        f[34 + k - 1:60 + k - 1, 52:80] = 200.0
-        frames.append(f)
-    wide = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
-    (d,) = detect_vehicles(flow, valid, gap_split_moved=True, **wide)
-    assert box_iou(d, (50, 32, 81, 61)) >= 0.7, d
-    # two blobs as wide as long (a tree's crowns that flicker): no vehicle drives across its length, no cut
-    frames = []
-    for k in range(3):
-        f = g.copy()
-        for x0 in (50, 68):
-            f[40 + k - 1:54 + k - 1, x0:x0 + 14] = 30.0
-            f[42 + k - 1:52 + k - 1, x0 + 2:x0 + 12] = 200.0
-        frames.append(f)
-    blobs = dict(kw, frames=(frames[1], frames[2]), prev_frame=frames[0])
-    assert len(detect_vehicles(flow, valid, gap_split_moved=True, **blobs)) == 1
+    _one_box_each(detect_vehicles(flow, valid, gap_split_moved=True, **_driving_down(g, (50, 76)), **kw),
+                  [(50, 32, 63, 61), (76, 32, 89, 61)])
 
 
 def test_gap_split_cuts_only_where_a_band_of_road_crosses_the_box():
