@@ -149,7 +149,9 @@ def _compare(name: str, ours: dict, ref: dict) -> list[str]:
         for k in PAIR_FIELDS + ("global_shift_px",):
             if not _equal(po[k], pr[k]):
                 bad.append(f"{name} pair {t}: {k} differs")
-        if po["detections"] != pr["detections"] or po["global_valid"] != pr["global_valid"]:
+        # as arrays, NaN equal to NaN: a Detection's area_m2 is NaN without a ground sampling distance, and two NaNs
+        # unpickled apart compare unequal as tuple fields
+        if not _equal(po["detections"], pr["detections"]) or po["global_valid"] != pr["global_valid"]:
             bad.append(f"{name} pair {t}: detections or global_valid differ")
     for k in SEQ_FIELDS:
         if not _equal(ours["sequence"][k], ref["sequence"][k]):
