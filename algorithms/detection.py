@@ -1050,13 +1050,15 @@ def _gap_split(frame: np.ndarray, box, u: float, v: float, *, width_px: int, len
     if model is not None:
         vehicle = np.abs(patch[ys, xs] - model[0]) > road_k * model[1]
         parts = cut(vehicle, low, peak)
-    if (len(parts) < 2 or not each_moves(parts)) and by_motion:
+    held = len(parts) >= 2 and each_moves(parts)
+    if not held and by_motion:
         # how much of a line moves depends on the vehicles' texture (a uniform roof moves at its ends alone): the
         # fractions are taken relative to the box's most moving line across
         most = float(_line_fractions(across, moving(), np.ones(len(xs), bool))[0].max())
         vehicle, low, lengthwise = moving(), valley * most, True
         parts = cut(vehicle, low, GAP_SPLIT_MOVED_PEAK * most) if most > 0 else []
-    if len(parts) < 2 or not each_moves(parts):
+        held = len(parts) >= 2 and each_moves(parts)
+    if not held:
         return []
     out = []
     for sel in parts:
