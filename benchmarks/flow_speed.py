@@ -24,7 +24,7 @@ worse EPE.
 Endpoint errors (mean, px) are reported on three pairs: an exact sub-pixel
 Fourier shift of a smooth texture (512x512, inner part, 32 px from the edges),
 Middlebury RubberWhale and Yosemite (sky masked), the latter two from
-``/work/shared/external`` as in ``tests/algorithms/test_external.py``.
+``shared/external`` beside the clone (or ``AEROBENCH_EXTERNAL``), as the tests read them.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from algorithms.reference import dis, ilk, tvl1  # noqa: E402
 from algorithms.tv_l1_flow import tv_l1  # noqa: E402
 from scenes.formats import read_flo  # noqa: E402
 
-EXTERNAL = Path("/work/shared/external")
+EXTERNAL = Path(os.environ.get("AEROBENCH_EXTERNAL") or Path(__file__).resolve().parents[2] / "shared" / "external")
 TRUTH_PX = (2.3, -1.7)
 C2F_LK = {"levels": 4, "iterations": 3}
 C2F_HS = {"levels": 4}

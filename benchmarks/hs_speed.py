@@ -1,6 +1,6 @@
 """Horn-Schunck iteration (``hs_iterate``) against the version of a reference tree: the same bits, and the CPU-time ratio.
 
-    python benchmarks/hs_speed.py --ref /work/wt-base [--shape 479,639] [--iterations 100] [--repeats 7]
+    python benchmarks/hs_speed.py --ref REF_TREE [--shape 479,639] [--iterations 100] [--repeats 7]
 
 The reference ``algorithms/horn_schunck_flow.py`` is loaded from ``--ref`` under another module name
 (its registration decorator dropped). Identity: both iterate the same random Ex, Ey, Et (and the

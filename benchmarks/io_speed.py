@@ -1,7 +1,6 @@
 """Sequence files: bytes on disk and render_sequence speed, the compact layout against the .flo one.
 
-    cd /work/wt/iospeed && PYTHONPATH=. PYOPENGL_PLATFORM=egl \\
-        /work/main/.venv/bin/python benchmarks/io_speed.py [--presets nominal noisy] [--frames 60] [--runs 3]
+    PYOPENGL_PLATFORM=egl python benchmarks/io_speed.py [--presets nominal noisy] [--frames 60] [--runs 3]
 
 For each preset, side by side in one process (so machine load hits both alike):
 

@@ -2,7 +2,7 @@
 
 Run single-threaded, as one worker of a process pool would run:
 
-    cd /work/main && /work/venv/bin/python benchmarks/render_throughput.py \\
+    python benchmarks/render_throughput.py \\
         [--preset nominal] [--frames 20] [--runs 3] [--only flat,blur,...] \\
         [--reference /path/to/other/checkout] [--one-core]
 

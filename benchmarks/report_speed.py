@@ -10,7 +10,7 @@ folder (the run folder is only read). Reported per tree: median CPU seconds of t
 the two report.md are byte-identical and how many ``<img>`` / ``<svg>`` the two HTML have.
 CPU is the figure to trust on a loaded machine; wall moves with the load.
 
-    /work/venv/bin/python benchmarks/report_speed.py RUN_DIR --reference /work/wt-ref [--repeats 3]
+    python benchmarks/report_speed.py RUN_DIR --reference REF_TREE [--repeats 3]
 
 Measured (run folder of the ``standard`` suite, 189 cells, 2 cores shared with 5 other jobs,
 load average 7-9; reference 4a49991, this tree the ``reportspeed`` branch):

@@ -3,16 +3,16 @@
 Every figure is measured in this run (no stored reference); each subcommand prints a
 table and the command lines it ran. Run from the project root:
 
-    cd /work/main && /work/venv/bin/python benchmarks/scale.py smoke [--workers 2]
-    /work/venv/bin/python benchmarks/scale.py speedup [--repeats 3] [--cells 8]
-    /work/venv/bin/python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
+    python benchmarks/scale.py smoke [--workers 2]
+    python benchmarks/scale.py speedup [--repeats 3] [--cells 8]
+    python benchmarks/scale.py memory [--frames 60,300] [--size 1920x1080]
                                               [--pipelines thesis-lk,pyramidal-hs] [--cache DIR] [--keep]
-    /work/venv/bin/python benchmarks/scale.py standard [--cells N] [--workers 2]
-    /work/venv/bin/python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
+    python benchmarks/scale.py standard [--cells N] [--workers 2]
+    python benchmarks/scale.py cores [--max-workers 16] [--cells 32] [--pipeline thesis-lk[,tvl1,...]]
                                               [--suite standard]
-    /work/venv/bin/python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
-    /work/venv/bin/python benchmarks/scale.py scene --reference TREE [--presets nominal] [--workers 1] [--repeats 3]
-    /work/venv/bin/python benchmarks/scale.py replay RUN [--workers 1,2,4,8,14,16,32] [--serial]
+    python benchmarks/scale.py cost [--preset nominal] [--pipelines a,b] [--pairs N] [--cache DIR]
+    python benchmarks/scale.py scene --reference TREE [--presets nominal] [--workers 1] [--repeats 3]
+    python benchmarks/scale.py replay RUN [--workers 1,2,4,8,14,16,32] [--serial]
 
 - ``smoke``: ``aerobench run smoke`` (render, pipelines, metrics, report) with a cold
   render cache, then again into a fresh run folder with the cache warm; wall times, and

@@ -1,6 +1,6 @@
 """Scoring speed per frame pair: the one-pass ``score_pair`` against the per-region scoring it replaced.
 
-    cd /work/wt-scoring && PYTHONPATH=. python benchmarks/score_speed.py [--preset nominal] [--runs 31]
+    python benchmarks/score_speed.py [--preset nominal] [--runs 31]
         [--sequence PATH [--pipelines [--pair 0]]]
 
 The pair is real: frames 0 -> 1 of ``--preset`` rendered with its exact ground truth

@@ -1,6 +1,6 @@
 """Wall frames/s and CPU per frame of one whole ``render_sequence`` call, this checkout against a reference.
 
-    cd /work/wt-render30 && /work/venv/bin/python benchmarks/sequence_speed.py \\
+    python benchmarks/sequence_speed.py \\
         --reference /path/to/other/checkout [--preset nominal] [--frames 60] [--runs 5] \\
         [--cores 0 | --cores 0,1] [--writer-threads N]
 

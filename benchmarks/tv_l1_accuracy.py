@@ -6,7 +6,7 @@ sequence. With ``--setting NAME=JSON`` (twice or more), ``tv-l1`` runs once per
 setting, its flow ``params`` replaced by the JSON dict (``{}``: ``tv_l1``'s
 defaults), and the first setting is the reference the others are compared to.
 
-    python benchmarks/tv_l1_accuracy.py /work/cache-standard2/*-* --pairs 8 \\
+    python benchmarks/tv_l1_accuracy.py CACHE/*-* --pairs 8 \\
         --setting old='{"n_warps": 5, "n_iter": 15}' --setting new='{"n_warps": 3, "n_iter": 10}'
 
 Every pair is scored by ``harness.metrics.score_pair`` as the runner scores a

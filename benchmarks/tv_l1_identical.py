@@ -1,7 +1,7 @@
 """Our TV-L1 against an earlier version of itself: the same bits, and the CPU-time ratio, on rendered pairs.
 
     git worktree add /tmp/tv-ref 95fabaa      # the version to compare with
-    python benchmarks/tv_l1_identical.py /tmp/tv-ref /work/cache-standard2/*-*/ [--params '{}'] [--repeats 3]
+    python benchmarks/tv_l1_identical.py /tmp/tv-ref CACHE/*-*/ [--params '{}'] [--repeats 3]
 
 The earlier ``algorithms/tv_l1_flow.py`` is loaded from the given tree under
 another module name (its registration decorator dropped; its other imports come

@@ -9,7 +9,6 @@ LK 0.259 / 0.148, HS 0.239 / 0.104; single-scale HS (alpha 15, 1000 sweeps)
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -19,10 +18,7 @@ from algorithms.horn_schunck_flow import horn_schunck
 from algorithms.lucas_kanade_flow import lucas_kanade
 from algorithms.tv_l1_flow import tv_l1
 from scenes.formats import read_flo
-
-EXTERNAL = Path(__file__).resolve().parents[3] / "shared" / "external"
-if not EXTERNAL.is_dir():
-    EXTERNAL = Path("/work/shared/external")
+from tests.external_data import EXTERNAL
 
 
 def _load(name: str):

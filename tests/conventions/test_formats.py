@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from scenes.formats import FormatError, read_flo, read_png, write_flo, write_png
+from tests.external_data import EXTERNAL, needs_external
 
-EXTERNAL = Path(__file__).resolve().parents[2].parent / "shared" / "external"
 
 
 def test_flo_round_trip_keeps_values_and_unknowns(tmp_path):
@@ -35,7 +35,7 @@ def test_flo_layout_is_u_then_v_row_major(tmp_path):
     assert values[2:4].tolist() == [5.0, -7.0]
 
 
-@pytest.mark.skipif(not EXTERNAL.is_dir(), reason="shared/external not beside the checkout")
+@needs_external
 def test_middlebury_file_reads_with_its_unknown_pixels():
     flow = read_flo(EXTERNAL / "middlebury" / "RubberWhale" / "flow10.flo")
     assert flow.shape == (388, 584, 2)
