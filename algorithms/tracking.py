@@ -1573,9 +1573,11 @@ class MultiTargetTracker:
                     tracks.remove(t)
                     self._joined_into(t, whole)
             took.add(c)
+            # the join removed tracks and moved the whole: the frame's other detections are weighed against these
             conf = [t for t in tracks if t.confirmed]
             tb = np.array([t.kf.x[:4] for t in conf]).reshape(-1, 4)
             ta = tb[:, 2] * tb[:, 3]
+            overlap = _intersections(_corners(tb), _corners(boxes))
         if p["merge_covered"]:
             self._merge_covered(tracks, frame, off)
         return took

@@ -874,6 +874,30 @@ def test_a_truck_found_in_two_parts_and_whole_by_turns_is_one_track_boxed_whole(
         MultiTargetTracker(merge_inside=0)
 
 
+def test_two_trucks_joined_from_their_parts_in_one_frame_are_two_tracks_each_boxed_whole():
+    # the truck of the test above twice, 100 px apart across the road, split and found whole in the same frames: both
+    # pairs of parts reach merge_hits in one frame. The first join shrank the confirmed tracks while the overlaps of
+    # the frame's other detections with them were those of before it: the second whole detection crashed the step
+    # (operands could not be broadcast together) or was weighed against the wrong tracks
+    trk = MultiTargetTracker(fill_min_ncc=0.0)
+    for t in range(40):
+        x = 60.0 + 1.5 * t
+        dets = []
+        for y in (50.0, 150.0):
+            dets += ([_box_det(x, y, 80, 30, 1.5)] if t >= 12 and t % 2 == 0 else
+                     [_box_det(x + 25, y - 5, 30, 20, 1.5), _box_det(x - 25, y + 5, 30, 20, 1.5)])
+        trk.step(t, dets)
+    rows = trk.rows()
+    assert len({r["track_id"] for r in rows}) == 2
+    for y in (50.0, 150.0):
+        mine = [r for r in rows if abs((r["bbox_y0_px"] + r["bbox_y1_px"]) / 2 - y) < 10]
+        assert sorted(r["frame"] for r in mine) == list(range(40))
+        for r in mine:
+            x = 60.0 + 1.5 * r["frame"]
+            np.testing.assert_allclose([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]],
+                                       [x - 39.5, y - 14.5, x + 39.5, y + 14.5], atol=2.5, err_msg=str(r["frame"]))
+
+
 def test_the_parts_of_a_truck_found_whole_every_fourth_frame_live_to_be_joined_with_merge_whole_spares():
     # the truck above found whole in every fourth frame from frame 3 on: each whole frame ended the two parts'
     # tentative tracks (a miss, birth_gap 0) before they travelled far enough to be confirmed, and the whole
