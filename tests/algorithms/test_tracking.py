@@ -1008,6 +1008,36 @@ def test_the_parts_of_a_turning_bus_keep_their_distance_and_a_car_closing_up_doe
     assert _kept_their_distance(ahead, track([c for _, c in closing.hist[:5]]), 0.2)   # 5 common frames: too few
 
 
+def test_the_ends_of_a_bus_whose_boxes_breathe_keep_their_distance_at_dis_s_merge_rigid_rel():
+    # dis's merge_rigid_rel 0.3 (algorithms/pipelines/dis.yaml): a bus found as its two ends, the front end's box
+    # growing from 30 to 60 px along the bus over 30 frames as the flow finds more of its roof, its far edge on the
+    # bus's front: its centre moves 15 px towards the rear end's, and the medians of the two halves' distances differ
+    # by about 7.5 px, a quarter of the 30 px side. 0.2 (the default) refuses the pair, so the ends were never joined
+    # (a 1080p world's bus 38: two tracks for 100 frames); 0.3 keeps it. It still refuses a car closing up by 24 px
+    # over the 30 frames, but no longer one closing by 16 px (about 8 px between the halves' medians), which 0.2 refuses
+    from types import SimpleNamespace
+
+    from algorithms.pipeline import PIPELINES
+    from algorithms.tracking import _kept_their_distance
+
+    rel = PIPELINES["dis"]["tracking"]["multi"]["merge_rigid_rel"]
+
+    def track(centres):
+        return SimpleNamespace(hist=[(t, np.asarray(c, float)) for t, c in enumerate(centres)],
+                               kf=SimpleNamespace(x=np.array([0.0, 0.0, 30.0, 14.0])))
+
+    x = 100 + 2.0 * np.arange(30)
+    grown = 30.0 * np.arange(30) / 29
+    front = track(np.stack([x + 40 - grown / 2, np.full(30, 50.0)], axis=1))
+    rear = track(np.stack([x, np.full(30, 50.0)], axis=1))
+    assert not _kept_their_distance(front, rear, 0.2)
+    assert rel == 0.3 and _kept_their_distance(front, rear, rel)
+    closing = track(np.stack([x - 40 + 24 * np.arange(30) / 29, np.full(30, 50.0)], axis=1))
+    assert not _kept_their_distance(rear, closing, rel)
+    slower = track(np.stack([x - 40 + 16 * np.arange(30) / 29, np.full(30, 50.0)], axis=1))
+    assert _kept_their_distance(rear, slower, rel) and not _kept_their_distance(rear, slower, 0.2)
+
+
 def test_a_car_found_in_the_clip_s_last_frames_is_reported_offline_and_flicker_there_is_not():
     # 30 frames (pairs 0-28, the last frame extrapolated): a 30 x 14 px car at 0.4 px a frame found in pairs 26-28
     # (too short a drive for the travel rule); a region flickering in place there, its flow turning about
