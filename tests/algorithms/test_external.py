@@ -9,7 +9,6 @@ LK 0.259 / 0.148, HS 0.239 / 0.104; single-scale HS (alpha 15, 1000 sweeps)
 
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 import pytest

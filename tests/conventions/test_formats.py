@@ -12,7 +12,6 @@ from scenes.formats import FormatError, read_flo, read_png, write_flo, write_png
 from tests.external_data import EXTERNAL, needs_external
 
 
-
 def test_flo_round_trip_keeps_values_and_unknowns(tmp_path):
     rng = np.random.default_rng(0)
     flow = rng.normal(size=(7, 9, 2)).astype(np.float32)

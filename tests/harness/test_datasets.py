@@ -3,14 +3,12 @@ round trip, bad files are refused, and a zero-flow method scores the mean true m
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
 from harness import datasets as D
 from scenes.formats import FormatError, write_flo, write_png
 from tests.external_data import EXTERNAL, needs_external
-
 
 
 def zero_flow(frame0, frame1):
