@@ -1535,12 +1535,15 @@ class MultiTargetTracker:
         n = p["merge_hits"]
         if n <= 0 or not len(boxes):
             return took
-        conf = [t for t in tracks if t.confirmed]
+
+        def weigh():  # the confirmed tracks, their box areas and their overlaps with the frame's detections
+            conf = [t for t in tracks if t.confirmed]
+            tb = np.array([t.kf.x[:4] for t in conf]).reshape(-1, 4)
+            return conf, tb[:, 2] * tb[:, 3], _intersections(_corners(tb), _corners(boxes))
+
+        conf, ta, overlap = weigh()
         if len(conf) < 1:
             return took
-        tb = np.array([t.kf.x[:4] for t in conf])
-        ta = tb[:, 2] * tb[:, 3]
-        overlap = _intersections(_corners(tb), _corners(boxes))
         for c in range(len(boxes)):
             if c in taken:
                 continue
@@ -1573,11 +1576,7 @@ class MultiTargetTracker:
                     tracks.remove(t)
                     self._joined_into(t, whole)
             took.add(c)
-            # the join removed tracks and moved the whole: the frame's other detections are weighed against these
-            conf = [t for t in tracks if t.confirmed]
-            tb = np.array([t.kf.x[:4] for t in conf]).reshape(-1, 4)
-            ta = tb[:, 2] * tb[:, 3]
-            overlap = _intersections(_corners(tb), _corners(boxes))
+            conf, ta, overlap = weigh()  # the join removed tracks and moved the whole: weigh the rest against these
         if p["merge_covered"]:
             self._merge_covered(tracks, frame, off)
         return took
